@@ -1,0 +1,1 @@
+"""The light, numpy-only plugins shipped with the core."""

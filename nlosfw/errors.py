@@ -1,0 +1,44 @@
+"""Errors a user can fix.
+
+Every subclass of :class:`NlosfwError` is reported by the command line as a
+single line (no traceback) with exit status 2. Anything else is a bug.
+"""
+
+from __future__ import annotations
+
+#: Exit status of the command line for errors the user can fix.
+USER_ERROR_EXIT_STATUS = 2
+
+
+class NlosfwError(Exception):
+    """Base class of errors caused by input, configuration or environment."""
+
+
+class ConfigError(NlosfwError, ValueError):
+    """An option has an unknown name or an invalid value.
+
+    ``option`` is the dotted name of the offending option (``model.lr``) so a
+    caller that knows the enclosing config group can prefix it.
+    """
+
+    def __init__(self, option: str, problem: str) -> None:
+        self.option = option
+        self.problem = problem
+        super().__init__(f"{option}: {problem}" if option else problem)
+
+    def within(self, prefix: str) -> ConfigError:
+        """The same error with ``prefix`` prepended to the option name."""
+        option = f"{prefix}.{self.option}" if self.option else prefix
+        return ConfigError(option, self.problem)
+
+
+class DataError(NlosfwError, ValueError):
+    """Arrays or files do not hold valid NLOS data (shape, dtype, NaN, fields)."""
+
+
+class PluginError(NlosfwError):
+    """A plugin is unknown, duplicated or cannot be loaded."""
+
+
+class FitError(NlosfwError):
+    """A field model failed to train (diverged, empty data, not fitted)."""

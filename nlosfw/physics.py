@@ -1,0 +1,79 @@
+"""Three-bounce light transport through the hidden scene: path lengths and weights.
+
+The one radiometric convention of nlosfw (every simulator follows it so their
+captures are interchangeable): unit laser power reaches the wall spot x_l;
+the relay wall is Lambertian with albedo 1; a hidden surface element dA at p
+with normal n_p is Lambertian with albedo rho; ``H`` holds the radiance leaving
+the wall point x_s, binned by optical path length. One path then contributes
+
+    rho * dA * cos_l * cos_p_in * cos_p_out * cos_s / (pi^3 * r_l^2 * r_s^2)
+
+with r_l = |p - x_l|, r_s = |p - x_s|, cos_l and cos_s the cosines at the wall
+between its normal (+z) and the hidden point, cos_p_in and cos_p_out the
+cosines at p. Surfaces are two-sided: a path counts when x_l and x_s are on
+the same side of the surface. A point scatterer has no normal: its cosines at
+p are dropped and ``rho * dA`` is its effective area (the ``albedo`` of a
+``point`` item). Confocal scans use x_l = x_s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Speed of light in vacuum (m/s); times in nlosfw are optical path lengths c*t.
+SPEED_OF_LIGHT = 299_792_458.0
+
+_INV_PI3 = 1.0 / np.pi**3
+
+
+def three_bounce(
+    laser_points: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray | None,
+    area_albedo: np.ndarray,
+    sensor_points: np.ndarray,
+    wall_normal: np.ndarray = np.array([0.0, 0.0, 1.0]),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Path length and weight of laser -> hidden point -> sensor, without visibility.
+
+    ``laser_points`` is (3,) for a single spot or (S, 3) paired with the sensors
+    (confocal). ``points`` (P, 3) with ``normals`` (P, 3) or None for point
+    scatterers; ``area_albedo`` (P,) is rho * dA. Returns two (P, S) arrays:
+    the hidden part of the optical path |x_l - p| + |p - x_s| and the weight.
+    """
+    points = np.asarray(points, dtype=float)
+    sensors = np.asarray(sensor_points, dtype=float)
+    laser = np.asarray(laser_points, dtype=float)
+    d_s = sensors[None, :, :] - points[:, None, :]          # p -> x_s, (P, S, 3)
+    r_s = np.linalg.norm(d_s, axis=-1)
+    if laser.ndim == 1:
+        d_l = (laser[None, :] - points)[:, None, :]          # p -> x_l, (P, 1, 3)
+    else:
+        d_l = laser[None, :, :] - points[:, None, :]
+    r_l = np.linalg.norm(d_l, axis=-1)
+    cos_l = -(d_l @ wall_normal) / r_l                       # at the wall, towards p
+    cos_s = -(d_s @ wall_normal) / r_s
+    weight = np.clip(cos_l, 0, None) * np.clip(cos_s, 0, None)
+    if normals is not None:
+        n = np.asarray(normals, dtype=float)[:, None, :]
+        cos_in = np.sum(d_l * n, axis=-1) / r_l
+        cos_out = np.sum(d_s * n, axis=-1) / r_s
+        same_side = (cos_in * cos_out) > 0
+        weight = weight * np.where(same_side, np.abs(cos_in * cos_out), 0.0)
+    weight = weight * (np.asarray(area_albedo, dtype=float)[:, None] * _INV_PI3) / (r_l**2 * r_s**2)
+    return r_l + r_s, weight
+
+
+def device_legs(laser_points: np.ndarray, sensor_points: np.ndarray,
+                laser_xyz: np.ndarray, sensor_xyz: np.ndarray) -> np.ndarray:
+    """Optical path of the device legs |laser_xyz - x_l| + |x_s - sensor_xyz|, shape (S,)."""
+    sensors = np.asarray(sensor_points, dtype=float)
+    laser = np.asarray(laser_points, dtype=float)
+    leg_l = np.linalg.norm(laser - np.asarray(laser_xyz, dtype=float), axis=-1)
+    leg_s = np.linalg.norm(sensors - np.asarray(sensor_xyz, dtype=float), axis=-1)
+    return leg_l + leg_s
+
+
+def bin_index(path: np.ndarray, t_start: float, delta_t: float) -> np.ndarray:
+    """Index of the histogram bin holding each optical path length (may be out of range)."""
+    return np.floor((np.asarray(path) - t_start) / delta_t).astype(np.int64)

@@ -1,0 +1,67 @@
+"""Hook specifications of nlosfw (the ``nlosfw`` pluggy project).
+
+A plugin is a module named by an entry point in the ``nlosfw`` group whose
+functions are marked with :data:`hookimpl` and named after these specs. The
+``register_*`` hooks receive a ``register`` callable (see
+:class:`nlosfw.plugins.registry.Registrar`) instead of returning values, so new
+keyword arguments can be added to it without breaking existing plugins.
+Plugins may implement any subset of the hooks, and may omit arguments.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pluggy
+
+PROJECT = "nlosfw"
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+# ------------------------------------------------------------------ registration
+@hookspec
+def register_simulators(register: Any) -> None:
+    """Register :class:`~nlosfw.interfaces.Simulator` plugins: ``register(name, factory, ...)``."""
+
+
+@hookspec
+def register_phasor_transforms(register: Any) -> None:
+    """Register :class:`~nlosfw.interfaces.PhasorTransform` plugins."""
+
+
+@hookspec
+def register_field_models(register: Any) -> None:
+    """Register :class:`~nlosfw.interfaces.FieldModel` plugins."""
+
+
+@hookspec
+def register_imagers(register: Any) -> None:
+    """Register :class:`~nlosfw.interfaces.Imager` plugins."""
+
+
+# ------------------------------------------------------------------ run lifecycle
+@hookspec
+def on_run_start(run_dir: str, config: dict[str, Any]) -> None:
+    """A run begins; ``config`` is the resolved configuration as plain data."""
+
+
+@hookspec
+def on_run_end(run_dir: str, metrics: dict[str, Any], status: str) -> None:
+    """A run ends; ``status`` is ``completed`` or ``failed``, ``metrics`` as in metrics.json."""
+
+
+@hookspec
+def on_stage_end(stage: str, seconds: float) -> None:
+    """A pipeline stage (simulate, transform, fit, ...) has finished."""
+
+
+@hookspec
+def on_training_step(model: str, step: int, total_steps: int, loss: float,
+                     val_loss: float | None) -> None:
+    """A field model reports training progress."""
+
+
+@hookspec
+def on_artefact_written(path: str, kind: str) -> None:
+    """A file was written into the run directory; ``kind`` is e.g. ``capture`` or ``figure``."""

@@ -1,0 +1,121 @@
+"""Discover plugin modules through entry points and collect their registrations."""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from types import ModuleType
+from typing import Any
+
+import pluggy
+
+from nlosfw.enums import PluginKind
+from nlosfw.plugins import hookspecs
+from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
+
+log = logging.getLogger(__name__)
+
+#: Entry-point group naming plugin modules.
+ENTRY_POINT_GROUP = "nlosfw"
+
+#: Environment variable that blocks (``-name``) or allows (``name``) plugins, comma separated.
+#: Names match a plugin (``siren_jax``), a kind-qualified plugin (``model:siren_jax``)
+#: or an entry point (``jax``). If any name is allowed, only allowed plugins load.
+ENV_VAR = "NLOSFW_PLUGINS"
+
+_HOOK_OF_KIND = {
+    PluginKind.SIMULATOR: "register_simulators",
+    PluginKind.PHASOR_TRANSFORM: "register_phasor_transforms",
+    PluginKind.FIELD_MODEL: "register_field_models",
+    PluginKind.IMAGER: "register_imagers",
+}
+
+
+@dataclass(frozen=True)
+class PluginFilter:
+    """Which plugins to load, from the ``NLOSFW_PLUGINS`` environment variable."""
+
+    allow: frozenset[str] = frozenset()
+    block: frozenset[str] = frozenset()
+
+    @classmethod
+    def parse(cls, text: str) -> PluginFilter:
+        allow, block = set(), set()
+        for token in (t.strip() for t in text.split(",")):
+            if not token:
+                continue
+            if token.startswith("-"):
+                block.add(token[1:].strip())
+            else:
+                allow.add(token.lstrip("+").strip())
+        return cls(frozenset(allow), frozenset(block))
+
+    def loads_entry_point(self, entry_point: str) -> bool:
+        return entry_point not in self.block
+
+    def accepts(self, spec: PluginSpec) -> bool:
+        names = {spec.name, spec.qualified_name, spec.entry_point}
+        if names & self.block:
+            return False
+        return not self.allow or bool(names & self.allow)
+
+
+@dataclass
+class PluginHost:
+    """The pluggy manager with every plugin module loaded, and the resulting registry."""
+
+    manager: pluggy.PluginManager
+    registry: Registry
+    broken: dict[str, str] = field(default_factory=dict)
+    """Entry points that failed to load: name -> one-line reason."""
+
+    @property
+    def hook(self) -> Any:
+        """Call lifecycle hooks: ``host.hook.on_run_start(run_dir=..., config=...)``."""
+        return self.manager.hook
+
+
+def load_plugins(env: Mapping[str, str] | None = None,
+                 extra: Sequence[tuple[str, str, ModuleType | object]] = ()) -> PluginHost:
+    """Load every plugin module of the ``nlosfw`` entry-point group and build the registry.
+
+    ``env`` defaults to ``os.environ`` (for ``NLOSFW_PLUGINS``). ``extra`` adds
+    in-process plugin modules as ``(distribution, name, module)`` triples, for
+    tests and embedding. No plugin factory is imported here.
+    """
+    env = os.environ if env is None else env
+    rules = PluginFilter.parse(env.get(ENV_VAR, ""))
+    manager = pluggy.PluginManager(hookspecs.PROJECT)
+    manager.add_hookspecs(hookspecs)
+    origins: dict[str, tuple[str, str]] = {}
+    broken: dict[str, str] = {}
+    for ep in sorted(entry_points(group=ENTRY_POINT_GROUP), key=lambda e: e.name):
+        if not rules.loads_entry_point(ep.name):
+            continue
+        dist = ep.dist.metadata["Name"] if ep.dist is not None else "unknown"
+        try:
+            module = ep.load()
+        except Exception as err:  # a broken third-party plugin must not break the others
+            broken[ep.name] = f"{dist}: {type(err).__name__}: {err}"
+            log.warning("nlosfw plugin %r from %s failed to load: %s", ep.name, dist, err)
+            continue
+        key = f"{dist}:{ep.name}"
+        if manager.is_registered(module) or manager.has_plugin(key):
+            continue
+        manager.register(module, name=key)
+        origins[key] = (dist, ep.name)
+    for dist, name, module in extra:
+        key = f"{dist}:{name}"
+        manager.register(module, name=key)
+        origins[key] = (dist, name)
+
+    registry = Registry()
+    for kind, hook_name in _HOOK_OF_KIND.items():
+        for key, (dist, ep_name) in origins.items():
+            others = [p for k, p in manager.list_name_plugin() if k != key]
+            caller = manager.subset_hook_caller(hook_name, remove_plugins=others)
+            caller(register=Registrar(kind, dist, ep_name, rules.accepts, registry))
+    return PluginHost(manager=manager, registry=registry, broken=broken)

@@ -1,0 +1,205 @@
+"""Plugin specifications and the per-kind registry.
+
+A :class:`PluginSpec` names a factory lazily (``"package.module:Class"``) so
+that listing plugins never imports a heavy backend; the factory is imported
+when :meth:`PluginSpec.create` is first called.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from nlosfw.config import config_from_mapping
+from nlosfw.enums import PluginKind
+from nlosfw.errors import PluginError
+
+
+def import_object(path: str) -> Any:
+    """Import ``"package.module:attr"`` (or ``"package.module.attr"``)."""
+    module_name, _, attr = path.partition(":")
+    if not attr:
+        module_name, _, attr = path.rpartition(".")
+    module = importlib.import_module(module_name)
+    obj: Any = module
+    for part in attr.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+@dataclass(frozen=True)
+class PluginSpec:
+    """One registered plugin: what it is, where it comes from, how to build it."""
+
+    kind: PluginKind
+    name: str
+    factory: str | Callable[..., Any]
+    """The implementation class, or ``"module:Class"`` imported on first use."""
+    distribution: str
+    """The installed distribution that registered it (``nlosfw``, ``nlosfw-torch``, ...)."""
+    entry_point: str = ""
+    config: str | type | None = None
+    """Config dataclass (or ``"module:Class"``); default the factory's ``config_class``."""
+    requires: tuple[tuple[str, str], ...] = ()
+    """(importable module, pip requirement) pairs the factory needs."""
+    description: str = ""
+    test_config: Mapping[str, Any] = field(default_factory=dict)
+    """Small, fast settings used by the conformance checks."""
+    expected_failures: Mapping[str, str] = field(default_factory=dict)
+    """Conformance check name -> reason it is expected to fail for this plugin."""
+
+    @property
+    def qualified_name(self) -> str:
+        return f"{self.kind.value}:{self.name}"
+
+    def missing_requirements(self) -> list[tuple[str, str]]:
+        """Required modules that cannot be found (checked without importing them)."""
+        missing = []
+        for module, requirement in self.requires:
+            try:
+                found = importlib.util.find_spec(module) is not None
+            except (ImportError, ValueError):
+                found = False
+            if not found:
+                missing.append((module, requirement))
+        return missing
+
+    def install_command(self) -> str:
+        """The pip command that installs the missing requirements ('' if none are missing)."""
+        missing = self.missing_requirements()
+        if not missing:
+            return ""
+        return "pip install " + " ".join(_quote(req) for _, req in missing)
+
+    def load(self) -> Any:
+        """The factory, imported on first use; a one-line error says what to install."""
+        if not isinstance(self.factory, str):
+            return self.factory
+        command = self.install_command()
+        if command:
+            modules = ", ".join(m for m, _ in self.missing_requirements())
+            raise PluginError(f"{self.kind.value} plugin '{self.name}' needs {modules}, which is "
+                              f"not installed; run: {command}")
+        try:
+            return import_object(self.factory)
+        except ImportError as err:
+            raise PluginError(f"{self.kind.value} plugin '{self.name}' (from {self.distribution}) "
+                              f"cannot be imported: {err}") from None
+
+    def config_class(self) -> type:
+        """The config dataclass (imports ``config`` if it is a path, else the factory)."""
+        if self.config is None:
+            return self.load().config_class
+        if isinstance(self.config, str):
+            try:
+                return import_object(self.config)
+            except ImportError as err:
+                raise PluginError(f"{self.kind.value} plugin '{self.name}': config class "
+                                  f"{self.config} cannot be imported: {err}") from None
+        return self.config
+
+    def make_config(self, options: Mapping[str, Any] | None = None) -> Any:
+        """A validated config instance; errors name ``<kind>.<option>``."""
+        return config_from_mapping(self.config_class(), options, self.kind.value)
+
+    def create(self, options: Mapping[str, Any] | Any = None) -> Any:
+        """Instantiate the plugin with ``options`` (a mapping or a config instance)."""
+        config = options if isinstance(options, self.config_class()) else self.make_config(options)
+        return self.load()(config)
+
+
+class Registry:
+    """Plugins of every kind by name. Duplicate names within a kind are errors."""
+
+    def __init__(self, specs: Iterable[PluginSpec] = ()) -> None:
+        self._specs: dict[tuple[PluginKind, str], PluginSpec] = {}
+        for spec in specs:
+            self.add(spec)
+
+    def add(self, spec: PluginSpec) -> None:
+        key = (spec.kind, spec.name)
+        if key in self._specs:
+            other = self._specs[key]
+            raise PluginError(f"duplicate {spec.kind.value} plugin '{spec.name}': registered by "
+                              f"{other.distribution} and by {spec.distribution}; uninstall one "
+                              "or block one with NLOSFW_PLUGINS=-<name>")
+        self._specs[key] = spec
+
+    def get(self, kind: PluginKind | str, name: str) -> PluginSpec:
+        kind = PluginKind(kind)
+        try:
+            return self._specs[(kind, name)]
+        except KeyError:
+            valid = ", ".join(self.names(kind)) or "(none installed)"
+            raise PluginError(f"unknown {kind.value} plugin '{name}'; valid: {valid}") from None
+
+    def names(self, kind: PluginKind | str) -> list[str]:
+        kind = PluginKind(kind)
+        return sorted(n for k, n in self._specs if k is kind)
+
+    def specs(self, kind: PluginKind | str | None = None) -> list[PluginSpec]:
+        if kind is None:
+            return sorted(self._specs.values(), key=lambda s: (list(PluginKind).index(s.kind),
+                                                               s.name))
+        kind = PluginKind(kind)
+        return [self._specs[(kind, n)] for n in self.names(kind)]
+
+    def create(self, kind: PluginKind | str, name: str, options: Any = None) -> Any:
+        return self.get(kind, name).create(options)
+
+    def __len__(self) -> int:
+        return len(self._specs)
+
+    def __contains__(self, key: tuple[PluginKind | str, str]) -> bool:
+        kind, name = key
+        return (PluginKind(kind), name) in self._specs
+
+
+@dataclass
+class Registrar:
+    """The ``register`` callable handed to ``register_*`` hooks of one plugin module."""
+
+    kind: PluginKind
+    distribution: str
+    entry_point: str
+    accept: Callable[[PluginSpec], bool]
+    registry: Registry
+
+    def __call__(
+        self,
+        name: str,
+        factory: str | Callable[..., Any],
+        *,
+        config: str | type | None = None,
+        requires: Sequence[str] | Mapping[str, str] = (),
+        description: str = "",
+        test_config: Mapping[str, Any] | None = None,
+        expected_failures: Mapping[str, str] | None = None,
+    ) -> None:
+        """Register plugin ``name`` of this hook's kind.
+
+        ``requires`` lists importable modules the factory needs, or maps each
+        to the pip requirement that provides it (``{"torch": "torch==2.13.0"}``).
+        """
+        if not name or not name.replace("_", "").replace("-", "").isalnum():
+            raise PluginError(f"{self.distribution}: invalid {self.kind.value} plugin name "
+                              f"{name!r}; use letters, digits, '_' and '-'")
+        if isinstance(requires, Mapping):
+            reqs = tuple((str(m), str(r)) for m, r in requires.items())
+        else:
+            reqs = tuple((str(m), str(m)) for m in requires)
+        spec = PluginSpec(
+            kind=self.kind, name=name, factory=factory, distribution=self.distribution,
+            entry_point=self.entry_point, config=config, requires=reqs,
+            description=description, test_config=dict(test_config or {}),
+            expected_failures=dict(expected_failures or {}),
+        )
+        if self.accept(spec):
+            self.registry.add(spec)
+
+
+def _quote(requirement: str) -> str:
+    return f"'{requirement}'" if any(c in requirement for c in "<>=!~ ;[") else requirement
