@@ -1,7 +1,8 @@
 """Registration of the built-in plugins.
 
 This module is the core distribution's ``nlosfw`` entry point: the built-ins
-register through exactly the same hooks as third-party plugins.
+register through exactly the same hooks as third-party plugins. Factories and
+config classes are named by import path so nothing is imported until used.
 """
 
 from __future__ import annotations
@@ -13,12 +14,52 @@ from nlosfw.plugins.hookspecs import hookimpl
 
 @hookimpl
 def register_simulators(register: Any) -> None:
-    from nlosfw.builtin.analytic import AnalyticConfig
-
     register(
         "analytic",
         "nlosfw.builtin.analytic:AnalyticSimulator",
-        config=AnalyticConfig,
+        config="nlosfw.builtin.analytic:AnalyticConfig",
         description="Exact three-bounce transients of points and patches (no visibility)",
         test_config={"patch_size": 0.05},
+    )
+
+
+@hookimpl
+def register_phasor_transforms(register: Any) -> None:
+    register(
+        "fft",
+        "nlosfw.builtin.fft_transform:FFTTransform",
+        config="nlosfw.builtin.fft_transform:FFTTransformConfig",
+        description="Temporal Fourier transform at any set of frequencies",
+    )
+    register(
+        "wavelet",
+        "nlosfw.builtin.wavelet_transform:WaveletTransform",
+        config="nlosfw.builtin.wavelet_transform:WaveletTransformConfig",
+        description="Liu's Gaussian-enveloped virtual illumination (spectral bins and weights)",
+    )
+
+
+@hookimpl
+def register_field_models(register: Any) -> None:
+    register(
+        "interp",
+        "nlosfw.builtin.interp:InterpFieldModel",
+        config="nlosfw.builtin.interp:InterpConfig",
+        description="Cubic interpolation of the complex field in x, y and frequency (baseline)",
+    )
+
+
+@hookimpl
+def register_imagers(register: Any) -> None:
+    register(
+        "rsd",
+        "nlosfw.builtin.rsd_imager:RSDImager",
+        config="nlosfw.builtin.rsd_imager:RSDImagerConfig",
+        description="Direct Rayleigh-Sommerfeld sum over any voxel set",
+    )
+    register(
+        "fft",
+        "nlosfw.builtin.fft_imager:FFTImager",
+        config="nlosfw.builtin.fft_imager:FFTImagerConfig",
+        description="Fast RSD: per-plane FFT convolution (Liu 2020)",
     )
