@@ -1,0 +1,5 @@
+"""``python -m nlosfw``."""
+
+from nlosfw.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,21 @@
+"""Reporting errors the user can fix: one line on stderr, traceback only on request."""
+
+from __future__ import annotations
+
+import logging
+import os
+import traceback
+
+from rich.console import Console
+from rich.markup import escape
+
+log = logging.getLogger("nlosfw")
+
+
+def report_user_error(err: BaseException) -> None:
+    """Print ``error: <message>`` as one line on stderr (the traceback too in debug mode)."""
+    console = Console(stderr=True, soft_wrap=True, highlight=False)
+    if os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("NLOSFW_DEBUG") == "1":
+        console.print(escape("".join(traceback.format_exception(err))), end="")
+    message = " ".join(str(err).split())
+    console.print(f"[bold red]error:[/] {escape(message)}")

@@ -1,0 +1,158 @@
+"""Figures of a run (PNG): phasor fields, reconstructions, loss curves.
+
+``fields_f<k>.png``  amplitude, phase and amplitude error of each field at one
+                     training and one held-out frequency (as in thesis figs. 4.2-5.5)
+``reconstructions.png``  max-intensity images of every source, their depth maps
+                     and their error against the reconstruction of the true field
+``loss.png``         training (and validation) loss of each field model
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlosfw.app.run import RunContext
+from nlosfw.metrics import normalise
+from nlosfw.phasor_field import PhasorField
+from nlosfw.reconstruction import Reconstruction
+
+_SOURCE_TITLES = {"true": "true field", "raw": "raw (training grid)", "model": "model",
+                  "interp": "interp baseline"}
+
+
+def write_figures(ctx: RunContext, fields: dict[str, PhasorField],
+                  recons: dict[str, Reconstruction], fitted: dict[str, Any], dpi: int) -> None:
+    """Write every figure of a run into ``figures/``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    split = fitted["split"]
+    chosen = _chosen_frequencies(split)
+    for label, index in chosen.items():
+        ctx.write(f"figures/fields_f{index}.png",
+                  _saver(lambda fig_index=index, lab=label: _field_figure(fields, fig_index, lab),
+                         dpi), kind="figure")
+    ctx.write("figures/reconstructions.png", _saver(lambda: _recon_figure(recons), dpi),
+              kind="figure")
+    histories = {s: r.history for s, r in fitted["reports"].items() if r.history}
+    if histories:
+        ctx.write("figures/loss.png", _saver(lambda: _loss_figure(histories), dpi), kind="figure")
+
+
+def _saver(make: Callable[[], Any], dpi: int) -> Callable[[Path], None]:
+    def save(path: Path) -> None:
+        import matplotlib.pyplot as plt
+
+        fig = make()
+        fig.savefig(path, dpi=dpi, format="png", bbox_inches="tight")
+        plt.close(fig)
+
+    return save
+
+
+def _chosen_frequencies(split: Any) -> dict[str, int]:
+    """A training frequency near the top of the band and a held-out one, by index."""
+    train = np.asarray(split.train_frequency_index)
+    held = np.asarray(split.heldout_frequency_index)
+    chosen = {"training": int(train[int(0.75 * (train.size - 1))])}
+    if held.size:
+        chosen["held-out"] = int(held[held.size // 2])
+    return chosen
+
+
+def _extent(field: PhasorField) -> list[float]:
+    w = field.wall_xyz
+    sp = field.grid_spacing() or (0.0, 0.0)
+    return [w[0, 0, 0] - sp[1] / 2, w[0, -1, 0] + sp[1] / 2,
+            w[0, 0, 1] - sp[0] / 2, w[-1, 0, 1] + sp[0] / 2]
+
+
+def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any:
+    import matplotlib.pyplot as plt
+
+    true = fields["true"]
+    sources = [s for s in ("true", "raw", "model", "interp") if s in fields]
+    amp_max = float(np.abs(true.values[index]).max()) or 1.0
+    fig, axes = plt.subplots(len(sources), 3, figsize=(9.5, 3.0 * len(sources)),
+                             squeeze=False)
+    freq = true.frequencies[index]
+    fig.suptitle(f"phasor field at f = {freq:.3f} cycles/m (λ = {100 / freq:.1f} cm), "
+                 f"{label} frequency")
+    for row, source in enumerate(sources):
+        values = fields[source].values[index]
+        ext = _extent(fields[source])
+        ax = axes[row]
+        im = ax[0].imshow(np.abs(values), origin="lower", extent=ext, vmin=0, vmax=amp_max,
+                          cmap="magma")
+        ax[0].set_title(f"{_SOURCE_TITLES[source]}: amplitude")
+        fig.colorbar(im, ax=ax[0], fraction=0.046)
+        im = ax[1].imshow(np.angle(values), origin="lower", extent=ext, vmin=-np.pi,
+                          vmax=np.pi, cmap="twilight")
+        ax[1].set_title("phase (rad)")
+        fig.colorbar(im, ax=ax[1], fraction=0.046)
+        if source in ("true", "raw"):
+            ax[2].axis("off")
+            continue
+        err = np.abs(values - true.values[index]) / amp_max
+        im = ax[2].imshow(err, origin="lower", extent=ext, vmin=0, cmap="viridis")
+        ax[2].set_title("|error| / max |true|")
+        fig.colorbar(im, ax=ax[2], fraction=0.046)
+    for ax in axes.ravel():
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+    fig.tight_layout()
+    return fig
+
+
+def _recon_figure(recons: dict[str, Reconstruction]) -> Any:
+    import matplotlib.pyplot as plt
+
+    sources = [s for s in ("true", "raw", "model", "interp") if s in recons]
+    reference = normalise(recons["true"].max_intensity_image())
+    fig, axes = plt.subplots(3, len(sources), figsize=(3.3 * len(sources), 9.5), squeeze=False)
+    vox = recons["true"].voxels
+    ext = [vox[0, 0, 0, 0], vox[0, 0, -1, 0], vox[0, 0, 0, 1], vox[0, -1, 0, 1]]
+    depths = recons["true"].depths
+    for col, source in enumerate(sources):
+        recon = recons[source]
+        image = normalise(recon.max_intensity_image())
+        axes[0, col].imshow(image, origin="lower", extent=ext, cmap="hot", vmin=0, vmax=1)
+        axes[0, col].set_title(f"{_SOURCE_TITLES[source]}\nmax intensity")
+        depth = recon.depth_map(threshold=0.25)
+        im = axes[1, col].imshow(depth, origin="lower", extent=ext, cmap="viridis",
+                                 vmin=depths.min(), vmax=depths.max())
+        axes[1, col].set_title("depth of maximum (m)")
+        fig.colorbar(im, ax=axes[1, col], fraction=0.046)
+        err = np.abs(image - reference)
+        im = axes[2, col].imshow(err, origin="lower", extent=ext, cmap="viridis", vmin=0,
+                                 vmax=max(float(err.max()), 1e-6))
+        axes[2, col].set_title("|error| vs true field")
+        fig.colorbar(im, ax=axes[2, col], fraction=0.046)
+    for ax in axes.ravel():
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+    fig.tight_layout()
+    return fig
+
+
+def _loss_figure(histories: dict[str, list[dict[str, float]]]) -> Any:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    for source, history in histories.items():
+        steps = [h.get("step", i) for i, h in enumerate(history)]
+        ax.plot(steps, [h.get("loss", np.nan) for h in history], label=f"{source} train")
+        if any(h.get("val_loss") is not None for h in history):
+            ax.plot(steps, [h.get("val_loss") if h.get("val_loss") is not None else np.nan
+                            for h in history], "--", label=f"{source} validation")
+    ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("loss (normalised MSE)")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return fig

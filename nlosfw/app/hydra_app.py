@@ -1,0 +1,225 @@
+"""The Hydra application behind ``python -m nlosfw``.
+
+Three things happen before Hydra takes over:
+
+1. every registered plugin contributes a config group entry (``model=siren_torch``)
+   to Hydra's ConfigStore from its own config dataclass, so a third-party
+   plugin is selectable without touching ``conf/``;
+2. ``+group=name`` is accepted for the selector groups (``+simulator=embree``):
+   Hydra refuses ``+`` for a group that already has a default, so the ``+`` is
+   dropped there and the override selects the option as ``group=name`` does;
+3. the configuration is composed once and validated (every group choice, every
+   plugin option, the scene, the run settings; one composition per swept value),
+   so a mistake ends with one line and exit status 2 before any output exists.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import uuid
+from collections.abc import Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from nlosfw.app.settings import SELECTOR_GROUPS, run_settings
+from nlosfw.config import config_defaults
+from nlosfw.enums import PluginKind
+from nlosfw.errors import ConfigError, NlosfwError, PluginError
+from nlosfw.plugins import PluginHost
+
+log = logging.getLogger(__name__)
+
+_PLUGIN_GROUPS = tuple(k.value for k in PluginKind)
+_MAX_PREFLIGHT_COMPOSITIONS = 64
+
+
+def config_dir() -> Path:
+    """The directory of ``config.yaml``: the installed ``nlosfw.conf`` package or ``conf/``."""
+    try:
+        path = Path(str(resources.files("nlosfw.conf")))
+        if (path / "config.yaml").is_file():
+            return path
+    except (ModuleNotFoundError, TypeError):
+        pass
+    source_tree = Path(__file__).resolve().parents[2] / "conf"
+    if (source_tree / "config.yaml").is_file():
+        return source_tree
+    raise PluginError("cannot find nlosfw's Hydra configs (package nlosfw.conf); reinstall "
+                      "nlosfw with: pip install .")
+
+
+def register_plugin_configs(host: PluginHost) -> None:
+    """Store one config node per plugin in Hydra's ConfigStore (group = plugin kind)."""
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance()
+    for spec in host.registry.specs():
+        try:
+            defaults = config_defaults(spec.config_class())
+        except NlosfwError as err:
+            log.warning("plugin %s has no usable config and is not selectable: %s",
+                        spec.qualified_name, err)
+            continue
+        store.store(group=spec.kind.value, name=spec.name,
+                    node={"name": spec.name, **defaults}, provider=spec.distribution)
+
+
+def normalise_overrides(args: Sequence[str]) -> list[str]:
+    """Turn ``+group=x`` / ``++group=x`` into ``group=x`` for the selector groups."""
+    out = []
+    for arg in args:
+        stripped = arg.lstrip("+")
+        key = stripped.split("=", 1)[0]
+        if arg.startswith("+") and "=" in stripped and key in SELECTOR_GROUPS:
+            out.append(stripped)
+        else:
+            out.append(arg)
+    return out
+
+
+def ensure_resolvers() -> None:
+    """Register the ``nlosfw_run_id`` resolver (a short random id, fixed per process)."""
+    from omegaconf import OmegaConf
+
+    if not OmegaConf.has_resolver("nlosfw_run_id"):
+        run_id = uuid.uuid4().hex[:6]
+        OmegaConf.register_new_resolver("nlosfw_run_id", lambda: run_id)
+
+
+def preflight(overrides: Sequence[str], host: PluginHost) -> None:
+    """Compose and validate the config for every swept value; raise a one-line NlosfwError."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    try:
+        parsed = OverridesParser.create().parse_overrides(list(overrides))
+    except HydraException as err:
+        raise ConfigError("", f"cannot parse overrides: {_one_line(err)}") from None
+    fixed, sweeps = [], []
+    for ov, text in zip(parsed, overrides, strict=True):
+        if ov.is_sweep_override():
+            values = [str(v) for v in ov.sweep_string_iterator()]
+            sweeps.append((ov.get_key_element(), values))
+        else:
+            fixed.append(text)
+    candidates = [fixed + [f"{key}={values[0]}" for key, values in sweeps]]
+    for i, (key, values) in enumerate(sweeps):
+        for value in values[1:]:
+            others = [f"{k}={v[0]}" for j, (k, v) in enumerate(sweeps) if j != i]
+            candidates.append(fixed + others + [f"{key}={value}"])
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3",
+                                   job_name="nlosfw"):
+            loader = GlobalHydra.instance().config_loader()
+            for key, values in [(o.key_or_group, _values(o)) for o in parsed]:
+                _check_group_choice(key, values, loader)
+            for combo in candidates[:_MAX_PREFLIGHT_COMPOSITIONS]:
+                try:
+                    cfg = compose(config_name="config", overrides=combo)
+                except (HydraException, OmegaConfBaseException) as err:
+                    raise ConfigError("", _one_line(err)) from None
+                validate_config(cfg, host)
+    finally:
+        GlobalHydra.instance().clear()
+
+
+def validate_config(cfg: Any, host: PluginHost) -> None:
+    """Check a composed config: plugin names, installed dependencies, options, scene, settings."""
+    from omegaconf import OmegaConf
+
+    from nlosfw.scene import scene_from_config
+
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    settings = run_settings(plain)
+    for group in _PLUGIN_GROUPS:
+        node = dict(plain.get(group) or {})
+        if not node:
+            raise ConfigError(group, "no plugin selected")
+        name = node.pop("name", None)
+        spec = host.registry.get(group, str(name))
+        command = spec.install_command()
+        if command:
+            raise PluginError(f"{group} plugin '{spec.name}' needs packages that are not "
+                              f"installed; run: {command}")
+        spec.make_config(node)
+    if settings.capture.path is None:
+        scene_from_config(plain.get("scene"))
+    elif not Path(settings.capture.path).expanduser().is_file():
+        raise ConfigError("capture.path", f"file not found: {settings.capture.path}")
+
+
+def main(argv: Sequence[str]) -> int:
+    """Run the Hydra app with ``argv`` (without the program name); return the exit status."""
+    import hydra
+    from hydra._internal.utils import get_args_parser
+
+    from nlosfw.plugins import load_plugins
+
+    argv = normalise_overrides(argv)
+    args = get_args_parser().parse_args(argv)
+    host = load_plugins()
+    register_plugin_configs(host)
+    ensure_resolvers()
+    if not (args.help or args.hydra_help or args.shell_completion):
+        preflight(args.overrides, host)
+    decorated = hydra.main(config_path=str(config_dir()), config_name="config",
+                           version_base="1.3")(_task)
+    saved = sys.argv
+    sys.argv = [saved[0] if saved else "nlosfw", *argv]
+    try:
+        decorated()
+    finally:
+        sys.argv = saved
+    return 0
+
+
+def _task(cfg: Any) -> float | None:
+    """One Hydra job: the whole pipeline in its run directory."""
+    from nlosfw.app.errors import report_user_error
+    from nlosfw.app.pipeline import run_pipeline
+
+    try:
+        return run_pipeline(cfg)
+    except NlosfwError as err:
+        report_user_error(err)
+        raise SystemExit(2) from None
+
+
+def _values(override: Any) -> list[str]:
+    if override.is_sweep_override():
+        return [str(v) for v in override.sweep_string_iterator()]
+    value = override.value()
+    return [] if value is None else [str(value)]
+
+
+def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
+    if key not in SELECTOR_GROUPS:
+        return
+    options = sorted(loader.get_group_options(key))
+    for value in values:
+        if value in ("null", "None") and key == "experiment":
+            continue
+        if value not in options:
+            noun = f"{key} plugin" if key in _PLUGIN_GROUPS else key
+            hint = ""
+            if key in _PLUGIN_GROUPS:
+                hint = " (is its plugin installed? see: python -m nlosfw plugins)"
+            valid = ", ".join(options) or "(none)"
+            raise ConfigError("", f"unknown {noun} '{value}'; valid: {valid}{hint}")
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(line.strip() for line in str(err).splitlines() if line.strip())
+    return text or type(err).__name__
+
+
+def debug_enabled() -> bool:
+    """Whether tracebacks were requested (``--debug`` or ``HYDRA_FULL_ERROR=1``)."""
+    return os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("NLOSFW_DEBUG") == "1"

@@ -1,0 +1,359 @@
+"""The end-to-end run: capture -> transform -> split -> fit -> predict -> reconstruct -> report.
+
+Four fields are imaged side by side: the true full-resolution field, the raw
+subsampled field the model trains on, the model's prediction and the ``interp``
+baseline's, all on the same voxels; every reconstruction is compared with the
+one from the true field.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlosfw import __version__
+from nlosfw.app.cache import Cache, cache_key, file_digest
+from nlosfw.app.console import config_tree, progress_bar
+from nlosfw.app.run import RunContext
+from nlosfw.app.settings import RunSettings, run_settings
+from nlosfw.capture import Capture
+from nlosfw.errors import ConfigError, NlosfwError
+from nlosfw.interfaces import TrainingStep
+from nlosfw.io import (
+    read_capture,
+    read_phasor_field,
+    write_capture,
+    write_phasor_field,
+    write_reconstruction,
+    yaml_safe,
+)
+from nlosfw.metrics import image_metrics
+from nlosfw.phasor_field import PhasorField
+from nlosfw.plugins import PluginHost, load_plugins
+from nlosfw.reconstruction import Reconstruction, volume_voxels
+
+log = logging.getLogger(__name__)
+
+#: Files Hydra itself puts in a run directory before the job starts.
+_HYDRA_FILES = {".hydra", "run.log"}
+
+
+def run_pipeline(cfg: Any) -> float | None:
+    """Hydra task: run the pipeline in Hydra's output directory; returns the held-out NMSE (dB)."""
+    from hydra.core.hydra_config import HydraConfig
+    from omegaconf import OmegaConf
+
+    run_dir = Path(HydraConfig.get().runtime.output_dir)
+    plain = OmegaConf.to_container(cfg, resolve=True)
+    return Pipeline(run_dir, plain, load_plugins()).run()
+
+
+class Pipeline:
+    """One run of every stage up to ``stop_after``, writing into ``run_dir``."""
+
+    def __init__(self, run_dir: Path, config: dict[str, Any], host: PluginHost) -> None:
+        from rich.console import Console
+
+        self.config = config
+        self.settings: RunSettings = run_settings(config)
+        self.host = host
+        self.run_dir = Path(run_dir)
+        self.console = Console(stderr=False)
+        self.ctx = RunContext(self.run_dir, host)
+        self.cache = Cache(self.settings.cache.dir, self.settings.cache.enabled)
+        self.metrics = self.ctx.metrics
+
+    # ------------------------------------------------------------------ driver
+    def run(self) -> float | None:
+        if self._already_completed():
+            return None
+        self._set_aside_leftovers()
+        self.console.print(config_tree(self.config, title=f"nlosfw run → {self.run_dir}"))
+        self.metrics["run"] = self._run_info()
+        self.host.hook.on_run_start(run_dir=str(self.run_dir), config=self.config)
+        self.ctx.write_text("config", yaml_safe.dump(self.config))
+        try:
+            objective = self._stages()
+        except (NlosfwError, KeyboardInterrupt):
+            self.ctx.finish("failed")
+            self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics,
+                                      status="failed")
+            raise
+        status = "completed" if self.settings.stop_after is None else "stopped"
+        if status == "stopped":
+            self.metrics["run"]["stopped_after"] = self.settings.last_stage
+        self.ctx.finish(status)
+        self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics, status=status)
+        from nlosfw.app.summary import summary_table
+
+        self.console.print(summary_table(self.metrics))
+        self.console.print(f"[bold green]done[/] ({status}): {self.run_dir}")
+        return objective
+
+    def _stages(self) -> float | None:
+        s = self.settings
+        with self.ctx.stage("capture"):
+            capture, capture_key = self.capture()
+        if not s.runs("transform"):
+            return None
+        with self.ctx.stage("transform"):
+            field = self.transform(capture, capture_key)
+        if not s.runs("fit"):
+            return None
+        with self.ctx.stage("fit"):
+            fitted = self.fit(field)
+        if not s.runs("predict"):
+            return None
+        with self.ctx.stage("predict"):
+            fields = self.predict(field, fitted)
+        if not s.runs("reconstruct"):
+            return None
+        with self.ctx.stage("reconstruct"):
+            recons = self.reconstruct(capture, fields)
+        if s.runs("report"):
+            with self.ctx.stage("report"):
+                self.report(fields, recons, fitted)
+        model_metrics = self.metrics["field"].get("model") or self.metrics["field"]["interp"]
+        return model_metrics["splits"]["heldout_pixels"]["nmse_db"]
+
+    # ------------------------------------------------------------------ stages
+    def capture(self) -> tuple[Capture, str]:
+        """Read ``capture.path`` or simulate the scene (cached); write capture.hdf5."""
+        path = self.settings.capture.path
+        info: dict[str, Any] = {}
+        if path is not None:
+            source = Path(path).expanduser()
+            capture = read_capture(source)
+            key = cache_key({"file": file_digest(source)})
+            info.update(source="file", path=str(source.resolve()))
+        else:
+            from nlosfw.scene import scene_from_config
+
+            scene = scene_from_config(self.config["scene"])
+            name, options = self._plugin_options("simulator")
+            simulator = self.host.registry.create("simulator", name, options)
+            key = cache_key({"simulator": name, "options": options,
+                             "scene": self.config["scene"]})
+            with self.console.status(f"simulating {scene.name} with {name}…"):
+                capture, hit = self.cache.get_or_compute(
+                    "captures", key, lambda: simulator.simulate(scene),
+                    lambda p, c: write_capture(p, c, compression=1), read_capture)
+            info.update(source="simulated", simulator=name, cache_hit=hit)
+        self.ctx.write("capture", lambda p: write_capture(
+            p, capture, compression=self.settings.output.compression))
+        info.update(shape=list(capture.H.shape), kind=capture.kind.value,
+                    delta_t=capture.delta_t, t_start=capture.t_start,
+                    total=float(np.sum(capture.H, dtype=np.float64)))
+        if "noise" in capture.scene_info:
+            info["noise"] = capture.scene_info["noise"]
+        self.metrics["capture"] = info
+        return capture, key
+
+    def transform(self, capture: Capture, capture_key: str) -> PhasorField:
+        name, options = self._plugin_options("transform")
+        transform = self.host.registry.create("transform", name, options)
+        key = cache_key({"capture": capture_key, "transform": name, "options": options})
+        field, hit = self.cache.get_or_compute(
+            "fields", key, lambda: transform.transform(capture),
+            lambda p, f: write_phasor_field(p, f), read_phasor_field)
+        self.ctx.write("phasor_field", lambda p: write_phasor_field(p, field))
+        self.metrics["transform"] = {
+            "name": name, "cache_hit": hit, "n_frequencies": field.n_frequencies,
+            "frequency_band": [float(field.frequencies.min()), float(field.frequencies.max())],
+            "grid": list(field.grid_shape),
+        }
+        return field
+
+    def fit(self, field: PhasorField) -> dict[str, Any]:
+        """Split the field, fit the selected model and the interp baseline."""
+        from nlosfw.protocol import split_field
+
+        s = self.settings.split
+        split = split_field(field, spatial_step=s.spatial_step, spectral=s.spectral,
+                            spectral_fraction=s.spectral_fraction)
+        name, options = self._plugin_options("model")
+        fitted: dict[str, Any] = {"split": split, "models": {}, "reports": {}}
+        self.metrics["field"] = {}
+        for source, (plugin, opts) in self._field_models(name, options).items():
+            model = self.host.registry.create("model", plugin, opts)
+            report = self._fit_with_progress(source, plugin, model, split.train)
+            fitted["models"][source] = model
+            fitted["reports"][source] = report
+            entry = self.metrics["field"][source] = {
+                "plugin": plugin,
+                "n_parameters": int(model.n_parameters),
+                "training_values": int(split.train.values.size * 2),
+                "fit": {"steps": report.steps, "seconds": round(report.seconds, 3),
+                        "final_loss": report.final_loss, "best_val_loss": report.best_val_loss,
+                        "stopped_early": report.stopped_early},
+            }
+            entry["parameters_per_value"] = entry["n_parameters"] / entry["training_values"]
+            if source == "model":
+                self.ctx.write("field_model", model.save, kind="field_model")
+        return fitted
+
+    def predict(self, field: PhasorField, fitted: dict[str, Any]) -> dict[str, PhasorField]:
+        """The fields to image: true, raw (training grid, all frequencies), model, interp."""
+        from nlosfw.protocol import field_metrics
+
+        split = fitted["split"]
+        step = self.settings.split.spatial_step
+        fields = {"true": field, "raw": field.select(y=slice(None, None, step),
+                                                     x=slice(None, None, step))}
+        for source, model in fitted["models"].items():
+            start = time.perf_counter()
+            predicted = model.predict_field(field.wall_xyz, field.frequencies, field.geometry,
+                                            field.weights, metadata={"source": source})
+            seconds = time.perf_counter() - start
+            fields[source] = predicted
+            entry = self.metrics["field"][source]
+            entry["predict_seconds"] = round(seconds, 4)
+            entry["splits"] = field_metrics(field, predicted, split)
+        for source, f in fields.items():
+            self.ctx.write(f"fields/{source}.hdf5", lambda p, f=f: write_phasor_field(p, f),
+                           kind="phasor_field")
+        return fields
+
+    def reconstruct(self, capture: Capture,
+                    fields: dict[str, PhasorField]) -> dict[str, Reconstruction]:
+        name, options = self._plugin_options("imager")
+        imager = self.host.registry.create("imager", name, options)
+        voxels = self._voxels(capture, fields["true"])
+        recons: dict[str, Reconstruction] = {}
+        timings = {}
+        for source, field in fields.items():
+            start = time.perf_counter()
+            recons[source] = imager.reconstruct(field, voxels)
+            timings[source] = round(time.perf_counter() - start, 4)
+            self.ctx.write(f"reconstructions/{source}.hdf5",
+                           lambda p, r=recons[source]: write_reconstruction(p, r),
+                           kind="reconstruction")
+        reference = recons["true"].max_intensity_image()
+        per_source = {}
+        for source, recon in recons.items():
+            per_source[source] = {**image_metrics(reference, recon.max_intensity_image()),
+                                  "seconds": timings[source]}
+        self.metrics["reconstruction"] = {
+            "imager": name, "reference": "true",
+            "depths": [float(d) for d in voxels[:, 0, 0, 2]],
+            "sources": per_source,
+        }
+        return recons
+
+    def report(self, fields: dict[str, PhasorField], recons: dict[str, Reconstruction],
+               fitted: dict[str, Any]) -> None:
+        if not self.settings.figures.enabled:
+            return
+        from nlosfw.app.figures import write_figures
+
+        write_figures(self.ctx, fields, recons, fitted, self.settings.figures.dpi)
+
+    # ------------------------------------------------------------------ helpers
+    def _plugin_options(self, kind: str) -> tuple[str, dict[str, Any]]:
+        node = dict(self.config.get(kind) or {})
+        name = node.pop("name", None)
+        if not name:
+            raise ConfigError(kind, "no plugin selected")
+        return str(name), node
+
+    def _field_models(self, name: str, options: dict[str, Any]) -> dict[str, tuple[str, dict]]:
+        """The selected model and, unless it is the baseline itself, the interp baseline."""
+        models = {"model": (name, options)} if name != "interp" else {}
+        models["interp"] = (name, options) if name == "interp" else ("interp", {})
+        return models
+
+    def _fit_with_progress(self, source: str, plugin: str, model: Any, train: PhasorField) -> Any:
+        with progress_bar(self.console) as progress:
+            task = progress.add_task(f"fit {plugin}", total=None, info="")
+
+            def on_step(step: TrainingStep) -> None:
+                val = "" if step.val_loss is None else f" val {step.val_loss:.3g}"
+                progress.update(task, completed=step.step, total=step.total_steps,
+                                info=f"loss {step.loss:.3g}{val}")
+                self.host.hook.on_training_step(model=plugin, step=step.step,
+                                                total_steps=step.total_steps, loss=step.loss,
+                                                val_loss=step.val_loss)
+
+            report = model.fit(train, on_step=on_step)
+            progress.update(task, completed=report.steps, total=max(report.steps, 1))
+        return report
+
+    def _voxels(self, capture: Capture, field: PhasorField) -> np.ndarray:
+        r = self.settings.reconstruction
+        if r.depths:
+            depths = np.asarray(r.depths, dtype=float)
+        else:
+            near, far = r.depth_range or _depth_span(capture)
+            depths = np.linspace(near, far, r.n_depths)
+        wall = field.wall_xyz
+        spacing = field.grid_spacing()
+        if spacing is None:
+            raise ConfigError("reconstruction", "the field's wall samples are not a regular "
+                              "grid; give explicit voxels through an imager that accepts points")
+        dy, dx = spacing
+        ny, nx = field.grid_shape
+        x0, y0 = wall[0, 0, 0] - dx / 2, wall[0, 0, 1] - dy / 2
+        return volume_voxels(depths, (x0, x0 + nx * dx), (y0, y0 + ny * dy), (ny, nx))
+
+    def _run_info(self) -> dict[str, Any]:
+        return {
+            "dir": str(self.run_dir),
+            "nlosfw_version": __version__,
+            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "scene": (self.config.get("scene") or {}).get("name"),
+            **{k: (self.config.get(k) or {}).get("name")
+               for k in ("simulator", "transform", "model", "imager")},
+        }
+
+    def _already_completed(self) -> bool:
+        path = self.run_dir / "metrics.json"
+        if not path.exists():
+            return False
+        try:
+            status = json.loads(path.read_text()).get("status")
+        except (OSError, ValueError):
+            status = None
+        if status in ("completed", "stopped"):
+            self.console.print(f"[yellow]skipping[/]: {self.run_dir} already holds a "
+                               f"{status} run")
+            return True
+        return False
+
+    def _set_aside_leftovers(self) -> None:
+        """Move the files of an interrupted or failed earlier run out of the way (not delete)."""
+        if not self.run_dir.exists():
+            return
+        leftovers = [p for p in self.run_dir.iterdir()
+                     if p.name not in _HYDRA_FILES and not p.name.startswith("interrupted-")]
+        if not leftovers:
+            return
+        aside = self.run_dir / f"interrupted-{time.strftime('%Y%m%d-%H%M%S')}"
+        aside.mkdir()
+        for p in leftovers:
+            shutil.move(str(p), aside / p.name)
+        log.warning("moved %d files of an earlier unfinished run to %s", len(leftovers), aside)
+
+
+def _depth_span(capture: Capture) -> tuple[float, float]:
+    """Depths covering the hidden geometry: from ground truth if present, else the time window."""
+    truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
+    if truth is not None:
+        depth = np.asarray(truth, dtype=float)
+        hit = depth[depth > 0]
+        if hit.size:
+            lo, hi = float(hit.min()), float(hit.max())
+            margin = max(0.15, 0.25 * (hi - lo))
+            return max(0.05, lo - margin), hi + margin
+    # round trip from the wall: the earliest and latest signal bound the depth range
+    profile = capture.H.reshape(capture.n_bins, -1).sum(axis=1)
+    nonzero = np.nonzero(profile > 1e-3 * profile.max())[0] if profile.max() > 0 else []
+    if len(nonzero) == 0:
+        return 0.3, 2.0
+    times = capture.bin_centers[[nonzero[0], nonzero[-1]]]
+    return max(0.05, float(times[0]) / 2 * 0.8), max(0.3, float(times[1]) / 2)

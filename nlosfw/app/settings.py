@@ -1,0 +1,123 @@
+"""The run options of ``python -m nlosfw`` outside the plugin and scene groups.
+
+These are the top-level keys of ``conf/config.yaml``; :func:`run_settings`
+validates them by name and type like every other config.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from nlosfw.config import config_from_mapping, require
+
+#: The config groups that select a scene or a plugin (plus presets).
+SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment")
+
+#: Pipeline stages in order; ``stop_after`` accepts any of them (``simulate`` = ``capture``).
+STAGES = ("capture", "transform", "fit", "predict", "reconstruct", "report")
+StopAfter = Literal["capture", "simulate", "transform", "fit", "predict", "reconstruct"]
+
+
+@dataclass(frozen=True)
+class CaptureSource:
+    """Where the capture comes from."""
+
+    path: str | None = None
+    """Read this HDF5 capture (nlosfw, y-tal or Zaragoza layout) instead of simulating."""
+
+
+@dataclass(frozen=True)
+class SplitSettings:
+    """Which samples the field model trains on (thesis: 32x32 of 64x64, 90% of frequencies)."""
+
+    spatial_step: int = 2
+    """Keep every k-th wall sample in x and y for training."""
+    spectral: Literal["interleaved", "tail", "none"] = "interleaved"
+    """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
+    spectral_fraction: float = 0.1
+
+    def __post_init__(self) -> None:
+        require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
+        require(0 <= self.spectral_fraction < 1, "spectral_fraction",
+                f"must be in [0, 1), got {self.spectral_fraction}")
+
+
+@dataclass(frozen=True)
+class ReconstructionSettings:
+    """The voxels imaged from every field."""
+
+    depths: tuple[float, ...] = ()
+    """Depth planes (m); empty: ``n_depths`` planes spanning the scene's ground truth or
+    ``depth_range``."""
+    depth_range: tuple[float, float] | None = None
+    n_depths: int = 24
+    single_frequency_images: int = 2
+    """How many single-frequency images (as in the thesis figures) to add per field."""
+
+    def __post_init__(self) -> None:
+        require(all(d > 0 for d in self.depths), "depths", "every depth must be > 0 (in front "
+                "of the wall)")
+        require(self.n_depths >= 1, "n_depths", f"must be >= 1, got {self.n_depths}")
+        if self.depth_range is not None:
+            lo, hi = self.depth_range
+            require(0 < lo < hi, "depth_range", f"must satisfy 0 < near < far, got "
+                    f"{self.depth_range}")
+        require(self.single_frequency_images >= 0, "single_frequency_images", "must be >= 0")
+
+
+@dataclass(frozen=True)
+class FigureSettings:
+    enabled: bool = True
+    dpi: int = 110
+
+    def __post_init__(self) -> None:
+        require(self.dpi >= 30, "dpi", f"must be >= 30, got {self.dpi}")
+
+
+@dataclass(frozen=True)
+class CacheSettings:
+    """Captures and phasor fields are cached by a hash of the config that produced them."""
+
+    enabled: bool = True
+    dir: str = "~/.cache/nlosfw"
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    compression: int = 4
+    """gzip level (0-9) for the transient in capture.hdf5."""
+
+    def __post_init__(self) -> None:
+        require(0 <= self.compression <= 9, "compression", f"must be 0-9, got {self.compression}")
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything in a run's config except the selected scene and plugins."""
+
+    stop_after: StopAfter | None = None
+    capture: CaptureSource = field(default_factory=CaptureSource)
+    split: SplitSettings = field(default_factory=SplitSettings)
+    reconstruction: ReconstructionSettings = field(default_factory=ReconstructionSettings)
+    figures: FigureSettings = field(default_factory=FigureSettings)
+    cache: CacheSettings = field(default_factory=CacheSettings)
+    output: OutputSettings = field(default_factory=OutputSettings)
+    thesis: dict[str, Any] = field(default_factory=dict)
+    """Reference numbers of a thesis experiment preset, reported next to ours."""
+
+    @property
+    def last_stage(self) -> str:
+        if self.stop_after is None:
+            return STAGES[-1]
+        return "capture" if self.stop_after == "simulate" else self.stop_after
+
+    def runs(self, stage: str) -> bool:
+        """Whether ``stage`` runs given ``stop_after``."""
+        return STAGES.index(stage) <= STAGES.index(self.last_stage)
+
+
+def run_settings(cfg: Any) -> RunSettings:
+    """Validate the non-group part of a composed config (a mapping)."""
+    plain = {k: v for k, v in dict(cfg).items() if k not in SELECTOR_GROUPS}
+    return config_from_mapping(RunSettings, plain, "")
