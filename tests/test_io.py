@@ -10,7 +10,7 @@ import h5py
 import numpy as np
 import pytest
 
-from nlosfw import CaptureKind, DataError, HFormat, PhasorField, Reconstruction
+from nlosfw import CaptureKind, DataError, HFormat, Reconstruction
 from nlosfw.capture import YTAL_FIELDS
 from nlosfw.io import (
     read_capture,
