@@ -75,7 +75,7 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
     import matplotlib.pyplot as plt
 
     true = fields["true"]
-    sources = [s for s in ("true", "raw", "model", "interp") if s in fields]
+    sources = list(fields)
     amp_max = float(np.abs(true.values[index]).max()) or 1.0
     fig, axes = plt.subplots(len(sources), 3, figsize=(9.5, 3.0 * len(sources)),
                              squeeze=False)
@@ -88,7 +88,7 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
         ax = axes[row]
         im = ax[0].imshow(np.abs(values), origin="lower", extent=ext, vmin=0, vmax=amp_max,
                           cmap="magma")
-        ax[0].set_title(f"{_SOURCE_TITLES[source]}: amplitude")
+        ax[0].set_title(f"{_SOURCE_TITLES.get(source, source)}: amplitude")
         fig.colorbar(im, ax=ax[0], fraction=0.046)
         im = ax[1].imshow(np.angle(values), origin="lower", extent=ext, vmin=-np.pi,
                           vmax=np.pi, cmap="twilight")
@@ -111,7 +111,7 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
 def _recon_figure(recons: dict[str, Reconstruction]) -> Any:
     import matplotlib.pyplot as plt
 
-    sources = [s for s in ("true", "raw", "model", "interp") if s in recons]
+    sources = list(recons)
     reference = normalise(recons["true"].max_intensity_image())
     fig, axes = plt.subplots(3, len(sources), figsize=(3.3 * len(sources), 9.5), squeeze=False)
     vox = recons["true"].voxels
@@ -121,7 +121,7 @@ def _recon_figure(recons: dict[str, Reconstruction]) -> Any:
         recon = recons[source]
         image = normalise(recon.max_intensity_image())
         axes[0, col].imshow(image, origin="lower", extent=ext, cmap="hot", vmin=0, vmax=1)
-        axes[0, col].set_title(f"{_SOURCE_TITLES[source]}\nmax intensity")
+        axes[0, col].set_title(f"{_SOURCE_TITLES.get(source, source)}\nmax intensity")
         depth = recon.depth_map(threshold=0.25)
         im = axes[1, col].imshow(depth, origin="lower", extent=ext, cmap="viridis",
                                  vmin=depths.min(), vmax=depths.max())

@@ -149,6 +149,14 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
             raise PluginError(f"{group} plugin '{spec.name}' needs packages that are not "
                               f"installed; run: {command}")
         spec.make_config(node)
+    for label, options in settings.compare.items():
+        node = dict(options)
+        spec = host.registry.get("model", str(node.pop("name")))
+        try:
+            spec.make_config(node)
+        except ConfigError as err:
+            raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
+                              err.problem) from None
     if settings.capture.path is None:
         scene_from_config(plain.get("scene"))
     elif not Path(settings.capture.path).expanduser().is_file():

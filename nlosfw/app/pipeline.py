@@ -23,6 +23,7 @@ from nlosfw.app.console import config_tree, progress_bar
 from nlosfw.app.run import RunContext
 from nlosfw.app.settings import RunSettings, run_settings
 from nlosfw.capture import Capture
+from nlosfw.config import config_to_dict
 from nlosfw.errors import ConfigError, NlosfwError
 from nlosfw.interfaces import TrainingStep
 from nlosfw.io import (
@@ -68,6 +69,9 @@ class Pipeline:
         self.ctx = RunContext(self.run_dir, host)
         self.cache = Cache(self.settings.cache.dir, self.settings.cache.enabled)
         self.metrics = self.ctx.metrics
+        self.clean: tuple[Capture, str] | None = None
+        """The noise-free capture and its cache key, when the scene adds noise."""
+        self.clean_field: PhasorField | None = None
 
     # ------------------------------------------------------------------ driver
     def run(self) -> float | None:
@@ -138,12 +142,11 @@ class Pipeline:
             scene = scene_from_config(self.config["scene"])
             name, options = self._plugin_options("simulator")
             simulator = self.host.registry.create("simulator", name, options)
-            key = cache_key({"simulator": name, "options": options,
-                             "scene": self.config["scene"]})
+            key = self._capture_key(name, simulator, scene)
             with self.console.status(f"simulating {scene.name} with {name}…"):
-                capture, hit = self.cache.get_or_compute(
-                    "captures", key, lambda: simulator.simulate(scene),
-                    lambda p, c: write_capture(p, c, compression=1), read_capture)
+                capture, hit = self._simulate(simulator, scene, key)
+                if scene.noise.model != "none" or scene.noise.jitter_ps > 0:
+                    self.clean = self._clean_capture(simulator, scene, name)
             info.update(source="simulated", simulator=name, cache_hit=hit)
         self.ctx.write("capture", lambda p: write_capture(
             p, capture, compression=self.settings.output.compression))
@@ -158,10 +161,18 @@ class Pipeline:
     def transform(self, capture: Capture, capture_key: str) -> PhasorField:
         name, options = self._plugin_options("transform")
         transform = self.host.registry.create("transform", name, options)
-        key = cache_key({"capture": capture_key, "transform": name, "options": options})
-        field, hit = self.cache.get_or_compute(
-            "fields", key, lambda: transform.transform(capture),
-            lambda p, f: write_phasor_field(p, f), read_phasor_field)
+
+        canonical = config_to_dict(transform.config)
+
+        def cached_field(source: Capture, source_key: str) -> tuple[PhasorField, bool]:
+            key = cache_key({"capture": source_key, "transform": name, "options": canonical})
+            return self.cache.get_or_compute(
+                "fields", key, lambda: transform.transform(source),
+                lambda p, f: write_phasor_field(p, f), read_phasor_field)
+
+        field, hit = cached_field(capture, capture_key)
+        if self.clean is not None:
+            self.clean_field = cached_field(*self.clean)[0]
         self.ctx.write("phasor_field", lambda p: write_phasor_field(p, field))
         self.metrics["transform"] = {
             "name": name, "cache_hit": hit, "n_frequencies": field.n_frequencies,
@@ -215,6 +226,8 @@ class Pipeline:
             entry = self.metrics["field"][source]
             entry["predict_seconds"] = round(seconds, 4)
             entry["splits"] = field_metrics(field, predicted, split)
+            if self.clean_field is not None:
+                entry["denoising"] = _denoising(self.clean_field, field, predicted)
         for source, f in fields.items():
             self.ctx.write(f"fields/{source}.hdf5", lambda p, f=f: write_phasor_field(p, f),
                            kind="phasor_field")
@@ -248,13 +261,41 @@ class Pipeline:
 
     def report(self, fields: dict[str, PhasorField], recons: dict[str, Reconstruction],
                fitted: dict[str, Any]) -> None:
-        if not self.settings.figures.enabled:
-            return
-        from nlosfw.app.figures import write_figures
+        """The thesis comparison table (for thesis presets) and the figures."""
+        if self.settings.thesis:
+            from nlosfw.app.thesis import thesis_comparison
 
-        write_figures(self.ctx, fields, recons, fitted, self.settings.figures.dpi)
+            text = thesis_comparison([{**self.metrics, "run": str(self.run_dir.name),
+                                       "thesis": self.settings.thesis}])
+            if text:
+                self.ctx.write_text("thesis_comparison.md", text, kind="report")
+        if self.settings.figures.enabled:
+            from nlosfw.app.figures import write_figures
+
+            write_figures(self.ctx, fields, recons, fitted, self.settings.figures.dpi)
 
     # ------------------------------------------------------------------ helpers
+    def _simulate(self, simulator: Any, scene: Any, key: str) -> tuple[Capture, bool]:
+        return self.cache.get_or_compute(
+            "captures", key, lambda: simulator.simulate(scene),
+            lambda p, c: write_capture(p, c, compression=1), read_capture)
+
+    @staticmethod
+    def _capture_key(name: str, simulator: Any, scene: Any) -> str:
+        """Cache key of a simulated capture: plugin, validated options, validated scene."""
+        return cache_key({"simulator": name, "options": config_to_dict(simulator.config),
+                          "scene": config_to_dict(scene)})
+
+    def _clean_capture(self, simulator: Any, scene: Any, name: str) -> tuple[Capture, str]:
+        """The same scene without noise (same seed), for denoising metrics."""
+        import dataclasses
+
+        from nlosfw.scene import NoiseConfig
+
+        clean_scene = dataclasses.replace(scene, noise=NoiseConfig())
+        key = self._capture_key(name, simulator, clean_scene)
+        return self._simulate(simulator, clean_scene, key)[0], key
+
     def _plugin_options(self, kind: str) -> tuple[str, dict[str, Any]]:
         node = dict(self.config.get(kind) or {})
         name = node.pop("name", None)
@@ -263,9 +304,12 @@ class Pipeline:
         return str(name), node
 
     def _field_models(self, name: str, options: dict[str, Any]) -> dict[str, tuple[str, dict]]:
-        """The selected model and, unless it is the baseline itself, the interp baseline."""
+        """The selected model, the interp baseline (unless it is the model) and ``compare``."""
         models = {"model": (name, options)} if name != "interp" else {}
         models["interp"] = (name, options) if name == "interp" else ("interp", {})
+        for label, extra in self.settings.compare.items():
+            extra = dict(extra)
+            models[label] = (str(extra.pop("name")), extra)
         return models
 
     def _fit_with_progress(self, source: str, plugin: str, model: Any, train: PhasorField) -> Any:
@@ -338,6 +382,18 @@ class Pipeline:
         for p in leftovers:
             shutil.move(str(p), aside / p.name)
         log.warning("moved %d files of an earlier unfinished run to %s", len(leftovers), aside)
+
+
+def _denoising(clean: PhasorField, noisy: PhasorField, predicted: PhasorField) -> dict:
+    """Errors against the noise-free field: of the noisy full field and of a prediction."""
+    norm = float(np.linalg.norm(clean.values))
+
+    def rel(field: PhasorField) -> float:
+        return float(np.linalg.norm(field.values - clean.values)) / norm
+
+    noisy_error, model_error = rel(noisy), rel(predicted)
+    return {"noisy_relative_l2": noisy_error, "relative_l2": model_error,
+            "gain_db": float(20 * np.log10(noisy_error / model_error))}
 
 
 def _depth_span(capture: Capture) -> tuple[float, float]:

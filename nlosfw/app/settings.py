@@ -103,8 +103,19 @@ class RunSettings:
     figures: FigureSettings = field(default_factory=FigureSettings)
     cache: CacheSettings = field(default_factory=CacheSettings)
     output: OutputSettings = field(default_factory=OutputSettings)
+    compare: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """More field models fitted and imaged beside ``model`` and interp: label -> options with
+    the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""
     thesis: dict[str, Any] = field(default_factory=dict)
     """Reference numbers of a thesis experiment preset, reported next to ours."""
+
+    def __post_init__(self) -> None:
+        reserved = {"true", "raw", "model", "interp"}
+        for label, options in self.compare.items():
+            require(label not in reserved and label.isidentifier(), f"compare.{label}",
+                    f"labels must be identifiers other than {', '.join(sorted(reserved))}")
+            require(isinstance(options, dict) and bool(options.get("name")),
+                    f"compare.{label}", "needs the plugin name: {name: <model plugin>, ...}")
 
     @property
     def last_stage(self) -> str:

@@ -1,0 +1,16 @@
+"""Registration of the example plugin (the module named by the entry point)."""
+
+from typing import Any
+
+from nlosfw import hookimpl
+
+
+@hookimpl
+def register_field_models(register: Any) -> None:
+    register(
+        "nearest",
+        "nlosfw_example.nearest:NearestFieldModel",
+        config="nlosfw_example.nearest:NearestConfig",
+        requires={"scipy": "scipy"},
+        description="Nearest wall sample, linear in frequency (example third-party plugin)",
+    )

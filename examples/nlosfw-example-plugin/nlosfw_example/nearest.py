@@ -1,0 +1,91 @@
+"""A nearest-neighbour field model: the simplest possible :class:`nlosfw.FieldModel`."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from nlosfw import DataError, FieldModel, FieldModelConfig, FitError, FitReport, PhasorField
+from nlosfw.config import config_from_mapping, config_to_dict
+
+_FORMAT = "nlosfw-example-nearest"
+
+
+@dataclass(frozen=True)
+class NearestConfig(FieldModelConfig):
+    """Options of the nearest-neighbour model."""
+
+    frequency_interpolation: Literal["linear", "nearest"] = "linear"
+
+
+class NearestFieldModel(FieldModel):
+    """Copies the nearest training wall sample; interpolates between training frequencies."""
+
+    config_class = NearestConfig
+
+    def __init__(self, config: NearestConfig | None = None) -> None:
+        super().__init__(config)
+        self._xy: np.ndarray | None = None
+        self._freqs: np.ndarray | None = None
+        self._values: np.ndarray | None = None
+
+    def fit(self, field: PhasorField, validation: PhasorField | None = None,
+            on_step: Callable | None = None) -> FitReport:
+        if not np.any(field.values):
+            raise FitError("field: all values are zero; nothing to fit")
+        order = np.argsort(field.frequencies)
+        self._freqs = field.frequencies[order]
+        self._xy = field.wall_xyz[..., :2].reshape(-1, 2)
+        self._values = field.values[order].reshape(len(order), -1)
+        return FitReport(steps=0, seconds=0.0, final_loss=0.0)
+
+    def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
+        if self._values is None:
+            raise FitError("nearest: predict called before fit or load")
+        wall_xy = np.asarray(wall_xy, dtype=float)
+        freqs = np.atleast_1d(np.asarray(frequencies, dtype=float))
+        if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
+            raise DataError("frequencies: must be finite and > 0 (cycles per metre)")
+        _, nearest = cKDTree(self._xy).query(wall_xy.reshape(-1, 2))
+        at_points = self._values[:, nearest]                      # (F_train, N)
+        if self.config.frequency_interpolation == "nearest" or self._freqs.size == 1:
+            idx = np.abs(freqs[:, None] - self._freqs[None]).argmin(axis=1)
+            out = at_points[idx]
+        else:
+            hi = np.clip(np.searchsorted(self._freqs, freqs), 1, self._freqs.size - 1)
+            lo = hi - 1
+            w = np.clip((freqs - self._freqs[lo]) / (self._freqs[hi] - self._freqs[lo]), 0, 1)
+            out = (1 - w)[:, None] * at_points[lo] + w[:, None] * at_points[hi]
+        return out.reshape((freqs.size,) + wall_xy.shape[:-1])
+
+    @property
+    def n_parameters(self) -> int:
+        return 0 if self._values is None else int(self._values.size * 2)
+
+    def save(self, path: str | Path) -> None:
+        if self._values is None:
+            raise FitError("nearest: nothing to save before fit")
+        header = json.dumps({"format": _FORMAT, "config": config_to_dict(self.config)})
+        with open(path, "wb") as f:
+            np.savez(f, header=np.array(header), xy=self._xy, freqs=self._freqs,
+                     values=self._values)
+
+    @classmethod
+    def load(cls, path: str | Path) -> NearestFieldModel:
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                header = json.loads(str(data["header"]))
+                arrays = {k: data[k] for k in ("xy", "freqs", "values")}
+        except (OSError, ValueError, KeyError) as err:
+            raise DataError(f"{path}: not a nearest field-model file ({err})") from None
+        if header.get("format") != _FORMAT:
+            raise DataError(f"{path}: holds {header.get('format')!r}, not a nearest model")
+        model = cls(config_from_mapping(NearestConfig, header["config"]))
+        model._xy, model._freqs, model._values = arrays["xy"], arrays["freqs"], arrays["values"]
+        return model
