@@ -56,8 +56,8 @@ def _saver(make: Callable[[], Any], dpi: int) -> Callable[[Path], None]:
 
 def _chosen_frequencies(split: Any) -> dict[str, int]:
     """A training frequency near the top of the band and a held-out one, by index."""
-    train = np.asarray(split.train_frequency_index)
-    held = np.asarray(split.heldout_frequency_index)
+    train = np.asarray(split.train_frequencies)
+    held = np.asarray(split.heldout_frequencies)
     chosen = {"training": int(train[int(0.75 * (train.size - 1))])}
     if held.size:
         chosen["held-out"] = int(held[held.size // 2])
@@ -86,9 +86,9 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
         values = fields[source].values[index]
         ext = _extent(fields[source])
         ax = axes[row]
-        im = ax[0].imshow(np.abs(values), origin="lower", extent=ext, vmin=0, vmax=amp_max,
-                          cmap="magma")
-        ax[0].set_title(f"{_SOURCE_TITLES.get(source, source)}: amplitude")
+        im = ax[0].imshow(np.abs(values) / amp_max, origin="lower", extent=ext, vmin=0,
+                          vmax=1, cmap="magma")
+        ax[0].set_title(f"{_SOURCE_TITLES.get(source, source)}: |P| / max |P_true|")
         fig.colorbar(im, ax=ax[0], fraction=0.046)
         im = ax[1].imshow(np.angle(values), origin="lower", extent=ext, vmin=-np.pi,
                           vmax=np.pi, cmap="twilight")

@@ -158,9 +158,16 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
     if settings.capture.path is None:
-        scene_from_config(plain.get("scene"))
-    elif not Path(settings.capture.path).expanduser().is_file():
+        from nlosfw.geometry import validate_scene
+
+        validate_scene(scene_from_config(plain.get("scene")))
+        return
+    path = Path(settings.capture.path).expanduser()
+    if not path.is_file():
         raise ConfigError("capture.path", f"file not found: {settings.capture.path}")
+    from nlosfw.io import read_capture
+
+    read_capture(path)  # a malformed file must fail here, before any output exists
 
 
 def main(argv: Sequence[str]) -> int:
@@ -224,6 +231,9 @@ def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
 
 
 def _one_line(err: BaseException) -> str:
+    """The message of ``err`` (or of its cause, where Hydra keeps it) on one line."""
+    while not str(err).strip() and err.__cause__ is not None:
+        err = err.__cause__
     text = " ".join(line.strip() for line in str(err).splitlines() if line.strip())
     return text or type(err).__name__
 

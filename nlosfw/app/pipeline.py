@@ -193,13 +193,13 @@ class Pipeline:
         self.metrics["field"] = {}
         for source, (plugin, opts) in self._field_models(name, options).items():
             model = self.host.registry.create("model", plugin, opts)
-            report = self._fit_with_progress(source, plugin, model, split.train)
+            report = self._fit_with_progress(source, plugin, model, split.train_field)
             fitted["models"][source] = model
             fitted["reports"][source] = report
             entry = self.metrics["field"][source] = {
                 "plugin": plugin,
                 "n_parameters": int(model.n_parameters),
-                "training_values": int(split.train.values.size * 2),
+                "training_values": split.n_train_values,
                 "fit": {"steps": report.steps, "seconds": round(report.seconds, 3),
                         "final_loss": report.final_loss, "best_val_loss": report.best_val_loss,
                         "stopped_early": report.stopped_early},

@@ -39,8 +39,8 @@ class SplitSettings:
 
     def __post_init__(self) -> None:
         require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
-        require(0 <= self.spectral_fraction < 1, "spectral_fraction",
-                f"must be in [0, 1), got {self.spectral_fraction}")
+        require(0 < self.spectral_fraction < 1, "spectral_fraction",
+                f"must be in (0, 1), got {self.spectral_fraction}")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,216 @@
+"""The command line: user errors (one line, exit 2, nothing written) and runs end to end."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from nlosfw.cli import main
+
+DATA = Path(__file__).parent / "data"
+QUICK = ["scene=tiny", "model=interp", "imager=fft", "figures.enabled=false"]
+
+
+@pytest.fixture()
+def workdir(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    return tmp_path
+
+
+def run_cli(args, capsys):
+    status = main(args)
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+def nlosfw(*args, cwd, env=None, check=True):
+    """``python -m nlosfw ARGS`` in a subprocess (as a user runs it)."""
+    full_env = {**os.environ, "COLUMNS": "200", **(env or {})}
+    result = subprocess.run([sys.executable, "-m", "nlosfw", *args], cwd=cwd, env=full_env,
+                            capture_output=True, text=True, timeout=600, check=False)
+    if check and result.returncode != 0:
+        raise AssertionError(f"exit {result.returncode}\n{result.stdout}\n{result.stderr}")
+    return result
+
+
+def bad_capture(tmp_path, edit):
+    path = tmp_path / "bad.hdf5"
+    shutil.copy(DATA / "ytal_single.hdf5", path)
+    with h5py.File(path, "a") as f:
+        edit(f)
+    return path
+
+
+def set_nan(f):
+    H = f["H"][()]
+    H[0, 0, 0] = np.inf
+    del f["H"]
+    f["H"] = H
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["model=nope"], "error: unknown model plugin 'nope'; valid: "),
+        (["scene=nope"], "error: unknown scene 'nope'; valid: "),
+        (["-m", "model=interp,nope"], "error: unknown model plugin 'nope'; valid: "),
+        (["simulator=analytic", "simulator.patch_size=-1"],
+         "error: simulator.patch_size: must be > 0 metres, got -1.0"),
+        (["+simulator.bogus=1"], "error: simulator.bogus: unknown option; valid options: "),
+        (["model=interp", "split.spatial_step=0"], "error: split.spatial_step: must be >= 1"),
+        (["scene.time.bins=0"], "error: scene.time.bins: must be a positive number of bins, "
+                                "got 0"),
+        (["scene.time.bin_width=-0.01"], "error: scene.time.bin_width: must be a positive"),
+        (["scene=tiny", "scene.geometry.0.position=[0,0,-0.5]"],
+         "error: scene.geometry[0]: rectangle reaches z = -0.5 m; hidden geometry must lie in "
+         "front of the wall (z > 0)"),
+        (["scene=tiny", "scene.time.start=50"], "error: scene.time: the window [50, 54.1) m"),
+        (["capture.path=missing.hdf5"], "error: capture.path: file not found: missing.hdf5"),
+        (["stop_after=everything"], "error: stop_after: must be one of"),
+    ],
+)
+def test_user_errors_one_line_exit_2_nothing_written(workdir, capsys, args, message):
+    status, out, err = run_cli(args, capsys)
+    assert status == 2
+    assert err.startswith(message), err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not (workdir / "outputs").exists() and not (workdir / "multirun").exists()
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (set_nan, "H: contains 1 NaN or inf values out of 1536"),
+        (lambda f: f.__delitem__("delta_t"), "missing field 'delta_t'"),
+        (lambda f: (f.__delitem__("delta_t"), f.create_dataset("delta_t", data=-1.0)),
+         "delta_t: must be a positive number of metres, got -1.0"),
+    ],
+)
+def test_bad_capture_files_are_refused_before_any_output(workdir, capsys, edit, message):
+    path = bad_capture(workdir, edit)
+    status, _, err = run_cli([f"capture.path={path}", *QUICK[1:]], capsys)
+    assert status == 2
+    assert err.startswith(f"error: {path}: {message}"), err
+    assert not (workdir / "outputs").exists()
+
+
+def test_truncated_capture_file(workdir, capsys):
+    path = workdir / "cut.hdf5"
+    data = (DATA / "ytal_single.hdf5").read_bytes()
+    path.write_bytes(data[: len(data) // 3])
+    status, _, err = run_cli([f"capture.path={path}", *QUICK[1:]], capsys)
+    assert status == 2 and err.startswith(f"error: {path}: ") and err.count("\n") == 1
+
+
+def test_debug_shows_the_traceback(workdir, capsys, monkeypatch):
+    monkeypatch.delenv("NLOSFW_DEBUG", raising=False)
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    status, _, err = run_cli(["--debug", "model=nope"], capsys)
+    assert status == 2 and "Traceback" in err and "unknown model plugin 'nope'" in err
+
+
+def test_plus_group_selects_like_plain_group(workdir, capsys):
+    """``+simulator=x`` works although the group has a default (Hydra alone refuses it)."""
+    status, out, err = run_cli(["+simulator=analytic", "+model=interp", "--cfg", "job"], capsys)
+    assert status == 0, err
+    assert "name: analytic" in out and "name: interp" in out
+
+
+def test_full_run_writes_documented_artefacts(workdir):
+    result = nlosfw(*QUICK, "figures.enabled=true", cwd=workdir)
+    (run,) = list((workdir / "outputs").glob("*/*"))
+    names = {str(p.relative_to(run)) for p in run.rglob("*") if p.is_file()}
+    expected = {"config.yaml", "run.log", "metrics.json", "capture.hdf5", "phasor_field.hdf5",
+                "fields/true.hdf5", "fields/raw.hdf5", "fields/interp.hdf5",
+                "reconstructions/true.hdf5", "reconstructions/raw.hdf5",
+                "reconstructions/interp.hdf5", "figures/reconstructions.png"}
+    assert expected <= names, expected - names
+    assert any(n.startswith("figures/fields_f") for n in names)
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["status"] == "completed" and metrics["schema_version"] == 1
+    assert set(metrics["timings"]) >= {"capture", "transform", "fit", "predict", "reconstruct",
+                                       "report", "total"}
+    splits = metrics["field"]["interp"]["splits"]
+    assert set(splits) == {"heldout_pixels", "heldout_frequencies", "all"}
+    assert splits["all"]["nmse_db"] < -5
+    recon = metrics["reconstruction"]["sources"]
+    assert recon["true"]["ssim"] == pytest.approx(1.0)
+    assert 0.5 < recon["interp"]["ssim"] <= 1.0
+    assert "nlosfw run →" in result.stdout and "├── scene" in result.stdout  # config tree
+    assert "nlosfw run summary" in result.stdout
+    assert not list(run.rglob("*.tmp*")), "a temporary file was left behind"
+
+
+def test_stop_after_and_capture_from_file(workdir):
+    nlosfw(*QUICK, "stop_after=simulate", cwd=workdir)
+    (run,) = list((workdir / "outputs").glob("*/*"))
+    names = {p.name for p in run.iterdir()}
+    assert "capture.hdf5" in names and "phasor_field.hdf5" not in names
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["status"] == "stopped" and metrics["run"]["stopped_after"] == "capture"
+    # start a second run from the capture the first one wrote
+    nlosfw(f"capture.path={run / 'capture.hdf5'}", *QUICK[1:], "stop_after=transform",
+           cwd=workdir)
+    second = [r for r in (workdir / "outputs").glob("*/*") if r != run]
+    assert len(second) == 1
+    metrics = json.loads((second[0] / "metrics.json").read_text())
+    assert metrics["capture"]["source"] == "file"
+    assert metrics["transform"]["n_frequencies"] > 0
+
+
+def test_capture_written_by_ytal_runs_through_the_pipeline(workdir):
+    nlosfw(f"capture.path={DATA / 'ytal_single.hdf5'}", "model=interp", "stop_after=transform",
+           "transform.n_frequencies=9", cwd=workdir)
+    (run,) = list((workdir / "outputs").glob("*/*"))
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["capture"]["shape"] == [64, 6, 4]
+    assert metrics["transform"]["grid"] == [4, 6]  # the field is [frequency, y, x]
+
+
+def test_sweep_report_and_resume(workdir):
+    sweep = workdir / "sweep"
+    nlosfw("-m", *QUICK[:1], "model=interp,nearest", "imager=fft", "figures.enabled=false",
+           f"hydra.sweep.dir={sweep}", cwd=workdir)
+    runs = sorted(p.parent for p in sweep.rglob("metrics.json"))
+    assert [r.name for r in runs] == ["0", "1"]
+    first = (runs[0] / "metrics.json").read_bytes()
+    again = nlosfw("-m", *QUICK[:1], "model=interp,nearest", "imager=fft",
+                   "figures.enabled=false", f"hydra.sweep.dir={sweep}", cwd=workdir)
+    assert again.stdout.count("skipping") == 2
+    assert (runs[0] / "metrics.json").read_bytes() == first
+
+    report = nlosfw("report", str(sweep), cwd=workdir)
+    assert "report written to" in report.stdout
+    csv = (sweep / "report" / "report.csv").read_text().splitlines()
+    assert len(csv) == 3 and csv[0].startswith("run,status,scene")
+    assert (sweep / "report" / "report.png").stat().st_size > 1000
+    nlosfw("report", str(sweep), cwd=workdir)
+    assert (sweep / "report-2" / "report.md").exists()  # the first report is kept
+
+
+@pytest.mark.slow
+def test_non_editable_install_runs_from_any_directory(tmp_path):
+    """A plain ``pip install .`` (no editable finder, no source tree) finds its configs."""
+    repo = Path(__file__).resolve().parents[1]
+    target = tmp_path / "site"
+    subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-cache-dir",
+                    "--target", str(target), str(repo)], check=True, timeout=600,
+                   capture_output=True)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    env = {"PYTHONPATH": str(target), "NLOSFW_CACHE_DIR": str(tmp_path / "cache")}
+    result = nlosfw(*QUICK, "--cfg", "job", cwd=elsewhere, env=env)
+    assert "name: interp" in result.stdout
+    result = nlosfw(*QUICK, "stop_after=transform", cwd=elsewhere, env=env)
+    assert (elsewhere / "outputs").is_dir()
+    import_check = subprocess.run(
+        [sys.executable, "-c", "import nlosfw.app.hydra_app as h; print(h.config_dir())"],
+        cwd=elsewhere, env={**os.environ, **env}, capture_output=True, text=True, check=True)
+    assert str(target) in import_check.stdout
