@@ -214,3 +214,17 @@ def test_non_editable_install_runs_from_any_directory(tmp_path):
         [sys.executable, "-c", "import nlosfw.app.hydra_app as h; print(h.config_dir())"],
         cwd=elsewhere, env={**os.environ, **env}, capture_output=True, text=True, check=True)
     assert str(target) in import_check.stdout
+
+
+@pytest.mark.parametrize("launcher", ["slurm_local", "parallel"])
+def test_sweep_through_submitit_and_joblib_launchers(workdir, launcher):
+    """The SLURM launcher's code path (submitit's local executor) and the joblib launcher."""
+    sweep = workdir / launcher
+    nlosfw("-m", f"hydra/launcher={launcher}", *QUICK[:1], "model=interp,nearest",
+           "figures.enabled=false", f"hydra.sweep.dir={sweep}", cwd=workdir)
+    statuses = [json.loads((sweep / str(i) / "metrics.json").read_text())["status"]
+                for i in (0, 1)]
+    assert statuses == ["completed", "completed"]
+    models = {json.loads((sweep / str(i) / "metrics.json").read_text())["run"]["model"]
+              for i in (0, 1)}
+    assert models == {"interp", "nearest"}
