@@ -62,20 +62,44 @@ class Reconstruction:
         intensity, _ = self.as_volume()
         return intensity.max(axis=0)
 
-    def depth_map(self, threshold: float = 0.0) -> np.ndarray:
+    def depth_map(self, threshold: float = 0.0, refine: bool = False) -> np.ndarray:
         """Depth of the brightest voxel along z for each (y, x), (Y, X).
 
         Pixels whose maximum is at most ``threshold`` times the global maximum
-        are NaN (nothing there).
+        are NaN (nothing there). ``refine`` fits a parabola through the peak and
+        its two depth neighbours (sub-plane depth; the peak plane's depth at the
+        first and last planes).
         """
         intensity, voxels = self.as_volume()
+        z = voxels[..., 2]
         best = np.argmax(intensity, axis=0)
-        depth = np.take_along_axis(voxels[..., 2], best[None], axis=0)[0]
+        depth = np.take_along_axis(z, best[None], axis=0)[0]
+        if refine and intensity.shape[0] >= 3:
+            depth = depth + _parabolic_offset(intensity, z, best)
         peak = intensity.max(axis=0)
         return np.where(peak > threshold * float(intensity.max()), depth, np.nan)
 
+    def depth_and_max_images(self, threshold: float = 0.0,
+                             refine: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(depth map, max-intensity image), both (Y, X): the usual 2-D summary of a volume."""
+        return self.depth_map(threshold, refine), self.max_intensity_image()
+
     def replace(self, **changes: Any) -> Reconstruction:
         return dataclasses.replace(self, **changes)
+
+
+def _parabolic_offset(intensity: np.ndarray, z: np.ndarray, best: np.ndarray) -> np.ndarray:
+    """Depth offset of the vertex of the parabola through planes best-1, best, best+1."""
+    n = intensity.shape[0]
+    inner = np.clip(best, 1, n - 2)[None]
+    y0, y1, y2 = (np.take_along_axis(intensity, inner + k, axis=0)[0] for k in (-1, 0, 1))
+    z0, z2 = (np.take_along_axis(z, inner + k, axis=0)[0] for k in (-1, 1))
+    curvature = y0 - 2 * y1 + y2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.where(curvature < 0, 0.5 * (y0 - y2) / curvature, 0.0)
+    shift = np.clip(np.nan_to_num(shift), -0.5, 0.5) * (z2 - z0) / 2
+    edge = (best == 0) | (best == n - 1)
+    return np.where(edge, 0.0, shift)
 
 
 def plane_voxels(depth: float, x_range: tuple[float, float], y_range: tuple[float, float],

@@ -105,3 +105,116 @@ def smooth_field(n: int = 16, frequencies: Any = None, seed: int = 0,
 def tiny_voxels(depths: Any = (0.5, 0.6, 0.7), n: int = 16, size: float = 1.0) -> np.ndarray:
     """A small stack of planes (Z, Y, X, 3) facing the wall, matching :func:`wall_grid`."""
     return volume_voxels(depths, (-size / 2, size / 2), (-size / 2, size / 2), (n, n))
+
+
+# --------------------------------------------------------------------------- non-square grids
+#: Laser and sensor device positions of the fixtures that keep the device legs (m).
+DEVICE_XYZ = (-0.6, 0.1, 0.3)
+
+
+def rect_wall_grid(shape: tuple[int, int] = (6, 8), spacing: float = 0.1,
+                   center: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+    """Cell-centred wall points (Y, X, 3) of a ``shape`` = (ny, nx) grid of ``spacing``."""
+    ny, nx = shape
+    xs = center[0] + (np.arange(nx) - (nx - 1) / 2) * spacing
+    ys = center[1] + (np.arange(ny) - (ny - 1) / 2) * spacing
+    y, x = np.meshgrid(ys, xs, indexing="ij")
+    return np.stack([x, y, np.zeros_like(x)], axis=-1)
+
+
+def point_field(target: tuple[float, float, float], shape: tuple[int, int] = (12, 16),
+                spacing: float = 1 / 16, frequencies: Any = (4.0,), weights: Any = None,
+                confocal: bool = False, device_legs: bool = False) -> PhasorField:
+    """Exact phasor field of a point scatterer on a (ny, nx) wall grid.
+
+    P_f(x_s) = A(x_s) exp(-2 pi i f (r_l + r_s + legs(x_s))), laser spot at the
+    wall centre (single spot) or at x_s (confocal). With ``device_legs`` the
+    phase keeps the device legs to :data:`DEVICE_XYZ` and the geometry says so.
+    """
+    wall = rect_wall_grid(shape, spacing)
+    p = np.asarray(target, dtype=float)
+    r_s = np.linalg.norm(wall - p, axis=-1)
+    device = np.asarray(DEVICE_XYZ, dtype=float)
+    if confocal:
+        r_l = r_s
+        legs = 2 * np.linalg.norm(wall - device, axis=-1)
+        geometry = CaptureGeometry(kind=CaptureKind.CONFOCAL, laser_xyz=device,
+                                   sensor_xyz=device, t_accounts_first_and_last_bounces=device_legs)
+    else:
+        laser = np.zeros(3)
+        r_l = np.full_like(r_s, np.linalg.norm(p - laser))
+        legs = np.linalg.norm(wall - device, axis=-1) + np.linalg.norm(laser - device)
+        geometry = CaptureGeometry(kind=CaptureKind.SINGLE_SPOT, laser_point=laser,
+                                   laser_xyz=device, sensor_xyz=device,
+                                   t_accounts_first_and_last_bounces=device_legs)
+    if not device_legs:
+        legs = np.zeros_like(r_s)
+    amp = (p[2] / r_l) * (p[2] / r_s) / (r_l**2 * r_s**2)
+    f = np.atleast_1d(np.asarray(frequencies, dtype=float))
+    values = amp[None] * np.exp(-2j * np.pi * f[:, None, None] * (r_l + r_s + legs)[None])
+    return PhasorField(values=values, frequencies=f, wall_xyz=wall, geometry=geometry,
+                       weights=None if weights is None else np.asarray(weights),
+                       metadata={"target": [float(v) for v in p]})
+
+
+def gaussian_band(centre: float, sigma_f: float, n: int = 9,
+                  width: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+    """(frequencies, weights): ``n`` frequencies over centre ± width*sigma_f, Gaussian weights."""
+    f = np.linspace(centre - width * sigma_f, centre + width * sigma_f, n)
+    w = np.exp(-0.5 * ((f - centre) / sigma_f) ** 2) * (f[1] - f[0] if n > 1 else 1.0)
+    return f, w.astype(np.complex128)
+
+
+def aligned_voxels(wall: np.ndarray, depths: Any) -> np.ndarray:
+    """Planes (Z, Y, X, 3) at ``depths`` whose (x, y) are exactly the wall points (Y, X, 3)."""
+    depths = np.atleast_1d(np.asarray(depths, dtype=float))
+    vox = np.repeat(np.asarray(wall, dtype=float)[None], depths.size, axis=0)
+    vox[..., 2] = depths[:, None, None]
+    return vox
+
+
+def point_scene_config(target: tuple[float, float, float] = (0.1, -0.05, 0.5),
+                       resolution: tuple[int, int] = (8, 6), size: tuple[float, float] = (0.8, 0.6),
+                       confocal: bool = False, device_legs: bool = False, bins: int = 400,
+                       bin_width: float = 0.01, start: float = 0.0) -> dict[str, Any]:
+    """Plain config of a non-square wall ((nx, ny) = ``resolution``) and one point scatterer."""
+    return {
+        "name": "point",
+        "wall": {"size": list(size), "resolution": list(resolution)},
+        "capture": {"type": "confocal" if confocal else "single_spot",
+                    "device_legs": device_legs, "laser_position": list(DEVICE_XYZ),
+                    "sensor_position": list(DEVICE_XYZ)},
+        "time": {"bins": bins, "bin_width": bin_width, "start": start},
+        "geometry": [{"type": "point", "position": list(target), "albedo": 1e-3}],
+    }
+
+
+def point_capture(**kwargs: Any) -> Capture:
+    """The analytic transient of :func:`point_scene_config` (one bin per sensor, no noise)."""
+    from nlosfw.builtin.analytic import AnalyticSimulator
+
+    return AnalyticSimulator().simulate(scene_from_config(point_scene_config(**kwargs)))
+
+
+def random_capture(seed: int = 0, **kwargs: Any) -> Capture:
+    """:func:`point_capture`'s geometry with uniform random float32 values in H."""
+    capture = point_capture(**kwargs)
+    rng = np.random.default_rng(seed)
+    return capture.replace(H=rng.random(capture.H.shape, dtype=np.float32),
+                           scene_info={})
+
+
+def exhaustive_capture() -> Capture:
+    """A tiny exhaustive capture (T_Lx_Ly_Sx_Sy): every laser point with every sensor."""
+    from nlosfw.enums import GridFormat, HFormat
+
+    grid = np.moveaxis(rect_wall_grid((2, 3), 0.2), 0, 1)     # (X, Y, 3)
+    normals = np.broadcast_to(np.array([0.0, 0.0, 1.0]), grid.shape).copy()
+    H = np.zeros((16, 3, 2, 3, 2), dtype=np.float32)
+    H[5] = 1.0
+    return Capture(H=H, H_format=HFormat.T_Lx_Ly_Sx_Sy, sensor_grid_xyz=grid,
+                   sensor_grid_normals=normals, sensor_grid_format=GridFormat.X_Y_3,
+                   laser_grid_xyz=grid, laser_grid_normals=normals,
+                   laser_grid_format=GridFormat.X_Y_3, sensor_xyz=np.array(DEVICE_XYZ),
+                   laser_xyz=np.array(DEVICE_XYZ), delta_t=0.05, t_start=0.0,
+                   t_accounts_first_and_last_bounces=False)

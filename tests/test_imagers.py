@@ -1,0 +1,322 @@
+"""The built-in imagers ``rsd`` and ``fft`` (issue 4).
+
+Generic physics (focusing, reference agreement, translation) is in the
+conformance checks; here: the whole chain from the analytic simulator, device
+legs, tight rsd/fft/reference agreement, finer voxel spacings, arbitrary
+voxel sets, chunking, time-resolved images and bad input.
+"""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from nlosfw.builtin.fft_imager import FFTImager
+from nlosfw.builtin.fft_transform import FFTTransform
+from nlosfw.builtin.rsd_imager import RSDImager
+from nlosfw.builtin.wavelet_transform import WaveletTransform
+from nlosfw.capture import CaptureGeometry
+from nlosfw.enums import CaptureKind
+from nlosfw.errors import DataError
+from nlosfw.phasor_field import PhasorField
+from nlosfw.reconstruction import Reconstruction, volume_voxels
+from nlosfw.testing import fixtures, reference
+
+SPACING = 1 / 16
+
+
+def random_field(shape=(6, 9), n_f=5, confocal=False, legs=False, seed=0) -> PhasorField:
+    """A random complex field (every kernel detail matters, nothing is symmetric)."""
+    rng = np.random.default_rng(seed)
+    base = fixtures.point_field((0.05, 0.02, 0.5), shape=shape, spacing=SPACING,
+                                frequencies=np.linspace(3.0, 5.0, n_f), confocal=confocal,
+                                device_legs=legs)
+    values = rng.standard_normal(base.values.shape) + 1j * rng.standard_normal(base.values.shape)
+    weights = rng.standard_normal(n_f) + 1j * rng.standard_normal(n_f)
+    return base.replace(values=values, weights=weights)
+
+
+def peak_voxel(recon: Reconstruction) -> np.ndarray:
+    idx = np.unravel_index(np.argmax(recon.intensity), recon.intensity.shape)
+    return recon.voxels[idx]
+
+
+# ------------------------------------------------------------ the whole chain
+@pytest.mark.parametrize("confocal", [False, True])
+def test_analytic_point_through_wavelet_is_focused_by_both_imagers(confocal):
+    target = (0.125, -0.075, 0.55)                                     # a voxel centre
+    capture = fixtures.point_capture(target=target, resolution=(24, 16), size=(1.2, 0.8),
+                                     confocal=confocal, bins=600, bin_width=0.005)
+    field = WaveletTransform().transform(capture)                      # lambda_c = 0.2 m
+    wall = field.wall_xyz                                              # (16, 24, 3), 5 cm
+    voxels = fixtures.aligned_voxels(wall, np.arange(0.35, 0.76, 0.05))
+    for imager in (RSDImager(), FFTImager()):
+        peak = peak_voxel(imager.reconstruct(field, voxels))
+        assert np.all(np.abs(peak - target) <= [0.05 + 1e-9, 0.05 + 1e-9, 0.05 + 1e-9]), (
+            type(imager).__name__, peak)
+
+
+def test_analytic_point_through_fft_transform_single_frequency():
+    target = (-0.1, 0.05, 0.5)
+    capture = fixtures.point_capture(target=target, resolution=(24, 16), size=(1.2, 0.8))
+    field = FFTTransform({"frequencies": [5.0]}).transform(capture)
+    plane = fixtures.aligned_voxels(field.wall_xyz, [0.5])[0]
+    for imager in (RSDImager(), FFTImager()):
+        peak = peak_voxel(imager.reconstruct(field, plane))
+        np.testing.assert_allclose(peak[:2], target[:2], atol=0.05 + 1e-9)
+
+
+@pytest.mark.parametrize("confocal", [False, True])
+def test_device_legs_removed_or_kept_focus_to_the_same_voxel(confocal):
+    target = (0.1, 0.05, 0.5)
+    capture = fixtures.point_capture(target=target, resolution=(16, 12), size=(0.8, 0.6),
+                                     confocal=confocal, device_legs=True, bins=500,
+                                     bin_width=0.01)
+    removed = WaveletTransform().transform(capture)
+    kept = WaveletTransform({"remove_device_legs": False}).transform(capture)
+    assert kept.geometry.t_accounts_first_and_last_bounces
+    voxels = fixtures.aligned_voxels(removed.wall_xyz, np.arange(0.3, 0.71, 0.05))
+    for imager in (RSDImager(), FFTImager({"precision": "double"})):
+        a = imager.reconstruct(removed, voxels)
+        b = imager.reconstruct(kept, voxels)
+        np.testing.assert_allclose(peak_voxel(a), peak_voxel(b))
+        assert np.all(np.abs(peak_voxel(a) - target) <= 0.05 + 1e-9)
+        np.testing.assert_allclose(a.intensity, b.intensity, rtol=0,
+                                   atol=1e-9 * a.intensity.max())
+
+
+# ------------------------------------------------------------ agreement
+@pytest.mark.parametrize("confocal, legs", [(False, False), (False, True), (True, True)])
+def test_rsd_equals_the_plain_reference(confocal, legs):
+    field = random_field(confocal=confocal, legs=legs)
+    voxels = np.random.default_rng(1).uniform([-0.4, -0.3, 0.2], [0.4, 0.3, 0.9], (25, 3))
+    for time in (0.0, 0.13):
+        got = RSDImager({"time": time}).reconstruct(field, voxels).intensity
+        expected = reference.naive_rsd(field, voxels, time=time)
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12 * expected.max())
+
+
+def test_rsd_uniform_and_irregular_frequencies_use_the_same_kernel():
+    field = random_field(n_f=40)                       # uniform: the recurrence (refreshed)
+    irregular = field.replace(frequencies=field.frequencies * (1 + 0.01 * np.sin(
+        np.arange(40))))
+    voxels = volume_voxels([0.4, 0.7], (-0.3, 0.3), (-0.2, 0.2), (3, 4))
+    for f in (field, irregular):
+        got = RSDImager().reconstruct(f, voxels).intensity
+        expected = reference.naive_rsd(f, voxels)
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-12 * expected.max())
+
+
+@pytest.mark.parametrize("confocal", [False, True])
+@pytest.mark.parametrize("precision, tol", [("single", 2e-5), ("double", 1e-11)])
+def test_fft_equals_rsd_on_unaligned_planes(confocal, precision, tol):
+    field = random_field(shape=(7, 10), confocal=confocal, legs=True)
+    # voxel planes larger than the wall, shifted by a fraction of a sample
+    voxels = _with_spacing(volume_voxels([0.3, 0.55], (0, 1), (0, 1), (11, 16)), SPACING,
+                           SPACING, origin=(-0.31, -0.4))         # 1.9 samples off the wall
+    fast = FFTImager({"precision": precision}).reconstruct(field, voxels).intensity
+    slow = RSDImager().reconstruct(field, voxels).intensity
+    assert np.max(np.abs(fast - slow)) <= tol * slow.max()
+
+
+@pytest.mark.parametrize("ky, kx", [(2, 2), (1, 3), (4, 2)])
+def test_fft_finer_voxel_spacing_equals_rsd(ky, kx):
+    field = random_field(shape=(6, 8), legs=True)
+    voxels = _with_spacing(volume_voxels([0.45], (0, 1), (0, 1), (13, 17)), SPACING / ky,
+                           SPACING / kx, origin=(-0.21, -0.17))
+    fast = FFTImager({"precision": "double"}).reconstruct(field, voxels).intensity
+    slow = RSDImager().reconstruct(field, voxels).intensity
+    assert np.max(np.abs(fast - slow)) <= 1e-10 * slow.max()
+
+
+def test_fft_accepts_flipped_and_transposed_grids():
+    field = random_field(shape=(6, 8))
+    plane = _with_spacing(volume_voxels([0.5], (0, 1), (0, 1), (9, 7)), SPACING, SPACING)[0]
+    expected = RSDImager().reconstruct(field, plane).intensity
+    fft = FFTImager({"precision": "double"})
+    for view in (plane[::-1], plane[:, ::-1], plane.transpose(1, 0, 2),
+                 plane[::-1, ::-1].transpose(1, 0, 2)):
+        want = RSDImager().reconstruct(field, view).intensity
+        np.testing.assert_allclose(fft.reconstruct(field, view).intensity, want, rtol=1e-9,
+                                   atol=1e-12 * expected.max())
+    flipped = field.replace(values=field.values[:, ::-1, ::-1], wall_xyz=field.wall_xyz[::-1, ::-1])
+    np.testing.assert_allclose(fft.reconstruct(flipped, plane).intensity, expected, rtol=1e-9,
+                               atol=1e-12 * expected.max())
+
+
+def test_confocal_frequency_folding_matches_per_frequency_imaging():
+    """The confocal coherent shortcut (sum before one inverse FFT) changes nothing."""
+    field = random_field(shape=(6, 8), confocal=True)
+    voxels = fixtures.aligned_voxels(field.wall_xyz, [0.4, 0.6])
+    coherent = FFTImager({"precision": "double"}).reconstruct(field, voxels).intensity
+    expected = RSDImager().reconstruct(field, voxels).intensity
+    np.testing.assert_allclose(coherent, expected, rtol=1e-9, atol=1e-12 * expected.max())
+
+
+# ------------------------------------------------------------ options
+def test_incoherent_sum_is_the_sum_of_single_frequency_images():
+    field = random_field()
+    voxels = fixtures.aligned_voxels(field.wall_xyz, [0.5])
+    for imager in (RSDImager, FFTImager):
+        total = imager({"combine": "incoherent", "precision": "double"} if imager is FFTImager
+                       else {"combine": "incoherent"}).reconstruct(field, voxels).intensity
+        parts = sum(RSDImager().reconstruct(field.select(i), voxels).intensity
+                    for i in range(field.n_frequencies))
+        np.testing.assert_allclose(total, parts, rtol=1e-9)
+
+
+def test_time_resolved_images_peak_when_the_pulse_focuses():
+    f, w = fixtures.gaussian_band(4.0, 0.75, n=15)
+    target = (0.125, -0.0625, 0.5)
+    field = fixtures.point_field(target, frequencies=f, weights=w)
+    at_target = np.array([[target]])                                   # (1, 1, 3)
+    nearer = at_target - [0, 0, 0.05]
+    times = np.linspace(-0.3, 0.3, 121)
+    for imager in (RSDImager(), FFTImager({"precision": "double"})):
+        series = imager.reconstruct_time_resolved(field, at_target, times)[:, 0, 0]
+        assert abs(times[np.argmax(series)]) <= 0.005
+        later = imager.reconstruct_time_resolved(field, nearer, times)[:, 0, 0]
+        # a voxel 5 cm nearer the wall sees the pulse ~2 x 5 cm of path later
+        assert 0.05 <= times[np.argmax(later)] <= 0.11
+    plane = fixtures.aligned_voxels(field.wall_xyz, [0.5])[0]
+    np.testing.assert_allclose(
+        RSDImager().reconstruct_time_resolved(field, plane, [0.0, 0.1]),
+        FFTImager({"precision": "double"}).reconstruct_time_resolved(field, plane, [0.0, 0.1]),
+        rtol=1e-9, atol=1e-12)
+    shifted = RSDImager({"time": 0.1}).reconstruct(field, plane).intensity
+    np.testing.assert_allclose(
+        shifted, RSDImager().reconstruct_time_resolved(field, plane, [0.1])[0], rtol=1e-12)
+
+
+def test_rsd_accepts_points_planes_and_volumes_alike():
+    field = random_field()
+    volume = volume_voxels([0.4, 0.6], (-0.3, 0.3), (-0.2, 0.2), (4, 5))
+    rsd = RSDImager()
+    as_volume = rsd.reconstruct(field, volume).intensity
+    as_points = rsd.reconstruct(field, volume.reshape(-1, 3)).intensity
+    as_plane = rsd.reconstruct(field, volume[1]).intensity
+    np.testing.assert_allclose(as_points.reshape(as_volume.shape), as_volume, rtol=1e-12)
+    np.testing.assert_allclose(as_plane, as_volume[1], rtol=1e-12)
+
+
+def test_rsd_on_a_non_planar_wall():
+    field = random_field()
+    wall = field.wall_xyz.copy()
+    wall[..., 2] = 0.02 * np.sin(7 * wall[..., 0])                   # a bumpy relay wall
+    bumpy = field.replace(wall_xyz=wall)
+    voxels = volume_voxels([0.5], (-0.2, 0.2), (-0.2, 0.2), (3, 3))
+    np.testing.assert_allclose(RSDImager().reconstruct(bumpy, voxels).intensity,
+                               reference.naive_rsd(bumpy, voxels), rtol=1e-10)
+    with pytest.raises(DataError, match="regular"):
+        FFTImager().reconstruct(bumpy, voxels)
+
+
+def test_chunking_changes_nothing_and_bounds_memory():
+    field = random_field(shape=(16, 16), n_f=8)
+    voxels = volume_voxels(np.linspace(0.3, 0.9, 8), (-0.5, 0.5), (-0.5, 0.5), (32, 32))
+    small = RSDImager({"chunk_mb": 0.05}).reconstruct(field, voxels).intensity
+    large = RSDImager({"chunk_mb": 64}).reconstruct(field, voxels).intensity
+    np.testing.assert_allclose(small, large, rtol=1e-12)
+    fft_small = FFTImager({"chunk_mb": 0.05, "precision": "double"})
+    np.testing.assert_allclose(fft_small.reconstruct(field, voxels).intensity, large,
+                               rtol=1e-9, atol=1e-12 * large.max())
+    tracemalloc.start()
+    try:
+        RSDImager({"chunk_mb": 1}).reconstruct(field, voxels)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    # voxels (0.2 MiB) + output + a few blocks of 1 MiB, not voxels x samples x 16 B (32 MiB)
+    assert peak < 6 * 2**20, f"peak {peak / 2**20:.1f} MiB"
+
+
+def test_metadata_names_the_imager_and_frequencies():
+    field = random_field()
+    voxels = fixtures.aligned_voxels(field.wall_xyz, [0.5])
+    for imager, name in ((RSDImager(), "rsd"), (FFTImager(), "fft")):
+        meta = imager.reconstruct(field, voxels).metadata
+        assert meta["imager"] == name
+        assert meta["frequencies"] == pytest.approx(field.frequencies.tolist())
+        assert meta["weighted"] is True and meta["combine"] == "coherent"
+
+
+# ------------------------------------------------------------ bad input
+def test_fft_refuses_voxels_it_cannot_convolve():
+    field = random_field()
+    fft = FFTImager()
+    plane = fixtures.aligned_voxels(field.wall_xyz, [0.5])[0]
+    with pytest.raises(DataError, match="point list"):
+        fft.reconstruct(field, plane.reshape(-1, 3))
+    tilted = plane.copy()
+    tilted[..., 2] += 0.1 * tilted[..., 0]
+    with pytest.raises(DataError, match="not parallel"):
+        fft.reconstruct(field, tilted)
+    irregular = plane.copy()
+    irregular[:, 3, 0] += 0.01
+    with pytest.raises(DataError, match="regular"):
+        fft.reconstruct(field, irregular)
+    coarse = _with_spacing(volume_voxels([0.5], (0, 1), (0, 1), (4, 4)), SPACING / 0.7, SPACING)
+    with pytest.raises(DataError, match="whole number"):
+        fft.reconstruct(field, coarse)
+    with pytest.raises(DataError) as info:
+        fft.reconstruct(field, plane.reshape(-1, 3))
+    assert "\n" not in str(info.value) and "rsd imager" in str(info.value)
+
+
+@pytest.mark.parametrize("imager", [RSDImager(), FFTImager()])
+def test_bad_fields_and_voxels(imager):
+    field = random_field()
+    plane = fixtures.aligned_voxels(field.wall_xyz, [0.5])[0]
+    exhaustive = field.replace(geometry=CaptureGeometry(kind=CaptureKind.EXHAUSTIVE))
+    no_spot = field.replace(geometry=CaptureGeometry(kind=CaptureKind.SINGLE_SPOT))
+    for bad in (exhaustive, no_spot):
+        with pytest.raises(DataError, match="field.geometry"):
+            imager.reconstruct(bad, plane)
+    with pytest.raises(DataError, match="PhasorField"):
+        imager.reconstruct(field.values, plane)
+    with pytest.raises(DataError, match="voxels"):
+        imager.reconstruct(field, plane[..., :2])
+    nan = plane.copy()
+    nan[0, 0, 0] = np.nan
+    with pytest.raises(DataError, match="NaN"):
+        imager.reconstruct(field, nan)
+    with pytest.raises(DataError, match="z must be > 0"):
+        imager.reconstruct(field, plane * [1, 1, -1])
+
+
+def _with_spacing(voxels: np.ndarray, dy: float, dx: float,
+                  origin: tuple[float, float] = (-0.31, -0.4)) -> np.ndarray:
+    """Replace the (x, y) of planes (Z, Y, X, 3) by a grid of steps (dy, dx) from ``origin``."""
+    out = np.array(voxels, dtype=float)
+    ny, nx = out.shape[-3:-1]
+    out[..., 0] = origin[1] + dx * np.arange(nx)[None, :]
+    out[..., 1] = origin[0] + dy * np.arange(ny)[:, None]
+    return out
+
+
+# ------------------------------------------------------------ summaries
+def test_depth_map_and_max_image_of_an_imaged_point():
+    f, w = fixtures.gaussian_band(4.0, 0.75, n=11)
+    target = (0.15625, -0.09375, 0.57)                    # between the planes 0.55 and 0.60
+    field = fixtures.point_field(target, frequencies=f, weights=w)
+    voxels = fixtures.aligned_voxels(field.wall_xyz, np.arange(0.40, 0.76, 0.05))
+    recon = FFTImager().reconstruct(field, voxels)
+    depth, image = recon.depth_and_max_images(threshold=0.5)
+    iy, ix = np.unravel_index(np.argmax(image), image.shape)
+    np.testing.assert_allclose(field.wall_xyz[iy, ix, :2], target[:2])
+    np.testing.assert_allclose(image, recon.intensity.max(axis=0))
+    assert abs(depth[iy, ix] - target[2]) <= 0.05
+    assert np.isnan(depth).sum() > 0.5 * depth.size       # dim pixels are "nothing there"
+
+
+def test_refined_depth_map_finds_the_vertex_between_planes():
+    z = np.array([0.4, 0.5, 0.6, 0.7, 0.8])
+    z0 = np.array([[0.53, 0.66], [0.8, 0.4]])             # two inside, two at the ends
+    intensity = 10 - (z[:, None, None] - z0[None]) ** 2   # exact parabolas along depth
+    voxels = np.zeros(intensity.shape + (3,))
+    voxels[..., 2] = z[:, None, None]
+    recon = Reconstruction(intensity=intensity, voxels=voxels)
+    np.testing.assert_allclose(recon.depth_map(), [[0.5, 0.7], [0.8, 0.4]])
+    np.testing.assert_allclose(recon.depth_map(refine=True), z0, atol=1e-12)
