@@ -7,13 +7,17 @@ transport, never about shapes.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from nlosfw.errors import ConfigError
+from nlosfw.physics import device_legs
 from nlosfw.scene import GeometryItem, Scene
 
 log = logging.getLogger(__name__)
@@ -134,26 +138,75 @@ def scene_points(scene: Scene) -> PointScatterers:
                            np.array(idx, dtype=np.int64))
 
 
+def surface_points(mesh: TriangleMesh, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                  np.ndarray]:
+    """Map unit-square samples ``uv`` (n, 2) to area-uniform points on the mesh.
+
+    ``u`` picks a triangle through the cumulative area and is reused, rescaled
+    to [0, 1), as the first coordinate inside it; ``(u', v)`` is then warped to
+    the triangle by the square-root map. The map is continuous inside each
+    triangle, so stratified or low-discrepancy ``uv`` give spatially stratified
+    points. Returns (points, face normals, albedo), each with n rows.
+    """
+    uv = np.asarray(uv, dtype=float)
+    if mesh.n_faces == 0 or uv.shape[0] == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    areas = mesh.face_areas()
+    cdf = np.cumsum(areas)
+    cdf /= cdf[-1]
+    lower = np.concatenate([[0.0], cdf[:-1]])
+    u = uv[:, 0]
+    tri = np.minimum(np.searchsorted(cdf, u, side="right"), mesh.n_faces - 1)
+    width = np.maximum(cdf[tri] - lower[tri], 1e-300)
+    r1 = np.clip((u - lower[tri]) / width, 0.0, 1.0)
+    r2 = uv[:, 1]
+    s = np.sqrt(r1)
+    b1, b2 = s * (1 - r2), s * r2
+    v = mesh.vertices
+    f = mesh.faces[tri]
+    a = v[f[:, 0]]
+    points = a + b1[:, None] * (v[f[:, 1]] - a) + b2[:, None] * (v[f[:, 2]] - a)
+    return points, mesh.face_normals()[tri], mesh.albedo[tri]
+
+
+def unit_square_samples(n: int, rng: np.random.Generator, stratified: bool = True) -> np.ndarray:
+    """``n`` points in [0, 1)^2: scrambled Sobol (randomised QMC) or independent uniform.
+
+    Both are unbiased (every point is uniformly distributed); scrambled Sobol
+    points are stratified at every scale and converge much faster.
+    """
+    if n <= 0:
+        return np.zeros((0, 2))
+    if not stratified:
+        return rng.random((n, 2))
+    engine = sobol_engine(rng)
+    with warnings.catch_warnings():  # balance is best for powers of two; any n is unbiased
+        warnings.simplefilter("ignore", UserWarning)
+        return engine.random(n)
+
+
+def sobol_engine(rng: np.random.Generator, dims: int = 2) -> Any:
+    """A scrambled Sobol engine in ``dims`` dimensions seeded from ``rng`` (``.random(n)``)."""
+    from scipy.stats import qmc
+
+    try:
+        return qmc.Sobol(dims, scramble=True, rng=rng)
+    except TypeError:  # scipy < 1.15 names the argument seed
+        return qmc.Sobol(dims, scramble=True, seed=rng)
+
+
 def sample_surface(mesh: TriangleMesh, n: int, rng: np.random.Generator,
                    stratified: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     """``n`` area-uniform samples on the mesh: (points, normals, albedo, area per sample).
 
-    With ``stratified`` the triangle choice uses one jittered sample per 1/n of
-    the cumulative area (unbiased, lower variance than independent sampling).
+    With ``stratified`` the samples come from a scrambled Sobol sequence mapped by
+    :func:`surface_points` (unbiased, far lower variance than independent
+    sampling); otherwise they are independent.
     """
     if mesh.n_faces == 0 or n <= 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), 0.0
-    areas = mesh.face_areas()
-    total = float(areas.sum())
-    cdf = np.cumsum(areas) / total
-    u = (np.arange(n) + rng.random(n)) / n if stratified else rng.random(n)
-    tri = np.minimum(np.searchsorted(cdf, u, side="right"), mesh.n_faces - 1)
-    r1, r2 = rng.random(n), rng.random(n)
-    s = np.sqrt(r1)
-    b0, b1, b2 = 1 - s, s * (1 - r2), s * r2
-    t = mesh.triangles()[tri]
-    points = b0[:, None] * t[:, 0] + b1[:, None] * t[:, 1] + b2[:, None] * t[:, 2]
-    return points, mesh.face_normals()[tri], mesh.albedo[tri], total / n
+    points, normals, albedo = surface_points(mesh, unit_square_samples(n, rng, stratified))
+    return points, normals, albedo, float(mesh.face_areas().sum()) / n
 
 
 def ground_truth_maps(mesh: TriangleMesh, grid_xyz: np.ndarray,
@@ -207,6 +260,180 @@ def representative_points(scene: Scene, mesh: TriangleMesh, n: int = 4096,
     if mesh.n_faces:
         pts.append(sample_surface(mesh, n, np.random.default_rng(seed))[0])
     return np.concatenate(pts)
+
+
+@dataclass(frozen=True, eq=False)
+class SceneGeometry:
+    """A validated scene with its hidden geometry built once."""
+
+    scene: Scene
+    """The scene, with mesh file paths made absolute."""
+    mesh: TriangleMesh
+    """Every triangle of the scene (all items but points)."""
+    points: PointScatterers
+    """The point scatterers."""
+    path_range: tuple[float, float]
+    """Conservative bounds (m) on the optical path of every three-bounce path, device legs
+    included when the time axis counts them."""
+
+
+def resolve_mesh_paths(scene: Scene, base_dir: Path | None = None) -> Scene:
+    """The scene with every mesh path made absolute (relative to ``base_dir`` or the cwd)."""
+    base = Path.cwd() if base_dir is None else Path(base_dir)
+    items = []
+    changed = False
+    for item in scene.geometry:
+        if item.type == "mesh" and item.path:
+            path = Path(item.path).expanduser()
+            if not path.is_absolute():
+                item = dataclasses.replace(item, path=str((base / path).resolve()))
+                changed = True
+        items.append(item)
+    return dataclasses.replace(scene, geometry=tuple(items)) if changed else scene
+
+
+def validate_scene(scene: Scene, base_dir: Path | None = None) -> SceneGeometry:
+    """Build and check a scene's hidden geometry before anything is rendered.
+
+    One-line :class:`ConfigError` naming the item for: a missing, empty or
+    unreadable mesh file; geometry at or behind the wall (z <= 0); a time
+    window that cannot hold any path of the scene (the shortest and longest
+    possible paths are bounded from the items' bounding boxes, the wall grid
+    and, when counted, the device legs). A window that cuts off part of the
+    paths is allowed and logged as a warning.
+    """
+    scene = resolve_mesh_paths(scene, base_dir)
+    mesh = scene_mesh(scene)
+    points = scene_points(scene)
+    lo, hi = path_length_range(scene, mesh, points)
+    t = scene.time
+    if hi < t.start or lo >= t.end:
+        legs = "with" if scene.capture.device_legs else "without"
+        raise ConfigError("scene.time", (
+            f"the window [{t.start:.4g}, {t.end:.4g}) m (start + bins * bin_width) holds no path "
+            f"of this scene: its paths ({legs} device legs) lie within [{lo:.4g}, {hi:.4g}] m; "
+            f"valid: start < {hi:.4g} and start + bins * bin_width > {lo:.4g}"))
+    if lo < t.start or hi > t.end:
+        approx = _sampled_path_range(scene, mesh, points)
+        if approx[0] < t.start or approx[1] > t.end:
+            log.warning("scene %s: paths span about [%.3f, %.3f] m but the time window is "
+                        "[%.3f, %.3f) m; paths outside it are not recorded",
+                        scene.name, approx[0], approx[1], t.start, t.end)
+    return SceneGeometry(scene=scene, mesh=mesh, points=points, path_range=(lo, hi))
+
+
+def path_length_range(scene: Scene, mesh: TriangleMesh,
+                      points: PointScatterers) -> tuple[float, float]:
+    """Bounds (lo, hi) in metres on the optical path of every laser -> hidden -> sensor path.
+
+    Each item is enclosed in its bounding box: the shortest path to a box is at
+    least the distance from the laser point to the box plus the distance from
+    the box to the sensor point, the longest at most the largest sum over the
+    box corners (the path length is convex in the hidden point). Device legs are
+    added when the time axis counts them.
+    """
+    sensors = scene.wall.grid_xyz().reshape(-1, 3)
+    lasers = sensors if scene.is_confocal else np.broadcast_to(scene.laser_spot_xyz(),
+                                                               sensors.shape)
+    legs = np.zeros(sensors.shape[0])
+    if scene.capture.device_legs:
+        laser = sensors if scene.is_confocal else scene.laser_spot_xyz()
+        legs = device_legs(laser, sensors, scene.capture.laser_position,
+                           scene.capture.sensor_position)
+    boxes = []
+    for i in np.unique(mesh.item):
+        corners = mesh.vertices[mesh.faces[mesh.item == i]].reshape(-1, 3)
+        boxes.append((corners.min(axis=0), corners.max(axis=0)))
+    boxes += [(p, p) for p in points.positions]
+    lo, hi = np.inf, -np.inf
+    for bmin, bmax in boxes:
+        near = (_box_distance(lasers, bmin, bmax) + _box_distance(sensors, bmin, bmax) + legs)
+        corners = np.array([[x, y, z] for x in (bmin[0], bmax[0]) for y in (bmin[1], bmax[1])
+                            for z in (bmin[2], bmax[2])])
+        far = (np.linalg.norm(lasers[:, None] - corners[None], axis=-1)
+               + np.linalg.norm(sensors[:, None] - corners[None], axis=-1)).max(axis=1) + legs
+        lo, hi = min(lo, float(near.min())), max(hi, float(far.max()))
+    return lo, hi
+
+
+def blocked_fraction(scene: Scene, mesh: TriangleMesh, points_per_item: int = 48,
+                     wall_points: int = 4) -> float:
+    """Fraction of sampled sight lines from the wall to the hidden surfaces that cross a surface.
+
+    Segments join a ``wall_points`` x ``wall_points`` grid of wall points and the
+    laser spot to ``points_per_item`` area-uniform samples of every item (and to
+    point scatterers); each is tested against every triangle (Moller-Trumbore,
+    ignoring the last micrometre of the segment). 0 means no shadowing was found.
+    """
+    grid = scene.wall.grid_xyz()
+    ix = np.linspace(0, grid.shape[0] - 1, wall_points).round().astype(int)
+    iy = np.linspace(0, grid.shape[1] - 1, wall_points).round().astype(int)
+    starts = np.concatenate([grid[np.ix_(ix, iy)].reshape(-1, 3), scene.laser_spot_xyz()[None]])
+    rng = np.random.default_rng(0)
+    ends = [scene_points(scene).positions]
+    for i in np.unique(mesh.item):
+        sub = TriangleMesh(mesh.vertices, mesh.faces[mesh.item == i],
+                           mesh.albedo[mesh.item == i], mesh.item[mesh.item == i])
+        ends.append(sample_surface(sub, points_per_item, rng)[0])
+    end = np.concatenate(ends)
+    if mesh.n_faces == 0 or end.shape[0] == 0:
+        return 0.0
+    origin = np.repeat(starts, end.shape[0], axis=0)
+    d = np.tile(end, (starts.shape[0], 1)) - origin
+    blocked = np.zeros(origin.shape[0], bool)
+    tris = mesh.triangles()
+    seg_lo, seg_hi = np.minimum(origin, origin + d), np.maximum(origin, origin + d)
+    for first in range(0, tris.shape[0], 256):
+        t = tris[first:first + 256]
+        lo, hi = t.min(axis=1), t.max(axis=1)
+        near = np.all((seg_lo[:, None] <= hi[None]) & (seg_hi[:, None] >= lo[None]), axis=2)
+        seg, tri = np.nonzero(near & ~blocked[:, None])
+        if seg.size == 0:
+            continue
+        a, e1, e2 = t[tri, 0], t[tri, 1] - t[tri, 0], t[tri, 2] - t[tri, 0]
+        dd = d[seg]
+        pvec = np.cross(dd, e2)
+        det = np.einsum("ij,ij->i", e1, pvec)
+        ok = np.abs(det) > 1e-14
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        tvec = origin[seg] - a
+        u = np.einsum("ij,ij->i", tvec, pvec) * inv
+        qvec = np.cross(tvec, e1)
+        v = np.einsum("ij,ij->i", dd, qvec) * inv
+        along = np.einsum("ij,ij->i", e2, qvec) * inv
+        length = np.linalg.norm(dd, axis=1)
+        hit = (ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (along > 1e-9)
+               & (along < 1 - 1e-6 / np.maximum(length, 1e-12)))
+        blocked[seg[hit]] = True
+    return float(blocked.mean())
+
+
+def _box_distance(points: np.ndarray, bmin: np.ndarray, bmax: np.ndarray) -> np.ndarray:
+    """Euclidean distance from each point (N, 3) to an axis-aligned box."""
+    gap = np.maximum(np.maximum(bmin - points, points - bmax), 0.0)
+    return np.linalg.norm(gap, axis=-1)
+
+
+def _sampled_path_range(scene: Scene, mesh: TriangleMesh, points: PointScatterers,
+                        n: int = 512) -> tuple[float, float]:
+    """Approximate (min, max) optical path over surface samples, vertices and a sparse grid."""
+    from nlosfw.physics import three_bounce
+
+    cloud = [points.positions]
+    if mesh.n_faces:
+        cloud.append(sample_surface(mesh, n, np.random.default_rng(0))[0])
+        cloud.append(mesh.vertices[:: max(1, mesh.vertices.shape[0] // n)])
+    cloud_pts = np.concatenate(cloud)
+    grid = scene.wall.grid_xyz()
+    step = (max(1, grid.shape[0] // 16), max(1, grid.shape[1] // 16))
+    sub = np.concatenate([grid[:: step[0], :: step[1]].reshape(-1, 3),
+                          grid[[0, 0, -1, -1], [0, -1, 0, -1]]])
+    laser = sub if scene.is_confocal else scene.laser_spot_xyz()
+    path, _ = three_bounce(laser, cloud_pts, None, np.ones(cloud_pts.shape[0]), sub)
+    if scene.capture.device_legs:
+        path = path + device_legs(laser, sub, scene.capture.laser_position,
+                                  scene.capture.sensor_position)[None, :]
+    return float(path.min()), float(path.max())
 
 
 def _rectangle(w: float, h: float) -> tuple[np.ndarray, np.ndarray]:

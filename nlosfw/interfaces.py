@@ -67,9 +67,11 @@ class Simulator(_Configurable, ABC):
     def simulate(self, scene: Scene, base_dir: Path | None = None) -> Capture:
         """Render ``scene``, then add noise, ground truth and metadata to ``scene_info``."""
         from nlosfw.config import config_to_dict as _to_dict
-        from nlosfw.geometry import ground_truth_maps, scene_mesh
+        from nlosfw.geometry import ground_truth_maps, validate_scene
         from nlosfw.noise import apply_noise
 
+        geometry = validate_scene(scene, base_dir)  # one-line ConfigError for a bad scene
+        scene = geometry.scene
         capture = self.render(scene)
         expected = scene_capture(scene, np.zeros((1,) + _sensor_axes(scene), np.float32))
         if capture.H.shape[1:] != expected.H.shape[1:] or capture.n_bins != scene.time.bins:
@@ -83,7 +85,7 @@ class Simulator(_Configurable, ABC):
         res = scene.ground_truth_resolution or scene.wall.resolution
         gt_wall = type(scene.wall)(size=scene.wall.size, resolution=tuple(res),
                                    center=scene.wall.center)
-        depth, albedo = ground_truth_maps(scene_mesh(scene, base_dir), gt_wall.grid_xyz())
+        depth, albedo = ground_truth_maps(geometry.mesh, gt_wall.grid_xyz())
         info = dict(capture.scene_info)
         info.update({
             "original_format": "nlosfw",

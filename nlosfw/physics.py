@@ -44,23 +44,28 @@ def three_bounce(
     points = np.asarray(points, dtype=float)
     sensors = np.asarray(sensor_points, dtype=float)
     laser = np.asarray(laser_points, dtype=float)
-    d_s = sensors[None, :, :] - points[:, None, :]          # p -> x_s, (P, S, 3)
-    r_s = np.linalg.norm(d_s, axis=-1)
+    w = np.asarray(wall_normal, dtype=float)
+    # components of p -> x_s and p -> x_l, broadcast to (P, S) or (P, 1)
+    d_s = [sensors[None, :, k] - points[:, None, k] for k in range(3)]
     if laser.ndim == 1:
-        d_l = (laser[None, :] - points)[:, None, :]          # p -> x_l, (P, 1, 3)
+        d_l = [laser[k] - points[:, None, k] for k in range(3)]
     else:
-        d_l = laser[None, :, :] - points[:, None, :]
-    r_l = np.linalg.norm(d_l, axis=-1)
-    cos_l = -(d_l @ wall_normal) / r_l                       # at the wall, towards p
-    cos_s = -(d_s @ wall_normal) / r_s
-    weight = np.clip(cos_l, 0, None) * np.clip(cos_s, 0, None)
+        d_l = [laser[None, :, k] - points[:, None, k] for k in range(3)]
+    r_s = np.sqrt(d_s[0] ** 2 + d_s[1] ** 2 + d_s[2] ** 2)
+    r_l = np.sqrt(d_l[0] ** 2 + d_l[1] ** 2 + d_l[2] ** 2)
+    # cosines at the wall between its normal and the direction to p
+    cos_s = -(d_s[0] * w[0] + d_s[1] * w[1] + d_s[2] * w[2]) / r_s
+    cos_l = -(d_l[0] * w[0] + d_l[1] * w[1] + d_l[2] * w[2]) / r_l
+    weight = np.maximum(cos_l, 0.0) * np.maximum(cos_s, 0.0)
     if normals is not None:
-        n = np.asarray(normals, dtype=float)[:, None, :]
-        cos_in = np.sum(d_l * n, axis=-1) / r_l
-        cos_out = np.sum(d_s * n, axis=-1) / r_s
-        same_side = (cos_in * cos_out) > 0
-        weight = weight * np.where(same_side, np.abs(cos_in * cos_out), 0.0)
-    weight = weight * (np.asarray(area_albedo, dtype=float)[:, None] * _INV_PI3) / (r_l**2 * r_s**2)
+        n = np.asarray(normals, dtype=float)
+        cos_in = (d_l[0] * n[:, None, 0] + d_l[1] * n[:, None, 1] + d_l[2] * n[:, None, 2]) / r_l
+        cos_out = (d_s[0] * n[:, None, 0] + d_s[1] * n[:, None, 1]
+                   + d_s[2] * n[:, None, 2]) / r_s
+        both = cos_in * cos_out                       # > 0: x_l and x_s on the same side
+        weight = weight * np.maximum(both, 0.0)
+    scale = np.asarray(area_albedo, dtype=float)[:, None] * _INV_PI3
+    weight = weight * scale / ((r_l * r_s) ** 2)
     return r_l + r_s, weight
 
 

@@ -1,0 +1,22 @@
+"""Registration of the ``embree`` simulator (the ``embree`` entry point of ``nlosfw``).
+
+Nothing here imports embreex: the factory and its config are named by import path.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from nlosfw.plugins.hookspecs import hookimpl
+
+
+@hookimpl
+def register_simulators(register: Any) -> None:
+    register(
+        "embree",
+        "nlosfw_embree.simulator:EmbreeSimulator",
+        config="nlosfw_embree.config:EmbreeConfig",
+        requires={"embreex": "embreex"},
+        description="Three-bounce transport with Embree occlusion rays (shadows, any mesh)",
+        test_config={"samples": 8192},
+    )

@@ -1,0 +1,22 @@
+"""Registration of the ``mitsuba`` simulator (the ``mitsuba`` entry point of ``nlosfw``).
+
+Nothing here imports mitsuba, drjit or mitransient.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from nlosfw.plugins.hookspecs import hookimpl
+
+
+@hookimpl
+def register_simulators(register: Any) -> None:
+    register(
+        "mitsuba",
+        "nlosfw_mitsuba.simulator:MitsubaSimulator",
+        config="nlosfw_mitsuba.config:MitsubaConfig",
+        requires={"mitsuba": "mitsuba", "mitransient": "mitransient"},
+        description="Mitsuba 3 + mitransient path tracing (transient_nlos_path, LLVM)",
+        test_config={"spp": 1024},
+    )

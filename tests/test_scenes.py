@@ -1,0 +1,138 @@
+"""The built-in scenes (conf/scene/*.yaml) and the scene config group."""
+
+from __future__ import annotations
+
+import dataclasses
+from importlib.resources import files
+
+import numpy as np
+import pytest
+import yaml
+
+from nlosfw.errors import ConfigError
+from nlosfw.geometry import ground_truth_maps, sample_surface, validate_scene
+from nlosfw.scene import Scene
+from nlosfw.scenes import builtin_scene, builtin_scene_config, builtin_scene_names
+
+THESIS = ("thesis_planes", "thesis_concave", "thesis_two_planes", "thesis_occluded")
+QUICK = ("plane", "letter_t", "point")
+
+
+def test_every_required_scene_is_built_in():
+    names = builtin_scene_names()
+    for name in THESIS + QUICK:
+        assert name in names
+
+
+@pytest.mark.parametrize("name", builtin_scene_names())
+def test_scene_files_hold_exactly_the_scene_fields(name):
+    text = (files("nlosfw.conf") / "scene" / f"{name}.yaml").read_text()
+    keys = set(yaml.safe_load(text))
+    fields = {f.name for f in dataclasses.fields(Scene)}
+    assert keys <= fields
+    if name != "tiny":
+        assert keys == fields
+        assert builtin_scene_config(name)["name"] == name
+
+
+@pytest.mark.parametrize("name", THESIS + QUICK)
+def test_defaults_and_time_window_hold_every_path(name):
+    scene = builtin_scene(name)
+    assert scene.wall.size == (2.0, 2.0) and scene.wall.resolution == (64, 64)
+    assert scene.wall.center == (0.0, 0.0)
+    assert scene.capture.type == "single_spot" and scene.capture.laser_spot == (0.0, 0.0)
+    assert (scene.time.bins, scene.time.bin_width, scene.time.start) == (2048, 0.003, 0.0)
+    lo, hi = validate_scene(scene).path_range
+    assert scene.time.start <= lo and hi < scene.time.end
+
+
+def test_unknown_scene_lists_the_valid_names():
+    with pytest.raises(ConfigError) as err:
+        builtin_scene("thesis_nope")
+    text = str(err.value)
+    assert text.startswith("scene: unknown scene 'thesis_nope'; valid: ")
+    assert "thesis_two_planes" in text and "\n" not in text
+
+
+def test_overrides_merge_into_the_scene():
+    scene = builtin_scene("plane", wall={"resolution": [8, 4]}, time={"bins": 512},
+                          capture={"type": "confocal"})
+    assert scene.wall.resolution == (8, 4) and scene.wall.size == (2.0, 2.0)
+    assert scene.time.bins == 512 and scene.time.bin_width == 0.003
+    assert scene.is_confocal
+    with pytest.raises(ConfigError, match=r"wall\.colour"):
+        builtin_scene("plane", wall={"colour": 1})
+
+
+def _blocked_fraction(name: str) -> float:
+    """Fraction of (wall point, surface point) segments crossing another item (no Embree).
+
+    Every item of these scenes is an unrotated rectangle facing the wall, so a
+    segment crosses item j exactly when it meets the plane of j inside j.
+    """
+    scene = builtin_scene(name, wall={"resolution": [9, 9]})
+    items = scene.geometry
+    wall = np.concatenate([scene.wall.grid_xyz().reshape(-1, 3), scene.laser_spot_xyz()[None]])
+    blocked = total = 0
+    for k, item in enumerate(items):
+        w, h = item.size
+        u = np.random.default_rng(k).random((400, 2)) - 0.5
+        p = np.asarray(item.position) + np.c_[u[:, 0] * w, u[:, 1] * h, np.zeros(400)]
+        hit = np.zeros((p.shape[0], wall.shape[0]), bool)
+        for j, other in enumerate(items):
+            z = other.position[2]
+            if j == k or z >= item.position[2]:
+                continue
+            t = z / p[:, 2]
+            q = wall[None, :, :2] + t[:, None, None] * (p[:, None, :2] - wall[None, :, :2])
+            hit |= ((np.abs(q[..., 0] - other.position[0]) < other.size[0] / 2)
+                    & (np.abs(q[..., 1] - other.position[1]) < other.size[1] / 2))
+        blocked, total = blocked + hit.sum(), total + hit.size
+    return blocked / total
+
+
+def test_two_planes_is_occlusion_free_and_occluded_is_not():
+    assert _blocked_fraction("thesis_two_planes") == 0.0
+    assert _blocked_fraction("thesis_occluded") > 0.05
+    two = builtin_scene("thesis_two_planes")
+    assert len(two.geometry) == 2 and two.geometry[0].position[2] != two.geometry[1].position[2]
+
+
+def test_occluded_ground_truth_shows_the_front_plane_over_the_back_one():
+    scene = builtin_scene("thesis_occluded", wall={"resolution": [32, 32]})
+    geometry = validate_scene(scene)
+    depth, _ = ground_truth_maps(geometry.mesh, scene.wall.grid_xyz())
+    front, back = (item.position[2] for item in scene.geometry)
+    assert np.isclose(depth, front).sum() > 50 and np.isclose(depth, back).sum() > 50
+    # the back plane's footprint is partly covered by the front plane
+    x, y = scene.wall.grid_xyz()[..., 0], scene.wall.grid_xyz()[..., 1]
+    b = scene.geometry[1]
+    under_back = (np.abs(x - b.position[0]) < b.size[0] / 2) & (np.abs(y - b.position[1])
+                                                                < b.size[1] / 2)
+    assert np.isclose(depth[under_back], front).any()
+
+
+def test_thesis_planes_are_one_depth_with_fine_detail():
+    scene = builtin_scene("thesis_planes")
+    depths = {item.position[2] for item in scene.geometry}
+    sizes = sorted(min(item.size) for item in scene.geometry)
+    assert len(depths) == 1 and len(scene.geometry) >= 6
+    assert sizes[0] <= 0.04 and sizes[-1] >= 0.3       # from sub-grid detail to large planes
+
+
+def test_thesis_concave_has_concavities_and_spikes():
+    scene = builtin_scene("thesis_concave")
+    geometry = validate_scene(scene)
+    base = scene.geometry[0].position[2]
+    z = geometry.mesh.vertices[:, 2]
+    assert z.min() < base - 0.1 and z.max() > base + 0.1
+    points, normals, _, _ = sample_surface(geometry.mesh, 2000, np.random.default_rng(0))
+    assert np.mean(np.abs(normals[:, 2]) < 0.7) > 0.05        # steep flanks that cast shadows
+
+
+def test_bad_time_axis_is_refused_with_one_line():
+    for time, option in (({"bins": 0}, "bins"), ({"bins": -5}, "bins"),
+                         ({"bin_width": 0.0}, "bin_width"), ({"bin_width": -0.003}, "bin_width")):
+        with pytest.raises(ConfigError, match=rf"^scene\.time\.{option}: must be a positive") as e:
+            builtin_scene("plane", time=time)
+        assert "\n" not in str(e.value)
