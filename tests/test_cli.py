@@ -138,7 +138,7 @@ def test_full_run_writes_documented_artefacts(workdir):
     assert set(metrics["timings"]) >= {"capture", "transform", "fit", "predict", "reconstruct",
                                        "report", "total"}
     splits = metrics["field"]["interp"]["splits"]
-    assert set(splits) == {"heldout_pixels", "heldout_frequencies", "all"}
+    assert {"heldout_pixels", "heldout_frequencies", "all"} <= set(splits)
     assert splits["all"]["nmse_db"] < -5
     recon = metrics["reconstruction"]["sources"]
     assert recon["true"]["ssim"] == pytest.approx(1.0)

@@ -127,6 +127,9 @@ def _recon_figure(recons: dict[str, Reconstruction]) -> Any:
                                  vmin=depths.min(), vmax=depths.max())
         axes[1, col].set_title("depth of maximum (m)")
         fig.colorbar(im, ax=axes[1, col], fraction=0.046)
+        if source == "true":
+            axes[2, col].axis("off")
+            continue
         err = np.abs(image - reference)
         im = axes[2, col].imshow(err, origin="lower", extent=ext, cmap="viridis", vmin=0,
                                  vmax=max(float(err.max()), 1e-6))

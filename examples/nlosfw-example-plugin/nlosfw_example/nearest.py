@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,6 +50,8 @@ class NearestFieldModel(FieldModel):
         if self._values is None:
             raise FitError("nearest: predict called before fit or load")
         wall_xy = np.asarray(wall_xy, dtype=float)
+        if wall_xy.shape[-1:] != (2,) or not np.all(np.isfinite(wall_xy)):
+            raise DataError("wall_xy: must be finite (x, y) pairs, shape (..., 2)")
         freqs = np.atleast_1d(np.asarray(frequencies, dtype=float))
         if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
             raise DataError("frequencies: must be finite and > 0 (cycles per metre)")
@@ -82,7 +85,7 @@ class NearestFieldModel(FieldModel):
             with np.load(path, allow_pickle=False) as data:
                 header = json.loads(str(data["header"]))
                 arrays = {k: data[k] for k in ("xy", "freqs", "values")}
-        except (OSError, ValueError, KeyError) as err:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as err:
             raise DataError(f"{path}: not a nearest field-model file ({err})") from None
         if header.get("format") != _FORMAT:
             raise DataError(f"{path}: holds {header.get('format')!r}, not a nearest model")
