@@ -64,6 +64,14 @@ class Simulator(_Configurable, ABC):
     def render(self, scene: Scene) -> Capture:
         """Noise-free transient of ``scene``, in the layout of :func:`scene_capture`."""
 
+    def check_scene(self, scene: Scene) -> None:
+        """Raise a one-line ConfigError if this simulator cannot render ``scene``.
+
+        Cheap checks only (no rendering): the command line calls it before any
+        output exists, and :meth:`simulate` calls it before rendering. The
+        default accepts every valid scene.
+        """
+
     def simulate(self, scene: Scene, base_dir: Path | None = None) -> Capture:
         """Render ``scene``, then add noise, ground truth and metadata to ``scene_info``."""
         from nlosfw.config import config_to_dict as _to_dict
@@ -72,6 +80,7 @@ class Simulator(_Configurable, ABC):
 
         geometry = validate_scene(scene, base_dir)  # one-line ConfigError for a bad scene
         scene = geometry.scene
+        self.check_scene(scene)
         capture = self.render(scene)
         expected = scene_capture(scene, np.zeros((1,) + _sensor_axes(scene), np.float32))
         if capture.H.shape[1:] != expected.H.shape[1:] or capture.n_bins != scene.time.bins:

@@ -110,8 +110,9 @@ def test_truncated_capture_file(workdir, capsys):
 
 
 def test_debug_shows_the_traceback(workdir, capsys, monkeypatch):
-    monkeypatch.delenv("NLOSFW_DEBUG", raising=False)
-    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    # main() sets both for the rest of the process; let monkeypatch restore them afterwards
+    monkeypatch.setenv("NLOSFW_DEBUG", "0")
+    monkeypatch.setenv("HYDRA_FULL_ERROR", "0")
     status, _, err = run_cli(["--debug", "model=nope"], capsys)
     assert status == 2 and "Traceback" in err and "unknown model plugin 'nope'" in err
 
@@ -228,3 +229,14 @@ def test_sweep_through_submitit_and_joblib_launchers(workdir, launcher):
     models = {json.loads((sweep / str(i) / "metrics.json").read_text())["run"]["model"]
               for i in (0, 1)}
     assert models == {"interp", "nearest"}
+
+
+def test_simulator_specific_refusal_before_any_output(workdir, capsys):
+    """A scene the chosen simulator cannot render is refused by preflight (check_scene)."""
+    status, _, err = run_cli(["scene=tiny", "scene.geometry.0.type=box",
+                              "scene.geometry.0.size=[0.2,0.2,0.2]", "simulator=analytic",
+                              "model=interp"], capsys)
+    assert status == 2
+    assert err.startswith("error: scene.geometry[0].type: the analytic simulator has no "
+                          "visibility and supports only point, patch, rectangle, heightfield")
+    assert not (workdir / "outputs").exists()

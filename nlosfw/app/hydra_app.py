@@ -160,7 +160,9 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
     if settings.capture.path is None:
         from nlosfw.geometry import validate_scene
 
-        validate_scene(scene_from_config(plain.get("scene")))
+        scene = validate_scene(scene_from_config(plain.get("scene"))).scene
+        node = dict(plain["simulator"])
+        host.registry.create("simulator", str(node.pop("name")), node).check_scene(scene)
         return
     path = Path(settings.capture.path).expanduser()
     if not path.is_file():

@@ -90,14 +90,18 @@ class AnalyticSimulator(Simulator):
         H = hist.reshape(scene.wall.resolution[0], scene.wall.resolution[1], bins)
         return scene_capture(scene, np.moveaxis(H, -1, 0))
 
-    def elements(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Quadrature elements: positions (E, 3), normals (E, 3; NaN for points), rho*dA (E,)."""
+    def check_scene(self, scene: Scene) -> None:
+        """Only items without self-shadowing and with a closed form or quadrature."""
         for i, item in enumerate(scene.geometry):
             if item.type not in SUPPORTED_TYPES:
                 raise ConfigError(f"scene.geometry[{i}].type",
                                   f"the analytic simulator has no visibility and supports only "
                                   f"{', '.join(SUPPORTED_TYPES)}; got {item.type!r} (use a "
                                   "ray-tracing simulator such as embree)")
+
+    def elements(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Quadrature elements: positions (E, 3), normals (E, 3; NaN for points), rho*dA (E,)."""
+        self.check_scene(scene)
         points = scene_points(scene)
         pos = [points.positions]
         nrm = [np.full_like(points.positions, np.nan)]
@@ -105,11 +109,7 @@ class AnalyticSimulator(Simulator):
         for i, item in enumerate(scene.geometry):
             if item.type == "point":
                 continue
-            mesh = item_mesh(item, i)
-            if mesh.vertices[:, 2].min() <= 0:
-                raise ConfigError(f"scene.geometry[{i}]",
-                                  f"{item.type} reaches z = {mesh.vertices[:, 2].min():.3g} m; "
-                                  "hidden geometry must lie in front of the wall (z > 0)")
+            mesh = item_mesh(item, i)  # validate_scene has checked it lies beyond the wall
             if item.type == "patch":
                 normal = mesh.face_normals()[0]
                 pos.append(np.asarray(item.position, dtype=float)[None])

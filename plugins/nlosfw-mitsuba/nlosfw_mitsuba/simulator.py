@@ -79,14 +79,18 @@ class MitsubaSimulator(Simulator):
 
     config_class = MitsubaConfig
 
-    def render(self, scene: Scene) -> Capture:
-        cfg = self.config
-        start = time.perf_counter()
+    def check_scene(self, scene: Scene) -> None:
+        """Point scatterers have no area for Mitsuba to intersect: refuse them."""
         for i, item in enumerate(scene.geometry):
             if item.type == "point":
                 raise ConfigError(f"scene.geometry[{i}].type", (
                     "the mitsuba simulator cannot render point scatterers (they have no "
                     "area); use a small patch, or the analytic or embree simulator"))
+
+    def render(self, scene: Scene) -> Capture:
+        cfg = self.config
+        start = time.perf_counter()
+        self.check_scene(scene)
         mi = load_mitsuba(cfg.variant)
         import drjit as dr
 
