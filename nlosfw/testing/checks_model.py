@@ -1,5 +1,207 @@
-"""Conformance checks for every model plugin (see :mod:`nlosfw.testing.checks_common`)."""
+"""Conformance checks for every field-model plugin (see :mod:`nlosfw.testing.checks_common`).
+
+Each check fits the plugin with its registered ``test_config`` (a small step
+budget) on fields computed in closed form (:func:`~nlosfw.testing.fixtures.smooth_field`,
+a sum of plane waves) and asserts numbers against that closed form, never
+against the plugin's own output.
+
+Fit tolerances are chosen per model family (``family`` attribute of the model
+class, or its registered name); a third-party model may declare a class
+attribute ``conformance_tolerance`` (capped at :data:`MAX_TOLERANCE`).
+"""
 
 from __future__ import annotations
 
-MODEL_CHECKS: tuple = ()
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlosfw.capture import CaptureGeometry
+from nlosfw.enums import CaptureKind
+from nlosfw.errors import NlosfwError
+from nlosfw.field_models import write_model_file
+from nlosfw.interfaces import FieldModelConfig
+from nlosfw.phasor_field import PhasorField
+from nlosfw.plugins.registry import PluginSpec
+from nlosfw.protocol import error_metrics, split_field
+from nlosfw.testing import fixtures
+
+#: Relative L2 error (on every sample of the fixture field, held-out frequencies
+#: included) that a model of each family must reach with its ``test_config``.
+FIT_TOLERANCE = {"interp": 0.02, "siren": 0.08, "pe": 0.15, "tanh": 0.15}
+#: Tolerance of families not listed above.
+DEFAULT_TOLERANCE = 0.2
+#: The largest tolerance a plugin may declare for itself.
+MAX_TOLERANCE = 0.3
+
+
+def fit_fixture() -> PhasorField:
+    """The smooth field the fit check learns: 12 x 12 wall points, 10 frequencies."""
+    return fixtures.smooth_field(n=12, frequencies=np.linspace(2.0, 4.0, 10), seed=1)
+
+
+def _family(spec: PluginSpec) -> str:
+    factory = spec.load()
+    return str(getattr(factory, "family", "") or spec.name)
+
+
+def _tolerance(spec: PluginSpec) -> float:
+    factory = spec.load()
+    declared = getattr(factory, "conformance_tolerance", None)
+    if declared is not None:
+        return min(float(declared), MAX_TOLERANCE)
+    return FIT_TOLERANCE.get(_family(spec), DEFAULT_TOLERANCE)
+
+
+def _fitted(spec: PluginSpec, field: PhasorField | None = None, **options: Any) -> Any:
+    model = spec.create({**spec.test_config, **options})
+    model.fit(fit_fixture() if field is None else field)
+    return model
+
+
+def _one_line_error(spec: PluginSpec, action: str, call: Any) -> str:
+    try:
+        call()
+    except NlosfwError as err:
+        text = str(err)
+        assert text and "\n" not in text, (
+            f"{spec.qualified_name}: {action}: the error must be one line, got {text!r}")
+        return text
+    except Exception as err:  # a bare ValueError, KeyError... is not a user-facing error
+        raise AssertionError(f"{spec.qualified_name}: {action}: raised {type(err).__name__} "
+                             f"({err}); expected an nlosfw error (DataError, FitError)") from err
+    raise AssertionError(f"{spec.qualified_name}: {action}: no error was raised")
+
+
+def check_fits_smooth_field(spec: PluginSpec) -> None:
+    """Learns a sum of plane waves over (x, y, f) to the family's tolerance.
+
+    Trained on 9 of the 10 frequencies (every pixel); scored on all 10 (the held-out
+    frequency lies inside the band) against the closed-form field.
+    """
+    field = fit_fixture()
+    split = split_field(field, spatial_step=1, spectral="interleaved", spectral_fraction=0.1)
+    model = spec.create(dict(spec.test_config))
+    model.fit(split.train_field)
+    pred = model.predict(field.wall_xyz[..., :2], field.frequencies)
+    assert pred.shape == field.values.shape, (
+        f"{spec.qualified_name}: predict returned {pred.shape}, expected {field.values.shape}")
+    err = error_metrics(field.values, pred)["relative_l2"]
+    tol = _tolerance(spec)
+    assert err <= tol, (f"{spec.qualified_name}: relative L2 error {err:.4f} on a smooth "
+                        f"plane-wave field exceeds {tol} (with its test_config)")
+
+
+def check_predicts_unseen_points(spec: PluginSpec) -> None:
+    """Finite complex values of shape (F, ...) at unseen points and frequencies.
+
+    Also: a prediction at the training samples matches the closed-form field at
+    least roughly (relative error < 0.5), so a model cannot ignore its inputs.
+    """
+    field = fit_fixture()
+    model = _fitted(spec, field)
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(-0.55, 0.55, (7, 5, 2))          # inside and just outside the hull
+    freqs = np.array([1.9, 2.33, 3.1, 4.2])            # unseen, two outside the band
+    out = model.predict(pts, freqs)
+    assert out.shape == (4, 7, 5), f"{spec.qualified_name}: predict gave shape {out.shape}, " \
+                                   "expected (4, 7, 5) for points (7, 5, 2) and 4 frequencies"
+    assert np.iscomplexobj(out), f"{spec.qualified_name}: predict must return complex values"
+    assert np.all(np.isfinite(out)), f"{spec.qualified_name}: predict returned NaN or inf"
+    flat = model.predict(pts.reshape(-1, 2), freqs[:1])
+    assert flat.shape == (1, 35), f"{spec.qualified_name}: (N, 2) points gave {flat.shape}"
+    again = model.predict(field.wall_xyz[..., :2], field.frequencies)
+    err = error_metrics(field.values, again)["relative_l2"]
+    assert err < 0.5, f"{spec.qualified_name}: error {err:.3f} on its own training samples"
+
+
+def check_save_load_round_trip(spec: PluginSpec) -> None:
+    """save -> load -> predict gives identical output; foreign and corrupt files are refused."""
+    factory = spec.load()
+    model = _fitted(spec)
+    pts = fixtures.wall_grid(9)[..., :2]
+    freqs = np.array([2.1, 3.05, 3.9])
+    before = model.predict(pts, freqs)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "model.bin"
+        model.save(path)
+        assert path.is_file(), f"{spec.qualified_name}: save did not write {path} itself"
+        loaded = factory.load(path)
+        np.testing.assert_array_equal(loaded.predict(pts, freqs), before, err_msg=(
+            f"{spec.qualified_name}: predictions changed after save -> load"))
+        assert loaded.n_parameters == model.n_parameters, "parameter count changed on load"
+        corrupt = Path(tmp) / "corrupt.bin"
+        corrupt.write_bytes(path.read_bytes()[: max(1, path.stat().st_size // 3)])
+        _one_line_error(spec, "loading a truncated file", lambda: factory.load(corrupt))
+        foreign = Path(tmp) / "foreign.npz"
+        write_model_file(foreign, "no_such_model_xyz", FieldModelConfig(),
+                         {"p0": np.zeros(3)})
+        _one_line_error(spec, "loading another model's file", lambda: factory.load(foreign))
+        _one_line_error(spec, "loading a missing file",
+                        lambda: factory.load(Path(tmp) / "missing.npz"))
+
+
+def check_bad_input_rejected(spec: PluginSpec) -> None:
+    """One-line errors: predict before fit, empty or all-zero fields, bad frequencies."""
+    fresh = spec.create(dict(spec.test_config))
+    pts = fixtures.wall_grid(4)[..., :2]
+    _one_line_error(spec, "predict before fit", lambda: fresh.predict(pts, np.array([2.0])))
+    field = fit_fixture()
+    zero = field.replace(values=np.zeros_like(field.values))
+    _one_line_error(spec, "fitting an all-zero field",
+                    lambda: spec.create(dict(spec.test_config)).fit(zero))
+    empty = PhasorField(values=np.zeros((0, 4, 4), np.complex64), frequencies=np.zeros(0),
+                        wall_xyz=fixtures.wall_grid(4),
+                        geometry=CaptureGeometry(kind=CaptureKind.SINGLE_SPOT,
+                                                 laser_point=np.zeros(3)))
+    _one_line_error(spec, "fitting an empty field",
+                    lambda: spec.create(dict(spec.test_config)).fit(empty))
+    model = _fitted(spec, field)
+    for bad in (np.array([np.nan]), np.array([np.inf]), np.array([0.0]), np.array([-2.0])):
+        _one_line_error(spec, f"predicting at frequency {bad[0]}",
+                        lambda bad=bad: model.predict(pts, bad))
+    _one_line_error(spec, "predicting at NaN points",
+                    lambda: model.predict(np.full((3, 2), np.nan), np.array([2.0])))
+
+
+def check_parameter_count(spec: PluginSpec) -> None:
+    """n_parameters is a positive integer; each preset has its thesis count in its saved file.
+
+    Models may declare ``presets()`` -> {name: preset with ``options`` and ``parameters``}.
+    A preset is fitted for two steps on a one-frequency field; ``n_parameters`` and (for
+    models with ``weights()``, the arrays of the backend) the number of trained values
+    must equal the declared count.
+    """
+    factory = spec.load()
+    model = _fitted(spec)
+    n = model.n_parameters
+    assert isinstance(n, (int, np.integer)) and n > 0, (
+        f"{spec.qualified_name}: n_parameters must be a positive integer, got {n!r}")
+    presets = getattr(factory, "presets", None)
+    if presets is None:
+        return
+    one = fit_fixture().select([4])
+    for name, preset in presets().items():
+        options = {**dict(preset.options), "steps": 2, "eval_every": 1, "device": "cpu"}
+        m = spec.create(options)
+        m.fit(one)
+        assert m.n_parameters == preset.parameters, (
+            f"{spec.qualified_name}: preset {name} has {m.n_parameters} parameters, the thesis "
+            f"network has {preset.parameters}")
+        weights = getattr(m, "weights", None)
+        if weights is not None:
+            stored = sum(int(np.asarray(w).size) for w in weights())
+            assert stored == preset.parameters, (
+                f"{spec.qualified_name}: preset {name} holds {stored} weights, expected "
+                f"{preset.parameters}")
+
+
+MODEL_CHECKS = (
+    check_fits_smooth_field,
+    check_predicts_unseen_points,
+    check_save_load_round_trip,
+    check_bad_input_rejected,
+    check_parameter_count,
+)

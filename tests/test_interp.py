@@ -1,0 +1,158 @@
+"""The ``interp`` baseline: exactness on cubics, convergence order, extrapolation, files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nlosfw.builtin.interp import InterpFieldModel, spline_weights
+from nlosfw.capture import CaptureGeometry
+from nlosfw.enums import CaptureKind
+from nlosfw.errors import DataError, FitError
+from nlosfw.phasor_field import PhasorField
+from nlosfw.testing import fixtures
+
+GEOM = CaptureGeometry(kind=CaptureKind.SINGLE_SPOT, laser_point=np.zeros(3))
+
+
+def _cubic(x, y, f):
+    """A complex polynomial of degree 3 in each of x, y and f (reproduced exactly)."""
+    return ((1 + 0.5j) * x**3 - 0.7 * x * y**2 + (0.2 - 1j) * y**3 + 0.3j * f**3 * x
+            + 0.8 * f**2 - (0.1 + 0.4j) * f * y + 2.0)
+
+
+def _field_of(fn, n: int = 8, freqs=np.linspace(1.0, 3.0, 6)) -> PhasorField:
+    wall = fixtures.wall_grid(n)
+    x, y = wall[..., 0][None], wall[..., 1][None]
+    f = np.asarray(freqs, float)[:, None, None]
+    return PhasorField(values=fn(x, y, f), frequencies=np.asarray(freqs, float),
+                       wall_xyz=wall, geometry=GEOM)
+
+
+def test_reproduces_training_samples_exactly():
+    field = fixtures.smooth_field(n=10)
+    model = InterpFieldModel()
+    model.fit(field)
+    pred = model.predict(field.wall_xyz[..., :2], field.frequencies)
+    np.testing.assert_allclose(pred, field.values, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("extrapolation", ["cubic", "nearest"])
+def test_tricubic_polynomials_are_exact_inside_the_hull(extrapolation):
+    field = _field_of(_cubic)
+    model = InterpFieldModel({"extrapolation": extrapolation, "demodulate": False})
+    model.fit(field)
+    rng = np.random.default_rng(0)
+    lo, hi = field.wall_xyz[0, 0, 0], field.wall_xyz[0, -1, 0]
+    pts = rng.uniform(lo, hi, (50, 2))
+    freqs = rng.uniform(1.0, 3.0, 7)
+    expected = _cubic(pts[None, :, 0], pts[None, :, 1], freqs[:, None])
+    np.testing.assert_allclose(model.predict(pts, freqs), expected, rtol=1e-10, atol=1e-10)
+
+
+def test_cubic_extrapolation_continues_the_polynomial():
+    field = _field_of(_cubic)
+    model = InterpFieldModel({"extrapolation": "cubic", "demodulate": False})
+    model.fit(field)
+    pts = np.array([[0.6, -0.55], [-0.7, 0.52]])     # outside the hull (+-0.4375)
+    freqs = np.array([0.8, 3.3])
+    expected = _cubic(pts[None, :, 0], pts[None, :, 1], freqs[:, None])
+    np.testing.assert_allclose(model.predict(pts, freqs), expected, rtol=1e-9, atol=1e-9)
+
+
+def test_nearest_extrapolation_clamps_to_the_hull():
+    field = _field_of(_cubic)
+    model = InterpFieldModel({"extrapolation": "nearest", "demodulate": False})
+    model.fit(field)
+    edge = field.wall_xyz[0, -1, 0]
+    out = model.predict(np.array([[edge + 0.3, 0.1]]), np.array([5.0]))
+    at_edge = model.predict(np.array([[edge, 0.1]]), np.array([3.0]))
+    np.testing.assert_allclose(out, at_edge, rtol=1e-12)
+    assert out[0, 0] == pytest.approx(_cubic(edge, 0.1, 3.0), rel=1e-10)
+
+
+def test_error_converges_at_fourth_order_on_a_point_scatterer():
+    # cubic splines converge as h^4 for smooth fields: halving the spacing must cut the
+    # mid-cell error by about 16 (at least 8 allowing for boundary effects)
+    target = (0.1, -0.05, 0.8)
+    dense = fixtures.point_phasor_field(target, n=64, frequencies=(3.0,))
+    errors = []
+    for n in (16, 32):
+        coarse = fixtures.point_phasor_field(target, n=n, frequencies=(3.0,))
+        model = InterpFieldModel()
+        model.fit(coarse)
+        inner = np.abs(dense.wall_xyz[..., 0]) < 0.4
+        inner &= np.abs(dense.wall_xyz[..., 1]) < 0.4
+        pred = model.predict(dense.wall_xyz[..., :2], dense.frequencies)
+        err = np.abs(pred[0][inner] - dense.values[0][inner])
+        errors.append(np.linalg.norm(err) / np.linalg.norm(dense.values[0][inner]))
+    assert errors[0] < 0.05
+    assert errors[0] / errors[1] > 8
+
+
+def test_unsorted_axes_give_the_same_result():
+    field = fixtures.smooth_field(n=8)
+    flipped = field.replace(values=field.values[::-1, :, ::-1],
+                            frequencies=field.frequencies[::-1],
+                            wall_xyz=field.wall_xyz[:, ::-1])
+    pts = np.random.default_rng(1).uniform(-0.4, 0.4, (20, 2))
+    a, b = InterpFieldModel(), InterpFieldModel()
+    a.fit(field)
+    b.fit(flipped)
+    np.testing.assert_allclose(a.predict(pts, [2.5, 3.3]), b.predict(pts, [2.5, 3.3]),
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_degenerate_axes():
+    field = fixtures.smooth_field(n=8).select([3])           # one frequency: constant in f
+    model = InterpFieldModel()
+    model.fit(field)
+    pts = field.wall_xyz[..., :2]
+    np.testing.assert_allclose(model.predict(pts, [9.0])[0], field.values[0], atol=1e-12)
+    w = spline_weights(np.array([0.0, 1.0]), np.array([0.25, 2.0]), "cubic")
+    np.testing.assert_allclose(w, [[0.75, 0.25], [-1.0, 2.0]])
+
+
+def test_rejects_non_grid_and_bad_input(tmp_path):
+    field = fixtures.smooth_field(n=6)
+    wall = field.wall_xyz.copy()
+    wall[2, 3, 0] += 0.01
+    with pytest.raises(DataError, match="rectilinear"):
+        InterpFieldModel().fit(field.replace(wall_xyz=wall))
+    with pytest.raises(FitError, match="before"):
+        InterpFieldModel().predict(np.zeros((2, 2)), [1.0])
+    with pytest.raises(FitError, match="zero"):
+        InterpFieldModel().fit(field.replace(values=np.zeros_like(field.values)))
+
+
+def test_save_load_and_parameter_count(tmp_path):
+    field = fixtures.smooth_field(n=8)
+    model = InterpFieldModel({"extrapolation": "cubic"})
+    model.fit(field)
+    assert model.n_parameters == 2 * field.values.size
+    path = tmp_path / "interp.model"
+    model.save(path)
+    loaded = InterpFieldModel.load(path)
+    assert loaded.config.extrapolation == "cubic"
+    pts = np.random.default_rng(2).uniform(-0.6, 0.6, (5, 3, 2))
+    np.testing.assert_array_equal(loaded.predict(pts, [2.2, 4.5]), model.predict(pts, [2.2, 4.5]))
+    path.write_bytes(b"not a model")
+    with pytest.raises(DataError, match="corrupt"):
+        InterpFieldModel.load(path)
+
+
+def test_demodulation_interpolates_a_delayed_pulse_between_sparse_frequencies():
+    # one point scatterer, frequencies so sparse that the phase turns ~2.4 rad per step:
+    # a spline through P fails, a spline through the demodulated P is nearly exact
+    target = (0.05, 0.0, 0.9)
+    coarse = fixtures.point_phasor_field(target, n=8, frequencies=np.linspace(4.0, 8.0, 21))
+    fine_f = np.linspace(4.1, 7.9, 17)
+    dense = fixtures.point_phasor_field(target, n=8, frequencies=fine_f)
+    errors = {}
+    for demodulate in (False, True):
+        model = InterpFieldModel({"demodulate": demodulate})
+        model.fit(coarse)
+        pred = model.predict(dense.wall_xyz[..., :2], fine_f)
+        errors[demodulate] = np.linalg.norm(pred - dense.values) / np.linalg.norm(dense.values)
+    assert errors[False] > 0.1
+    assert errors[True] < 0.01

@@ -1,0 +1,134 @@
+"""The thesis protocol: splits, metrics and Table 4.1's parameters/data ratio."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from nlosfw.capture import CaptureGeometry
+from nlosfw.enums import CaptureKind
+from nlosfw.errors import DataError
+from nlosfw.phasor_field import PhasorField
+from nlosfw.protocol import (
+    error_metrics,
+    field_metrics,
+    heldout_frequency_indices,
+    parameter_data_ratio,
+    split_field,
+)
+from nlosfw.testing import fixtures
+
+
+def _field(n: int = 64, n_f: int = 151, seed: int = 0) -> PhasorField:
+    rng = np.random.default_rng(seed)
+    values = rng.normal(size=(n_f, n, n)) + 1j * rng.normal(size=(n_f, n, n))
+    return PhasorField(values=values, frequencies=np.linspace(4.0, 12.0, n_f),
+                       wall_xyz=fixtures.wall_grid(n, 2.0),
+                       geometry=CaptureGeometry(kind=CaptureKind.SINGLE_SPOT,
+                                                laser_point=np.zeros(3)))
+
+
+def test_thesis_split_sizes_and_contents():
+    field = _field()
+    split = split_field(field)
+    assert split.train_field.values.shape == (135, 32, 32)
+    assert split.heldout_frequencies.size == 16
+    assert split.spatial_mask.sum() == 32 * 32
+    assert split.spatial_mask[0, 0] and not split.spatial_mask[1, 1]
+    np.testing.assert_array_equal(split.train_field.values,
+                                  field.values[split.train_frequencies][:, ::2, ::2])
+    np.testing.assert_array_equal(split.train_field.wall_xyz, field.wall_xyz[::2, ::2])
+    assert split.n_train_values == 276_480            # thesis: 32 * 32 * 135 * 2
+
+
+def test_interleaved_holds_out_interior_frequencies_evenly():
+    held = heldout_frequency_indices(151, "interleaved", 0.1)
+    assert held.size == 16 and held[0] > 0 and held[-1] < 150
+    gaps = np.diff(held)
+    assert gaps.min() >= 9 and gaps.max() <= 10       # "every tenth"
+    assert np.array_equal(heldout_frequency_indices(151, "tail", 0.1), np.arange(135, 151))
+    assert heldout_frequency_indices(151, "none", 0.1).size == 0
+
+
+def test_split_rejects_bad_options():
+    field = _field(8, 10)
+    for kwargs in ({"spatial_step": 0}, {"spatial_step": 1.5}, {"spectral": "middle"},
+                   {"spectral_fraction": 1.2}):
+        with pytest.raises(DataError) as err:
+            split_field(field, **kwargs)
+        assert "\n" not in str(err.value)
+
+
+def test_metrics_of_known_errors():
+    field = _field(16, 20)
+    split = split_field(field, spatial_step=2, spectral="interleaved")
+    t = field.values
+    # a pure 10% amplitude error everywhere
+    m = field_metrics(field, 1.1 * t, split)
+    for name in ("heldout_pixels", "heldout_frequencies", "all"):
+        assert m[name]["relative_l2"] == pytest.approx(0.1, rel=1e-9)
+        assert m[name]["nmse_db"] == pytest.approx(-20.0, abs=1e-9)
+        assert m[name]["phase_error"] == pytest.approx(0.0, abs=1e-12)
+    rms = np.sqrt(np.mean(np.abs(t) ** 2))
+    assert m["all"]["amplitude_rmse"] == pytest.approx(0.1 * rms, rel=1e-9)
+    assert m["all"]["relative_amplitude_rmse"] == pytest.approx(0.1, rel=1e-9)
+    # a pure phase error of 0.3 rad
+    m = field_metrics(field, t * np.exp(0.3j), split)
+    assert m["all"]["phase_error"] == pytest.approx(0.3, rel=1e-9)
+    assert m["all"]["relative_l2"] == pytest.approx(2 * math.sin(0.15), rel=1e-9)
+    assert m["all"]["amplitude_rmse"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_metric_sets_select_the_right_samples():
+    field = _field(16, 20)
+    split = split_field(field)
+    pred = field.values.copy()
+    held_px = ~split.spatial_mask
+    tf = split.train_frequencies
+    # corrupt only held-out pixels at training frequencies
+    block = pred[tf]
+    block[:, held_px] *= 1.2
+    pred[tf] = block
+    m = field_metrics(field, pred, split)
+    assert m["heldout_pixels"]["relative_l2"] == pytest.approx(0.2, rel=1e-9)
+    assert m["heldout_frequencies"]["relative_l2"] == pytest.approx(0.0, abs=1e-12)
+    changed = np.sum(np.abs(field.values[tf][:, held_px]) ** 2)
+    expected = 0.2 * np.sqrt(changed / np.sum(np.abs(field.values) ** 2))
+    assert m["all"]["relative_l2"] == pytest.approx(expected, rel=1e-9)
+    assert m["heldout_pixels"]["n_samples"] == tf.size * held_px.sum()
+    assert m["heldout_frequencies"]["n_samples"] == split.heldout_frequencies.size * 256
+    # 16 x 16 grid, training rows/cols 0, 2, ..., 14: the last row and column are outside
+    assert m["heldout_pixels_inside"]["n_samples"] == tf.size * (15 * 15 - 8 * 8)
+    assert m["heldout_pixels_inside"]["relative_l2"] == pytest.approx(0.2, rel=1e-9)
+
+
+def test_empty_sets_give_none():
+    field = _field(8, 10)
+    split = split_field(field, spatial_step=1, spectral="none")
+    m = field_metrics(field, field.values, split)
+    assert m["heldout_pixels"]["relative_l2"] is None
+    assert m["heldout_frequencies"]["n_samples"] == 0
+    assert m["all"]["relative_l2"] == 0.0
+    assert error_metrics(np.zeros(0), np.zeros(0))["nmse_db"] is None
+
+
+def test_metrics_reject_mismatched_fields():
+    field = _field(8, 10)
+    split = split_field(field)
+    with pytest.raises(DataError):
+        field_metrics(field, field.values[:, :4], split)
+    with pytest.raises(DataError):
+        field_metrics(split.train_field, split.train_field.values, split)
+
+
+def test_parameter_data_ratio_matches_thesis_table_4_1():
+    # the multi-frequency rows of Table 4.1 (the single-frequency rows print 31.57% and
+    # 45.63% for 942 / 2048 = 46.0% and 914 / 2048 = 44.6%: the thesis is inconsistent there)
+    assert parameter_data_ratio(3362, 276_480) == pytest.approx(1.22, abs=0.005)
+    assert parameter_data_ratio(3938, 1_105_920) == pytest.approx(0.36, abs=0.005)
+    split = split_field(_field())
+    assert parameter_data_ratio(3362, split) == pytest.approx(100 * 3362 / 276_480)
+    with pytest.raises(DataError):
+        parameter_data_ratio(10, 0)
