@@ -4,6 +4,7 @@
                      training and one held-out frequency (as in thesis figs. 4.2-5.5)
 ``reconstructions.png``  max-intensity images of every source, their depth maps
                      and their error against the reconstruction of the true field
+``reconstructions_f<k>.png``  the same from frequency k alone (thesis figs. 5.1-5.5)
 ``loss.png``         training (and validation) loss of each field model
 """
 
@@ -25,19 +26,34 @@ _SOURCE_TITLES = {"true": "true field", "raw": "raw (training grid)", "model": "
 
 
 def write_figures(ctx: RunContext, fields: dict[str, PhasorField],
-                  recons: dict[str, Reconstruction], fitted: dict[str, Any], dpi: int) -> None:
-    """Write every figure of a run into ``figures/``."""
+                  recons: dict[str, Reconstruction], fitted: dict[str, Any], dpi: int,
+                  truth_depth: np.ndarray | None = None,
+                  frequencies: dict[str, int] | None = None,
+                  single_frequency: dict[int, dict[str, Reconstruction]] | None = None) -> None:
+    """Write every figure of a run into ``figures/``.
+
+    ``truth_depth`` is the scene's ground-truth depth map (X, Y) as stored by the
+    simulators in ``scene_info`` (-1 where nothing is hit), shown for reference;
+    ``frequencies`` maps a label to a frequency index to show alone, and
+    ``single_frequency`` holds the reconstructions from those frequencies.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
-    split = fitted["split"]
-    chosen = _chosen_frequencies(split)
-    for label, index in chosen.items():
+    for label, index in (frequencies or {}).items():
         ctx.write(f"figures/fields_f{index}.png",
                   _saver(lambda fig_index=index, lab=label: _field_figure(fields, fig_index, lab),
                          dpi), kind="figure")
-    ctx.write("figures/reconstructions.png", _saver(lambda: _recon_figure(recons), dpi),
-              kind="figure")
+    metrics = ctx.metrics.get("reconstruction") or {}
+    ctx.write("figures/reconstructions.png",
+              _saver(lambda: _recon_figure(recons, metrics.get("sources") or {}, truth_depth,
+                                           "all frequencies"), dpi), kind="figure")
+    for index, singles in (single_frequency or {}).items():
+        entry = metrics["single_frequency"][str(index)]
+        title = f"f = {entry['frequency']:.3f} cycles/m only ({entry['split']} frequency)"
+        ctx.write(f"figures/reconstructions_f{index}.png",
+                  _saver(lambda r=singles, e=entry, t=title: _recon_figure(
+                      r, e["sources"], truth_depth, t), dpi), kind="figure")
     histories = {s: r.history for s, r in fitted["reports"].items() if r.history}
     if histories:
         ctx.write("figures/loss.png", _saver(lambda: _loss_figure(histories), dpi), kind="figure")
@@ -54,16 +70,6 @@ def _saver(make: Callable[[], Any], dpi: int) -> Callable[[Path], None]:
     return save
 
 
-def _chosen_frequencies(split: Any) -> dict[str, int]:
-    """A training frequency near the top of the band and a held-out one, by index."""
-    train = np.asarray(split.train_frequencies)
-    held = np.asarray(split.heldout_frequencies)
-    chosen = {"training": int(train[int(0.75 * (train.size - 1))])}
-    if held.size:
-        chosen["held-out"] = int(held[held.size // 2])
-    return chosen
-
-
 def _extent(field: PhasorField) -> list[float]:
     w = field.wall_xyz
     sp = field.grid_spacing() or (0.0, 0.0)
@@ -77,6 +83,9 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
     true = fields["true"]
     sources = list(fields)
     amp_max = float(np.abs(true.values[index]).max()) or 1.0
+    errors = {s: np.abs(fields[s].values[index] - true.values[index]) / amp_max
+              for s in sources if s not in ("true", "raw")}
+    err_max = _shared_scale(errors.values())
     fig, axes = plt.subplots(len(sources), 3, figsize=(9.5, 3.0 * len(sources)),
                              squeeze=False)
     freq = true.frequencies[index]
@@ -97,9 +106,9 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
         if source in ("true", "raw"):
             ax[2].axis("off")
             continue
-        err = np.abs(values - true.values[index]) / amp_max
-        im = ax[2].imshow(err, origin="lower", extent=ext, vmin=0, cmap="viridis")
-        ax[2].set_title("|error| / max |true|")
+        im = ax[2].imshow(errors[source], origin="lower", extent=ext, vmin=0, vmax=err_max,
+                          cmap="viridis")
+        ax[2].set_title("|P - P_true| / max |P_true|")
         fig.colorbar(im, ax=ax[2], fraction=0.046)
     for ax in axes.ravel():
         ax.set_xlabel("x (m)")
@@ -108,38 +117,67 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
     return fig
 
 
-def _recon_figure(recons: dict[str, Reconstruction]) -> Any:
+def _recon_figure(recons: dict[str, Reconstruction], scores: dict[str, Any],
+                  truth_depth: np.ndarray | None, title: str) -> Any:
     import matplotlib.pyplot as plt
 
     sources = list(recons)
     reference = normalise(recons["true"].max_intensity_image())
+    images = {s: normalise(recons[s].max_intensity_image()) for s in sources}
+    errors = {s: np.abs(images[s] - reference) for s in sources if s != "true"}
+    err_max = _shared_scale(errors.values())
     fig, axes = plt.subplots(3, len(sources), figsize=(3.3 * len(sources), 9.5), squeeze=False)
     vox = recons["true"].voxels
     ext = [vox[0, 0, 0, 0], vox[0, 0, -1, 0], vox[0, 0, 0, 1], vox[0, -1, 0, 1]]
     depths = recons["true"].depths
     for col, source in enumerate(sources):
-        recon = recons[source]
-        image = normalise(recon.max_intensity_image())
-        axes[0, col].imshow(image, origin="lower", extent=ext, cmap="hot", vmin=0, vmax=1)
-        axes[0, col].set_title(f"{_SOURCE_TITLES.get(source, source)}\nmax intensity")
-        depth = recon.depth_map(threshold=0.25)
+        ssim = (scores.get(source) or {}).get("ssim")
+        label = "" if ssim is None or source == "true" else f"  (SSIM {ssim:.3f})"
+        axes[0, col].imshow(images[source], origin="lower", extent=ext, cmap="hot", vmin=0,
+                            vmax=1)
+        axes[0, col].set_title(f"{_SOURCE_TITLES.get(source, source)}{label}\n"
+                               "max intensity over depth")
+        depth = recons[source].depth_map(threshold=0.1)
         im = axes[1, col].imshow(depth, origin="lower", extent=ext, cmap="viridis",
                                  vmin=depths.min(), vmax=depths.max())
-        axes[1, col].set_title("depth of maximum (m)")
+        axes[1, col].set_title("depth of the maximum (m)")
         fig.colorbar(im, ax=axes[1, col], fraction=0.046)
         if source == "true":
-            axes[2, col].axis("off")
+            _truth_panel(fig, axes[2, col], truth_depth, depths, ext)
             continue
-        err = np.abs(image - reference)
-        im = axes[2, col].imshow(err, origin="lower", extent=ext, cmap="viridis", vmin=0,
-                                 vmax=max(float(err.max()), 1e-6))
-        axes[2, col].set_title("|error| vs true field")
+        im = axes[2, col].imshow(errors[source], origin="lower", extent=ext, cmap="viridis",
+                                 vmin=0, vmax=err_max)
+        axes[2, col].set_title("|image - true field's image|")
         fig.colorbar(im, ax=axes[2, col], fraction=0.046)
     for ax in axes.ravel():
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
+    fig.suptitle(f"reconstructions from {title}")
     fig.tight_layout()
     return fig
+
+
+def _truth_panel(fig: Any, ax: Any, truth_depth: np.ndarray | None, depths: np.ndarray,
+                 extent: list[float]) -> None:
+    """The scene's ground-truth depth as seen from the wall (when the capture carries one).
+
+    The maps cover the wall, which is also the extent of the voxel planes.
+    """
+    if truth_depth is None:
+        ax.axis("off")
+        return
+    depth = np.asarray(truth_depth, dtype=float).T          # (X, Y) -> (Y, X) image
+    depth = np.where(depth > 0, depth, np.nan)
+    im = ax.imshow(depth, origin="lower", extent=extent, cmap="viridis",
+                   vmin=depths.min(), vmax=depths.max())
+    ax.set_title("ground truth: depth seen\nfrom the wall (m)")
+    fig.colorbar(im, ax=ax, fraction=0.046)
+
+
+def _shared_scale(maps: Any) -> float:
+    """One colour scale for several error maps: the largest 99th percentile (outliers clip)."""
+    values = [float(np.percentile(m, 99)) for m in maps if np.size(m)]
+    return max(values + [1e-12])
 
 
 def _loss_figure(histories: dict[str, list[dict[str, float]]]) -> Any:

@@ -89,8 +89,13 @@ def ensure_resolvers() -> None:
         OmegaConf.register_new_resolver("nlosfw_run_id", lambda: run_id)
 
 
-def preflight(overrides: Sequence[str], host: PluginHost) -> None:
-    """Compose and validate the config for every swept value; raise a one-line NlosfwError."""
+def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "config",
+              multirun: bool = False) -> None:
+    """Compose and validate the config for every swept value; raise a one-line NlosfwError.
+
+    Swept values come from the command line and, for multirun, from the
+    ``hydra.sweeper.params`` a preset or primary config declares.
+    """
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -104,15 +109,9 @@ def preflight(overrides: Sequence[str], host: PluginHost) -> None:
     fixed, sweeps = [], []
     for ov, text in zip(parsed, overrides, strict=True):
         if ov.is_sweep_override():
-            values = [str(v) for v in ov.sweep_string_iterator()]
-            sweeps.append((ov.get_key_element(), values))
+            sweeps.append((ov.get_key_element(), _values(ov)))
         else:
             fixed.append(text)
-    candidates = [fixed + [f"{key}={values[0]}" for key, values in sweeps]]
-    for i, (key, values) in enumerate(sweeps):
-        for value in values[1:]:
-            others = [f"{k}={v[0]}" for j, (k, v) in enumerate(sweeps) if j != i]
-            candidates.append(fixed + others + [f"{key}={value}"])
     GlobalHydra.instance().clear()
     try:
         with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3",
@@ -120,12 +119,31 @@ def preflight(overrides: Sequence[str], host: PluginHost) -> None:
             loader = GlobalHydra.instance().config_loader()
             for key, values in [(o.key_or_group, _values(o)) for o in parsed]:
                 _check_group_choice(key, values, loader)
-            for combo in candidates[:_MAX_PREFLIGHT_COMPOSITIONS]:
+
+            def composed(combo: list[str], with_hydra: bool = False) -> Any:
                 try:
-                    cfg = compose(config_name="config", overrides=combo)
+                    return compose(config_name=config_name, overrides=combo,
+                                   return_hydra_config=with_hydra)
                 except (HydraException, OmegaConfBaseException) as err:
                     raise ConfigError("", _one_line(err)) from None
-                validate_config(cfg, host)
+
+            if multirun:
+                given = {o.get_key_element() for o in parsed}
+                first = fixed + [f"{key}={values[0]}" for key, values in sweeps]
+                declared = composed(first, with_hydra=True).hydra.sweeper.params or {}
+                for key, value in declared.items():
+                    if key in given:
+                        continue
+                    (ov,) = OverridesParser.create().parse_overrides([f"{key}={value}"])
+                    _check_group_choice(ov.key_or_group, _values(ov), loader)
+                    sweeps.append((key, _values(ov)))
+            candidates = [fixed + [f"{key}={values[0]}" for key, values in sweeps]]
+            for i, (key, values) in enumerate(sweeps):
+                for value in values[1:]:
+                    others = [f"{k}={v[0]}" for j, (k, v) in enumerate(sweeps) if j != i]
+                    candidates.append(fixed + others + [f"{key}={value}"])
+            for combo in candidates[:_MAX_PREFLIGHT_COMPOSITIONS]:
+                validate_config(composed(combo), host)
     finally:
         GlobalHydra.instance().clear()
 
@@ -185,7 +203,7 @@ def main(argv: Sequence[str]) -> int:
     register_plugin_configs(host)
     ensure_resolvers()
     if not (args.help or args.hydra_help or args.shell_completion):
-        preflight(args.overrides, host)
+        preflight(args.overrides, host, args.config_name or "config", bool(args.multirun))
     decorated = hydra.main(config_path=str(config_dir()), config_name="config",
                            version_base="1.3")(_task)
     saved = sys.argv

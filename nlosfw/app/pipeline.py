@@ -72,6 +72,11 @@ class Pipeline:
         self.clean: tuple[Capture, str] | None = None
         """The noise-free capture and its cache key, when the scene adds noise."""
         self.clean_field: PhasorField | None = None
+        self.truth_depth: np.ndarray | None = None
+        """Ground-truth depth (X, Y) from the capture's scene_info, when it has one."""
+        self.chosen_frequencies: dict[str, int] = {}
+        """Frequency indices shown one at a time (figures, single-frequency images)."""
+        self.single_frequency_recons: dict[int, dict[str, Reconstruction]] = {}
 
     # ------------------------------------------------------------------ driver
     def run(self) -> float | None:
@@ -150,6 +155,8 @@ class Pipeline:
             info.update(source="simulated", simulator=name, cache_hit=hit)
         self.ctx.write("capture", lambda p: write_capture(
             p, capture, compression=self.settings.output.compression))
+        truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
+        self.truth_depth = None if truth is None else np.asarray(truth, dtype=float)
         info.update(shape=list(capture.H.shape), kind=capture.kind.value,
                     delta_t=capture.delta_t, t_start=capture.t_start,
                     total=float(np.sum(capture.H, dtype=np.float64)))
@@ -188,6 +195,8 @@ class Pipeline:
         s = self.settings.split
         split = split_field(field, spatial_step=s.spatial_step, spectral=s.spectral,
                             spectral_fraction=s.spectral_fraction)
+        self.chosen_frequencies = chosen_frequencies(
+            split, self.settings.reconstruction.single_frequency_images)
         name, options = self._plugin_options("model")
         fitted: dict[str, Any] = {"split": split, "models": {}, "reports": {}}
         self.metrics["field"] = {}
@@ -247,16 +256,21 @@ class Pipeline:
             self.ctx.write(f"reconstructions/{source}.hdf5",
                            lambda p, r=recons[source]: write_reconstruction(p, r),
                            kind="reconstruction")
-        reference = recons["true"].max_intensity_image()
-        per_source = {}
-        for source, recon in recons.items():
-            per_source[source] = {**image_metrics(reference, recon.max_intensity_image()),
-                                  "seconds": timings[source]}
         self.metrics["reconstruction"] = {
             "imager": name, "reference": "true",
             "depths": [float(d) for d in voxels[:, 0, 0, 2]],
-            "sources": per_source,
+            "sources": _scores(recons, timings),
+            "single_frequency": {},
         }
+        # as in the thesis figures: images from one frequency at a time
+        for label, index in self.chosen_frequencies.items():
+            singles = {source: imager.reconstruct(field.select(frequency_index=[index]),
+                                                  voxels)
+                       for source, field in fields.items()}
+            frequency = float(fields["true"].frequencies[index])
+            self.single_frequency_recons[index] = singles
+            self.metrics["reconstruction"]["single_frequency"][str(index)] = {
+                "frequency": frequency, "split": label, "sources": _scores(singles)}
         return recons
 
     def report(self, fields: dict[str, PhasorField], recons: dict[str, Reconstruction],
@@ -272,7 +286,9 @@ class Pipeline:
         if self.settings.figures.enabled:
             from nlosfw.app.figures import write_figures
 
-            write_figures(self.ctx, fields, recons, fitted, self.settings.figures.dpi)
+            write_figures(self.ctx, fields, recons, fitted, self.settings.figures.dpi,
+                          truth_depth=self.truth_depth, frequencies=self.chosen_frequencies,
+                          single_frequency=self.single_frequency_recons)
 
     # ------------------------------------------------------------------ helpers
     def _simulate(self, simulator: Any, scene: Any, key: str) -> tuple[Capture, bool]:
@@ -382,6 +398,29 @@ class Pipeline:
         for p in leftovers:
             shutil.move(str(p), aside / p.name)
         log.warning("moved %d files of an earlier unfinished run to %s", len(leftovers), aside)
+
+
+def chosen_frequencies(split: Any, count: int) -> dict[str, int]:
+    """Up to ``count`` frequency indices to show alone: a training one near the top of the
+    band, then a held-out one (if any), by label."""
+    train = np.asarray(split.train_frequencies)
+    held = np.asarray(split.heldout_frequencies)
+    chosen = {"training": int(train[int(0.75 * (train.size - 1))])}
+    if held.size:
+        chosen["held-out"] = int(held[held.size // 2])
+    return dict(list(chosen.items())[:count])
+
+
+def _scores(recons: dict[str, Reconstruction],
+            timings: dict[str, float] | None = None) -> dict[str, dict[str, float]]:
+    """Image metrics of every reconstruction's max-intensity image against the true field's."""
+    reference = recons["true"].max_intensity_image()
+    scores = {}
+    for source, recon in recons.items():
+        scores[source] = image_metrics(reference, recon.max_intensity_image())
+        if timings is not None:
+            scores[source]["seconds"] = timings[source]
+    return scores
 
 
 def _denoising(clean: PhasorField, noisy: PhasorField, predicted: PhasorField) -> dict:
