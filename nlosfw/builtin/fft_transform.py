@@ -21,13 +21,13 @@ import numpy as np
 from nlosfw.builtin.frequencies import (
     check_frequency_values,
     default_band,
-    grid_spacing,
     validate_frequencies,
+    wall_spacing,
 )
 from nlosfw.builtin.transform_common import check_capture, transform_capture
 from nlosfw.capture import Capture
 from nlosfw.config import require
-from nlosfw.errors import ConfigError, DataError
+from nlosfw.errors import ConfigError
 from nlosfw.interfaces import PhasorTransform, PhasorTransformConfig
 from nlosfw.phasor_field import PhasorField
 
@@ -86,18 +86,10 @@ class FFTTransform(PhasorTransform):
     def frequencies_for(self, capture: Capture) -> np.ndarray:
         """The frequencies this transform uses for ``capture`` (validated)."""
         cfg = self.config
-        spacing = cfg.grid_spacing
-        if spacing is None:
-            try:
-                spacing = grid_spacing(capture.sensor_grid_xyz)
-            except DataError:
-                if not cfg.frequencies:
-                    raise
-                spacing = None
+        spacing = wall_spacing(cfg.grid_spacing, capture, required=not cfg.frequencies)
         if cfg.frequencies:
             freqs = np.asarray(cfg.frequencies, dtype=float)
             return validate_frequencies(freqs, capture.delta_t, spacing, "transform.frequencies")
-        assert spacing is not None
         try:
             lo, hi = default_band(spacing, capture.delta_t, cfg.f_min, cfg.f_max)
         except ConfigError as err:

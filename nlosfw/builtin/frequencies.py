@@ -12,6 +12,7 @@ Frequencies are temporal frequencies in cycles per metre of optical path
 from __future__ import annotations
 
 import logging
+from typing import Any
 
 import numpy as np
 
@@ -22,6 +23,23 @@ log = logging.getLogger(__name__)
 #: Default ratio f_max / f_min of the band: wavelengths from 2Δ to 8Δ, centred
 #: (geometrically) on Liu's usual 4Δ virtual wavelength.
 DEFAULT_BAND_RATIO = 4.0
+
+
+def wall_spacing(configured: float | None, capture: Any, required: bool) -> float | None:
+    """Δ for a transform: ``configured`` if set, else the capture's sensor grid spacing.
+
+    When the capture has no spacing (a single wall point), returns None if the
+    transform does not need one (explicit frequencies or wavelength), and
+    re-raises the DataError otherwise.
+    """
+    if configured is not None:
+        return configured
+    try:
+        return grid_spacing(capture.sensor_grid_xyz)
+    except DataError:
+        if required:
+            raise
+        return None
 
 
 def grid_spacing(points: np.ndarray) -> float:

@@ -32,11 +32,11 @@ from typing import Any, Literal
 import numpy as np
 import scipy.fft
 
-from nlosfw.builtin.frequencies import grid_spacing, validate_frequencies
+from nlosfw.builtin.frequencies import validate_frequencies, wall_spacing
 from nlosfw.builtin.transform_common import check_capture, transform_capture
 from nlosfw.capture import Capture
 from nlosfw.config import require
-from nlosfw.errors import ConfigError, DataError
+from nlosfw.errors import ConfigError
 from nlosfw.interfaces import PhasorTransform, PhasorTransformConfig
 from nlosfw.phasor_field import PhasorField
 
@@ -117,16 +117,9 @@ class WaveletTransform(PhasorTransform):
     def wavelet_for(self, capture: Capture) -> tuple[GaussianWavelet, float | None]:
         """(the wavelet, the wall spacing used or None) for ``capture``."""
         cfg = self.config
-        spacing = cfg.grid_spacing
-        if spacing is None:
-            try:
-                spacing = grid_spacing(capture.sensor_grid_xyz)
-            except DataError:
-                if cfg.wavelength is None:
-                    raise
+        spacing = wall_spacing(cfg.grid_spacing, capture, required=cfg.wavelength is None)
         wavelength = cfg.wavelength
         if wavelength is None:
-            assert spacing is not None
             wavelength = cfg.wavelength_factor * spacing
         return GaussianWavelet(wavelength, cfg.n_cycles * wavelength / 6.0), spacing
 
