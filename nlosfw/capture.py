@@ -258,9 +258,11 @@ class Capture:
         if self.H_format in (HFormat.T_Lx_Ly_Sx_Sy, HFormat.T_Li_Si,
                              HFormat.F_Lx_Ly_Sx_Sy, HFormat.F_Li_Si):
             return CaptureKind.EXHAUSTIVE
-        if self.laser_grid_xyz.size == 3 and self.sensor_grid_xyz.size != 3:
-            return CaptureKind.SINGLE_SPOT
-        return CaptureKind.CONFOCAL
+        if self.laser_grid_xyz.shape == self.sensor_grid_xyz.shape and np.allclose(
+            self.laser_grid_xyz, self.sensor_grid_xyz, atol=1e-6
+        ):
+            return CaptureKind.CONFOCAL
+        return CaptureKind.SINGLE_SPOT  # validation admits only one laser point otherwise
 
     @property
     def is_confocal(self) -> bool:

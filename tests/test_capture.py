@@ -31,6 +31,16 @@ def test_kinds_and_properties():
     assert exhaustive.kind is CaptureKind.EXHAUSTIVE
 
 
+def test_one_sensor_is_confocal_only_where_the_laser_is():
+    one = np.array([[[0.3, 0.0, 0.0]]])
+    apart = make(H=np.zeros((10, 1, 1), np.float32), sensor_grid_xyz=one,
+                 laser_grid_xyz=np.zeros((1, 1, 3)))
+    assert apart.kind is CaptureKind.SINGLE_SPOT
+    together = make(H=np.zeros((10, 1, 1), np.float32), sensor_grid_xyz=one,
+                    laser_grid_xyz=one.copy())
+    assert together.kind is CaptureKind.CONFOCAL
+
+
 def test_device_path_by_hand():
     laser_xyz, sensor_xyz = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
     cap = make(t_accounts_first_and_last_bounces=True, laser_xyz=laser_xyz, sensor_xyz=sensor_xyz,
