@@ -32,7 +32,13 @@ from typing import Any
 
 import numpy as np
 
+from nlosfw.geometry import validate_scene
 from nlosfw.scenes import builtin_scene
+
+
+def rendered(simulator, scene):
+    """The noise-free transient of a scene (validated first, as simulate() does)."""
+    return simulator.render(validate_scene(scene))
 
 TARGET_ERROR = 0.03
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_simulators.json"
@@ -128,7 +134,7 @@ def run_embree(scene: Any, samples: int, seed: int, threads: int) -> dict[str, A
 
     sim = EmbreeSimulator({"samples": samples, "seed": seed, "threads": threads})
     start = time.perf_counter()
-    capture = sim.render(scene)
+    capture = rendered(sim, scene)
     seconds = time.perf_counter() - start
     stats = capture.scene_info["render"]
     return {"H": capture.H, "seconds": seconds, "rays": stats["rays"],
@@ -140,7 +146,7 @@ def run_mitsuba(scene: Any, spp: int, seed: int, threads: int) -> dict[str, Any]
 
     sim = MitsubaSimulator({"spp": spp, "seed": seed, "threads": threads})
     start = time.perf_counter()
-    capture = sim.render(scene)
+    capture = rendered(sim, scene)
     seconds = time.perf_counter() - start
     paths = capture.scene_info["render"]["paths"]
     return {"H": capture.H, "seconds": seconds, "paths": paths,
@@ -186,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     from nlosfw.builtin.analytic import AnalyticSimulator
 
     start = time.perf_counter()
-    analytic_H = AnalyticSimulator().render(scene).H
+    analytic_H = rendered(AnalyticSimulator(), scene).H
     analytic = {"seconds": time.perf_counter() - start, "error": rel_l2(analytic_H, ref_H),
                 "energy_ratio": float(analytic_H.sum(dtype=np.float64) / ref_H.sum())}
 

@@ -54,6 +54,13 @@ class TriangleMesh:
         t = self.triangles()
         return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
 
+    def item_mesh(self, index: int) -> TriangleMesh:
+        """The triangles of scene item ``index`` alone (vertices compacted)."""
+        faces = self.faces[self.item == index]
+        used, inverse = np.unique(faces, return_inverse=True)
+        return TriangleMesh(self.vertices[used], inverse.reshape(faces.shape),
+                            self.albedo[self.item == index], self.item[self.item == index])
+
     @staticmethod
     def concatenate(meshes: list[TriangleMesh]) -> TriangleMesh:
         if not meshes:
@@ -251,15 +258,6 @@ def ground_truth_maps(mesh: TriangleMesh, grid_xyz: np.ndarray,
         albedo[ray_i[closer]] = mesh.albedo[face[closer]]
     depth[~np.isfinite(depth)] = -1.0
     return depth.reshape(shape), albedo.reshape(shape)
-
-
-def representative_points(scene: Scene, mesh: TriangleMesh, n: int = 4096,
-                          seed: int = 0) -> np.ndarray:
-    """Vertices, surface samples and point scatterers: a cloud spanning the hidden geometry."""
-    pts = [mesh.vertices, scene_points(scene).positions]
-    if mesh.n_faces:
-        pts.append(sample_surface(mesh, n, np.random.default_rng(seed))[0])
-    return np.concatenate(pts)
 
 
 @dataclass(frozen=True, eq=False)

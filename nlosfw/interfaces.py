@@ -23,6 +23,7 @@ from nlosfw.capture import Capture, CaptureGeometry
 from nlosfw.config import config_from_mapping, config_to_dict, require
 from nlosfw.enums import GridFormat, HFormat
 from nlosfw.errors import DataError
+from nlosfw.geometry import SceneGeometry
 from nlosfw.phasor_field import PhasorField
 from nlosfw.reconstruction import Reconstruction
 from nlosfw.scene import Scene
@@ -54,15 +55,21 @@ class SimulatorConfig:
 class Simulator(_Configurable, ABC):
     """Renders a :class:`~nlosfw.scene.Scene` into a transient :class:`Capture`.
 
-    Subclasses implement :meth:`render` (noise-free transport). :meth:`simulate`
-    adds what every simulator shares: noise, ground truth and scene metadata.
+    Subclasses implement :meth:`render` (noise-free transport of a validated
+    scene) and may refuse scenes in :meth:`check_scene`. :meth:`simulate` adds
+    what every simulator shares: validation, ground truth, metadata, noise.
     """
 
     config_class: ClassVar[type] = SimulatorConfig
 
     @abstractmethod
-    def render(self, scene: Scene) -> Capture:
-        """Noise-free transient of ``scene``, in the layout of :func:`scene_capture`."""
+    def render(self, geometry: SceneGeometry) -> Capture:
+        """Noise-free transient of ``geometry.scene`` in the layout of :func:`scene_capture`.
+
+        ``geometry`` is the scene validated by :func:`nlosfw.geometry.validate_scene`
+        with its triangles and point scatterers built once; use them rather than
+        rebuilding meshes. :meth:`check_scene` has already accepted the scene.
+        """
 
     def check_scene(self, scene: Scene) -> None:
         """Raise a one-line ConfigError if this simulator cannot render ``scene``.
@@ -73,24 +80,28 @@ class Simulator(_Configurable, ABC):
         """
 
     def simulate(self, scene: Scene, base_dir: Path | None = None) -> Capture:
-        """Render ``scene``, then add noise, ground truth and metadata to ``scene_info``."""
-        from nlosfw.config import config_to_dict as _to_dict
+        """The capture of ``scene``: rendered, with ground truth and metadata, then noise."""
+        return self.add_noise(self.simulate_clean(scene, base_dir), scene)
+
+    def simulate_clean(self, scene: Scene, base_dir: Path | None = None) -> Capture:
+        """The noise-free capture of ``scene`` with ground truth and metadata.
+
+        Relative mesh paths resolve against ``base_dir`` (default: the working
+        directory). ``scene_info['scene']`` records the scene without its noise.
+        """
+        import dataclasses
+
         from nlosfw.geometry import ground_truth_maps, validate_scene
-        from nlosfw.noise import apply_noise
+        from nlosfw.scene import NoiseConfig
 
         geometry = validate_scene(scene, base_dir)  # one-line ConfigError for a bad scene
         scene = geometry.scene
         self.check_scene(scene)
-        capture = self.render(scene)
-        expected = scene_capture(scene, np.zeros((1,) + _sensor_axes(scene), np.float32))
-        if capture.H.shape[1:] != expected.H.shape[1:] or capture.n_bins != scene.time.bins:
+        capture = self.render(geometry)
+        expected = (scene.time.bins,) + _sensor_axes(scene)
+        if capture.H.shape != expected:
             raise DataError(f"{type(self).__name__}.render returned H of shape {capture.H.shape}, "
-                            f"expected {(scene.time.bins,) + expected.H.shape[1:]}")
-        H = capture.H
-        rng = np.random.default_rng([self.config.seed, 0x6E6F697365])  # "noise" stream
-        noise_info = {"model": "none"}
-        if scene.noise.model != "none" or scene.noise.jitter_ps > 0:
-            H, noise_info = apply_noise(H, capture.delta_t, scene.noise, rng)
+                            f"expected {expected}")
         res = scene.ground_truth_resolution or scene.wall.resolution
         gt_wall = type(scene.wall)(size=scene.wall.size, resolution=tuple(res),
                                    center=scene.wall.center)
@@ -98,15 +109,31 @@ class Simulator(_Configurable, ABC):
         info = dict(capture.scene_info)
         info.update({
             "original_format": "nlosfw",
-            "scene": _to_dict(scene),
-            "simulator": {"class": type(self).__name__, "config": _to_dict(self.config)},
-            "noise": noise_info,
+            "scene": config_to_dict(dataclasses.replace(scene, noise=NoiseConfig())),
+            "simulator": {"class": type(self).__name__, "config": config_to_dict(self.config)},
+            "noise": {"model": "none"},
             "ground_truth": {
                 "format": "X_Y",
                 "depth": np.round(depth, 6).tolist(),
                 "albedo": np.round(albedo, 6).tolist(),
             },
         })
+        return capture.replace(H=np.asarray(capture.H, dtype=np.float32), scene_info=info)
+
+    def add_noise(self, capture: Capture, scene: Scene) -> Capture:
+        """``capture`` (from :meth:`simulate_clean`) with ``scene``'s noise, drawn from the seed.
+
+        Returns ``capture`` itself when the scene has no noise.
+        """
+        from nlosfw.noise import apply_noise
+
+        if scene.noise.model == "none" and scene.noise.jitter_ps <= 0:
+            return capture
+        rng = np.random.default_rng([self.config.seed, 0x6E6F697365])  # "noise" stream
+        H, noise_info = apply_noise(capture.H, capture.delta_t, scene.noise, rng)
+        info = {**capture.scene_info, "noise": noise_info,
+                "scene": {**capture.scene_info.get("scene", {}),
+                          "noise": config_to_dict(scene.noise)}}
         return capture.replace(H=np.asarray(H, dtype=np.float32), scene_info=info)
 
 

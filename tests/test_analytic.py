@@ -8,9 +8,15 @@ from scipy import integrate
 
 from nlosfw.builtin.analytic import AnalyticSimulator
 from nlosfw.errors import ConfigError
+from nlosfw.geometry import validate_scene
 from nlosfw.physics import three_bounce
 from nlosfw.scene import scene_from_config
 from nlosfw.testing.fixtures import tiny_scene_config
+
+
+def rendered(simulator, scene):
+    """The noise-free transient of a scene (validated first, as simulate() does)."""
+    return simulator.render(validate_scene(scene))
 
 
 def scene_with(geometry, **capture):
@@ -26,7 +32,7 @@ def test_point_scatterer_closed_form(capture):
     p = np.array([0.15, -0.1, 0.55])
     area = 0.003
     scene = scene_with([{"type": "point", "position": p.tolist(), "albedo": area}], **capture)
-    H = AnalyticSimulator().render(scene).H
+    H = rendered(AnalyticSimulator(), scene).H
     sensors = scene.wall.grid_xyz()
     dt = scene.time.bin_width
     laser_dev = np.asarray(scene.capture.laser_position)
@@ -69,7 +75,7 @@ def test_rectangle_energy_matches_adaptive_quadrature():
     """Total energy at one sensor against scipy's dblquad of the same integrand."""
     centre, w, h = np.array([0.1, -0.05, 0.6]), 0.3, 0.2
     scene = scene_with([{"type": "rectangle", "position": centre.tolist(), "size": [w, h]}])
-    H = AnalyticSimulator({"patch_size": 0.005}).render(scene).H
+    H = rendered(AnalyticSimulator({"patch_size": 0.005}), scene).H
     sensor = scene.wall.grid_xyz()[1, 3]
 
     def f(y, x):
@@ -89,8 +95,8 @@ def test_quadrature_converges_as_patches_shrink():
                          "params": {"resolution": 9,
                                     "bumps": [{"x": 0, "y": 0, "radius": 0.08,
                                                "height": -0.05}]}}])
-    coarse = AnalyticSimulator({"patch_size": 0.02}).render(scene).H.astype(float)
-    fine = AnalyticSimulator({"patch_size": 0.004}).render(scene).H.astype(float)
+    coarse = rendered(AnalyticSimulator({"patch_size": 0.02}), scene).H.astype(float)
+    fine = rendered(AnalyticSimulator({"patch_size": 0.004}), scene).H.astype(float)
     assert coarse.sum() / fine.sum() == pytest.approx(1.0, abs=2e-3)
     smooth = np.cumsum(coarse, axis=0) - np.cumsum(fine, axis=0)   # compare arrival curves
     assert np.abs(smooth).max() < 0.01 * fine.sum(axis=0).max()
@@ -99,7 +105,10 @@ def test_quadrature_converges_as_patches_shrink():
 def test_items_needing_visibility_are_refused():
     for item in ({"type": "box", "size": [0.1, 0.1, 0.1]}, {"type": "mesh", "path": "x.obj"}):
         with pytest.raises(ConfigError, match=r"scene\.geometry\[0\]\.type: .*embree"):
-            AnalyticSimulator().render(scene_with([{"position": [0, 0, 0.5], **item}]))
+            AnalyticSimulator().check_scene(scene_with([{"position": [0, 0, 0.5], **item}]))
+    box = scene_with([{"position": [0, 0, 0.5], "type": "box", "size": [0.1, 0.1, 0.1]}])
+    with pytest.raises(ConfigError, match=r"scene\.geometry\[0\]\.type: .*embree"):
+        AnalyticSimulator().simulate(box)
 
 
 def test_shadowing_scenes_are_flagged(caplog):
@@ -109,10 +118,12 @@ def test_shadowing_scenes_are_flagged(caplog):
 
     small = {"wall": {"resolution": [4, 4]}, "time": {"bins": 256, "bin_width": 0.024}}
     with caplog.at_level(logging.WARNING, logger="nlosfw.builtin.analytic"):
-        AnalyticSimulator({"patch_size": 0.05}).render(builtin_scene("thesis_two_planes", **small))
+        rendered(AnalyticSimulator({"patch_size": 0.05}),
+                 builtin_scene("thesis_two_planes", **small))
     assert "ignores shadowing" not in caplog.text
     with caplog.at_level(logging.WARNING, logger="nlosfw.builtin.analytic"):
-        AnalyticSimulator({"patch_size": 0.05}).render(builtin_scene("thesis_occluded", **small))
+        rendered(AnalyticSimulator({"patch_size": 0.05}),
+                 builtin_scene("thesis_occluded", **small))
     assert "ignores shadowing" in caplog.text
 
 

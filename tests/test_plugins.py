@@ -22,7 +22,7 @@ class DummyConfig(SimulatorConfig):
 class DummySimulator(Simulator):
     config_class = DummyConfig
 
-    def render(self, scene):  # pragma: no cover - never rendered here
+    def render(self, geometry):  # pragma: no cover - never rendered here
         raise NotImplementedError
 
 

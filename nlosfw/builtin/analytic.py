@@ -20,7 +20,7 @@ import numpy as np
 from nlosfw.capture import Capture
 from nlosfw.config import require
 from nlosfw.errors import ConfigError
-from nlosfw.geometry import TriangleMesh, blocked_fraction, item_mesh, scene_mesh, scene_points
+from nlosfw.geometry import SceneGeometry, TriangleMesh, blocked_fraction
 from nlosfw.interfaces import Simulator, SimulatorConfig, scene_capture
 from nlosfw.physics import bin_index, device_legs, three_bounce
 from nlosfw.scene import Scene
@@ -49,9 +49,10 @@ class AnalyticSimulator(Simulator):
 
     config_class = AnalyticConfig
 
-    def render(self, scene: Scene) -> Capture:
-        positions, normals, area_albedo = self.elements(scene)
-        shadowed = blocked_fraction(scene, scene_mesh(scene))
+    def render(self, geometry: SceneGeometry) -> Capture:
+        scene = geometry.scene
+        positions, normals, area_albedo = self.elements(geometry)
+        shadowed = blocked_fraction(scene, geometry.mesh)
         if shadowed > 0:
             log.warning("analytic: %.1f%% of sampled sight lines of scene %s cross another "
                         "surface, and the analytic simulator ignores shadowing: this capture "
@@ -99,17 +100,17 @@ class AnalyticSimulator(Simulator):
                                   f"{', '.join(SUPPORTED_TYPES)}; got {item.type!r} (use a "
                                   "ray-tracing simulator such as embree)")
 
-    def elements(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def elements(self, geometry: SceneGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Quadrature elements: positions (E, 3), normals (E, 3; NaN for points), rho*dA (E,)."""
-        self.check_scene(scene)
-        points = scene_points(scene)
+        scene = geometry.scene
+        points = geometry.points
         pos = [points.positions]
         nrm = [np.full_like(points.positions, np.nan)]
         area = [points.albedo]
         for i, item in enumerate(scene.geometry):
             if item.type == "point":
                 continue
-            mesh = item_mesh(item, i)  # validate_scene has checked it lies beyond the wall
+            mesh = geometry.mesh.item_mesh(i)
             if item.type == "patch":
                 normal = mesh.face_normals()[0]
                 pos.append(np.asarray(item.position, dtype=float)[None])

@@ -32,8 +32,7 @@ import numpy as np
 from nlosfw.capture import Capture
 from nlosfw.geometry import (
     PointScatterers,
-    scene_mesh,
-    scene_points,
+    SceneGeometry,
     sobol_engine,
     surface_points,
 )
@@ -63,11 +62,10 @@ class EmbreeSimulator(Simulator):
 
     config_class = EmbreeConfig
 
-    def render(self, scene: Scene) -> Capture:
+    def render(self, geometry: SceneGeometry) -> Capture:
         cfg = self.config
         start = time.perf_counter()
-        mesh = scene_mesh(scene)
-        points = scene_points(scene)
+        scene, mesh, points = geometry.scene, geometry.mesh, geometry.points
         tracer = OcclusionTracer(mesh)
         grid = scene.wall.grid_xyz()
         nx, ny = grid.shape[:2]

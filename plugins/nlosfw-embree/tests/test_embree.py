@@ -16,6 +16,13 @@ pytest.importorskip("embreex")
 
 from nlosfw_embree.simulator import EmbreeSimulator
 
+from nlosfw.geometry import validate_scene
+
+
+def rendered(simulator, scene):
+    """The noise-free transient of a scene (validated first, as simulate() does)."""
+    return simulator.render(validate_scene(scene))
+
 
 def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(np.asarray(a, float) - b) / np.linalg.norm(b))
@@ -40,8 +47,8 @@ TILTED = [{"type": "rectangle", "position": [0.1, -0.05, 0.6], "size": [0.3, 0.2
 def test_agrees_with_analytic_in_absolute_value(capture):
     """Occlusion-free scene: same radiometric convention, same bins, same grid order."""
     scene = scene_with(TILTED, **capture)
-    reference = AnalyticSimulator({"patch_size": 0.003}).render(scene).H.astype(float)
-    H = EmbreeSimulator({"samples": 1 << 16}).render(scene).H
+    reference = rendered(AnalyticSimulator({"patch_size": 0.003}), scene).H.astype(float)
+    H = rendered(EmbreeSimulator({"samples": 1 << 16}), scene).H
     assert H.sum() / reference.sum() == pytest.approx(1.0, abs=0.003)
     per_sensor = H.sum(axis=0) / reference.sum(axis=0)
     assert np.abs(per_sensor - 1).max() < 0.01
@@ -85,8 +92,8 @@ def test_shadowing_matches_independent_visibility():
             ref[s] += np.bincount(idx[:, s], weight[:, s], minlength=scene.time.bins + 1)
     ref = ref[:, :-1].reshape(scene.wall.resolution + (scene.time.bins,))
     ref = np.moveaxis(ref, -1, 0)
-    capture = EmbreeSimulator({"samples": 1 << 17}).render(scene)
-    unshadowed = AnalyticSimulator({"patch_size": 0.004}).render(scene).H.sum()
+    capture = rendered(EmbreeSimulator({"samples": 1 << 17}), scene)
+    unshadowed = rendered(AnalyticSimulator({"patch_size": 0.004}), scene).H.sum()
     assert ref.sum() < 0.97 * unshadowed                       # the shadow matters here
     assert capture.H.sum() / ref.sum() == pytest.approx(1.0, abs=0.005)
     assert rel_l2(capture.H, ref) < 0.03
@@ -98,12 +105,12 @@ def test_point_scatterers_are_exact_and_can_be_hidden():
     hidden = {"type": "point", "position": [-0.05, 0.0, 1.2], "albedo": 0.01}
     plate = {"type": "rectangle", "position": [-0.05, 0.0, 0.3], "size": [1.2, 1.2]}
     scene = scene_with([visible], bins=400)
-    exact = AnalyticSimulator().render(scene).H
-    np.testing.assert_allclose(EmbreeSimulator().render(scene).H, exact, rtol=1e-5,
+    exact = rendered(AnalyticSimulator(), scene).H
+    np.testing.assert_allclose(rendered(EmbreeSimulator(), scene).H, exact, rtol=1e-5,
                                atol=1e-6 * exact.max())
-    both = EmbreeSimulator({"samples": 4096}).render(
-        scene_with([hidden, plate], bins=400)).H
-    plate_only = EmbreeSimulator({"samples": 4096}).render(scene_with([plate], bins=400)).H
+    both = rendered(EmbreeSimulator({"samples": 4096}),
+                    scene_with([hidden, plate], bins=400)).H
+    plate_only = rendered(EmbreeSimulator({"samples": 4096}), scene_with([plate], bins=400)).H
     np.testing.assert_array_equal(both, plate_only)
 
 
@@ -111,8 +118,8 @@ def test_closed_box_renders_as_its_front_face():
     """With the laser spot in front of it, only a box's wall-facing face is lit."""
     box = {"type": "box", "position": [0.05, 0.0, 0.701], "size": [0.3, 0.3, 0.002]}
     face = {"type": "rectangle", "position": [0.05, 0.0, 0.7], "size": [0.3, 0.3]}
-    H = EmbreeSimulator({"samples": 1 << 16}).render(scene_with([box])).H
-    reference = AnalyticSimulator({"patch_size": 0.003}).render(scene_with([face])).H
+    H = rendered(EmbreeSimulator({"samples": 1 << 16}), scene_with([box])).H
+    reference = rendered(AnalyticSimulator({"patch_size": 0.003}), scene_with([face])).H
     assert H.sum() / reference.sum() == pytest.approx(1.0, abs=0.01)
     assert rel_l2(H, reference) < 0.04
 
@@ -127,7 +134,7 @@ def test_mesh_file_renders_like_the_same_rectangle(tmp_path):
     mesh = scene_with([{"type": "mesh", "path": str(tmp_path / "plate.obj"), **common}])
     rect = scene_with([{"type": "rectangle", "size": [w, h], **common}])
     H = EmbreeSimulator({"samples": 1 << 15}).simulate(mesh).H
-    reference = AnalyticSimulator({"patch_size": 0.003}).render(rect).H
+    reference = rendered(AnalyticSimulator({"patch_size": 0.003}), rect).H
     assert H.sum() / reference.sum() == pytest.approx(1.0, abs=0.005)
     (tmp_path / "empty.obj").write_text("")
     for bad in ("missing.obj", "empty.obj"):
@@ -139,20 +146,20 @@ def test_mesh_file_renders_like_the_same_rectangle(tmp_path):
 def test_deterministic_independent_of_threads_and_seeded():
     scene = builtin_scene("thesis_occluded", wall={"resolution": [8, 8]},
                           time={"bins": 256, "bin_width": 0.024})
-    one = EmbreeSimulator({"samples": 5000, "threads": 1, "batch": 512}).render(scene).H
-    two = EmbreeSimulator({"samples": 5000, "threads": 2, "batch": 512}).render(scene).H
+    one = rendered(EmbreeSimulator({"samples": 5000, "threads": 1, "batch": 512}), scene).H
+    two = rendered(EmbreeSimulator({"samples": 5000, "threads": 2, "batch": 512}), scene).H
     np.testing.assert_array_equal(one, two)
-    other = EmbreeSimulator({"samples": 5000, "seed": 1, "batch": 512}).render(scene).H
+    other = rendered(EmbreeSimulator({"samples": 5000, "seed": 1, "batch": 512}), scene).H
     assert not np.array_equal(one, other)
     assert other.sum() / one.sum() == pytest.approx(1.0, abs=0.02)
 
 
 def test_sobol_sampling_is_unbiased_and_beats_independent_sampling():
     scene = scene_with(TILTED)
-    reference = AnalyticSimulator({"patch_size": 0.003}).render(scene).H
+    reference = rendered(AnalyticSimulator({"patch_size": 0.003}), scene).H
     errors = {}
     for sampler in ("sobol", "independent"):
-        runs = [EmbreeSimulator({"samples": 4096, "sampler": sampler, "seed": s}).render(scene).H
+        runs = [rendered(EmbreeSimulator({"samples": 4096, "sampler": sampler, "seed": s}), scene).H
                 for s in range(4)]
         mean = np.mean(runs, axis=0)
         assert mean.sum() / reference.sum() == pytest.approx(1.0, abs=0.01)
@@ -162,12 +169,12 @@ def test_sobol_sampling_is_unbiased_and_beats_independent_sampling():
 
 def test_ray_statistics_report_occlusion():
     small = {"wall": {"resolution": [8, 8]}, "time": {"bins": 256, "bin_width": 0.024}}
-    free = EmbreeSimulator({"samples": 2000}).render(builtin_scene("thesis_two_planes", **small))
+    free = rendered(EmbreeSimulator({"samples": 2000}), builtin_scene("thesis_two_planes", **small))
     stats = free.scene_info["render"]
     assert stats["unobstructed_fraction"] == 1.0          # the scene is occlusion-free
     assert stats["rays"] == 2000 * 64 + 2000              # sensor legs + laser legs
-    shadowed = EmbreeSimulator({"samples": 2000}).render(builtin_scene("thesis_occluded",
-                                                                       **small))
+    shadowed = rendered(EmbreeSimulator({"samples": 2000}),
+                        builtin_scene("thesis_occluded", **small))
     assert shadowed.scene_info["render"]["unobstructed_fraction"] < 0.98
 
 
@@ -179,8 +186,8 @@ def test_window_start_and_cut():
     late_config["geometry"] = TILTED
     late_config["time"]["start"] = 1.5
     late = scene_from_config(late_config)
-    a = EmbreeSimulator({"samples": 1 << 14}).render(full).H.astype(float)
-    b = EmbreeSimulator({"samples": 1 << 14}).render(late).H.astype(float)
+    a = rendered(EmbreeSimulator({"samples": 1 << 14}), full).H.astype(float)
+    b = rendered(EmbreeSimulator({"samples": 1 << 14}), late).H.astype(float)
     assert b.sum() / a[150:].sum() == pytest.approx(1.0, abs=1e-5)
     # float32 bin arithmetic may move a path lying within ~1e-4 bins of an edge
     moved = np.abs(b - a[150:]) > 1e-4 * a.max()

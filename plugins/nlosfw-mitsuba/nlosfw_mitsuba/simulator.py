@@ -35,8 +35,8 @@ from typing import Any
 import numpy as np
 
 from nlosfw.capture import Capture
-from nlosfw.errors import ConfigError, PluginError
-from nlosfw.geometry import TriangleMesh, item_mesh, sample_surface
+from nlosfw.errors import ConfigError, PluginError, one_line
+from nlosfw.geometry import SceneGeometry, TriangleMesh, sample_surface
 from nlosfw.interfaces import Simulator, scene_capture
 from nlosfw.scene import Scene
 from nlosfw_mitsuba.config import MitsubaConfig
@@ -63,7 +63,7 @@ def load_mitsuba(variant: str) -> Any:
         mi.set_variant(variant)
     except Exception as err:  # drjit raises several types when its LLVM backend fails
         raise PluginError(f"mitsuba simulator: variant {variant} is unavailable "
-                          f"({str(err).splitlines()[0] if str(err) else type(err).__name__}; "
+                          f"({one_line(err)}; "
                           f"LLVM: {llvm or 'unset'}); install LLVM >= 16 with `apt-get install "
                           "-y libllvm19` or set DRJIT_LIBLLVM_PATH") from None
     try:
@@ -87,16 +87,16 @@ class MitsubaSimulator(Simulator):
                     "the mitsuba simulator cannot render point scatterers (they have no "
                     "area); use a small patch, or the analytic or embree simulator"))
 
-    def render(self, scene: Scene) -> Capture:
+    def render(self, geometry: SceneGeometry) -> Capture:
         cfg = self.config
         start = time.perf_counter()
-        self.check_scene(scene)
+        scene = geometry.scene
         mi = load_mitsuba(cfg.variant)
         import drjit as dr
 
         if cfg.threads:
             dr.set_thread_count(cfg.threads)
-        meshes = [_oriented(item_mesh(item, i), item.type)
+        meshes = [_oriented(geometry.mesh.item_mesh(i), item.type)
                   for i, item in enumerate(scene.geometry)]
         mi_scene = _build_scene(mi, scene, meshes, cfg)
         _check_device_sight_lines(mi, mi_scene, scene)

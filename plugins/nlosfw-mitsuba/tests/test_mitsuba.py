@@ -12,12 +12,19 @@ from nlosfw_mitsuba.llvm import configure_llvm, find_libllvm, llvm_version
 
 from nlosfw.builtin.analytic import AnalyticSimulator
 from nlosfw.errors import ConfigError, PluginError
+from nlosfw.geometry import validate_scene
 from nlosfw.scene import scene_from_config
 from nlosfw.scenes import builtin_scene
 from nlosfw.testing.fixtures import tiny_scene_config
 
 TILTED = [{"type": "rectangle", "position": [0.1, -0.05, 0.6], "size": [0.3, 0.2],
            "rotation": [10.0, -20.0, 5.0], "albedo": 0.7}]
+
+
+def rendered(simulator, scene):
+    """The noise-free transient of a scene (validated first, as simulate() does)."""
+    return simulator.render(validate_scene(scene))
+
 
 
 def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
@@ -79,8 +86,8 @@ from nlosfw_mitsuba.simulator import MitsubaSimulator  # noqa: E402
 def test_agrees_with_analytic_in_absolute_value(capture):
     """Same radiometric scale (the projector factor divided out), bins and grid order."""
     scene = scene_with(TILTED, **capture)
-    reference = AnalyticSimulator({"patch_size": 0.003}).render(scene).H.astype(float)
-    H = MitsubaSimulator({"spp": 8192}).render(scene).H
+    reference = rendered(AnalyticSimulator({"patch_size": 0.003}), scene).H.astype(float)
+    H = rendered(MitsubaSimulator({"spp": 8192}), scene).H
     assert H.sum() / reference.sum() == pytest.approx(1.0, abs=0.01)
     per_sensor = H.sum(axis=0) / reference.sum(axis=0)
     assert np.abs(per_sensor - 1).max() < 0.03
@@ -96,8 +103,8 @@ def test_time_profiles_agree_with_embree():
 
     scene = builtin_scene("thesis_two_planes", wall={"resolution": [16, 12]},
                           time={"bins": 512, "bin_width": 0.01})
-    a = MitsubaSimulator({"spp": 1 << 15}).render(scene).H.astype(float)
-    b = EmbreeSimulator({"samples": 1 << 16}).render(scene).H.astype(float)
+    a = rendered(MitsubaSimulator({"spp": 1 << 15}), scene).H.astype(float)
+    b = rendered(EmbreeSimulator({"samples": 1 << 16}), scene).H.astype(float)
     pa, pb = a.reshape(a.shape[0], -1).T, b.reshape(b.shape[0], -1).T
     za = (pa - pa.mean(1, keepdims=True)) / pa.std(1, keepdims=True)
     zb = (pb - pb.mean(1, keepdims=True)) / pb.std(1, keepdims=True)
@@ -118,35 +125,35 @@ def test_hidden_geometry_sampling_overcounts_shadowing_and_warns(caplog):
 
     scene = builtin_scene("thesis_occluded", wall={"resolution": [12, 12]},
                           time={"bins": 384, "bin_width": 0.016})
-    truth = EmbreeSimulator({"samples": 1 << 16}).render(scene).H.sum()
+    truth = rendered(EmbreeSimulator({"samples": 1 << 16}), scene).H.sum()
     with caplog.at_level(logging.WARNING, logger="nlosfw_mitsuba"):
-        biased = MitsubaSimulator({"spp": 2048}).render(scene)
+        biased = rendered(MitsubaSimulator({"spp": 2048}), scene)
     assert "counts that light twice" in caplog.text
     assert biased.H.sum() > 1.1 * truth
     assert biased.scene_info["render"]["blocked_sight_line_fraction"] > 0.05
     unbiased = MitsubaSimulator({"spp": 1 << 16, "hidden_geometry_sampling": False})
-    assert unbiased.render(scene).H.sum() / truth == pytest.approx(1.0, abs=0.03)
+    assert rendered(unbiased, scene).H.sum() / truth == pytest.approx(1.0, abs=0.03)
 
 
 def test_point_scatterers_are_refused():
     scene = scene_with([{"type": "point", "position": [0.0, 0.0, 0.5]}])
     with pytest.raises(ConfigError, match=r"scene\.geometry\[0\]\.type: .*point"):
-        MitsubaSimulator().render(scene)
+        MitsubaSimulator().simulate(scene)
 
 
 def test_geometry_blocking_the_device_is_refused():
     scene = scene_with([{"type": "rectangle", "position": [0.0, 0.0, 0.2], "size": [0.8, 0.8]}],
                        sensor_position=[0.0, 0.0, 0.5], laser_position=[0.3, 0.0, 0.1])
     with pytest.raises(ConfigError, match=r"scene\.capture\.sensor_position"):
-        MitsubaSimulator({"spp": 16}).render(scene)
+        rendered(MitsubaSimulator({"spp": 16}), scene)
 
 
 def test_bounce_filter_and_passes():
     scene = scene_with(TILTED, resolution=(6, 5))
-    third = MitsubaSimulator({"spp": 2048}).render(scene)
-    passes = MitsubaSimulator({"spp": 2048, "spp_per_pass": 512}).render(scene)
+    third = rendered(MitsubaSimulator({"spp": 2048}), scene)
+    passes = rendered(MitsubaSimulator({"spp": 2048, "spp_per_pass": 512}), scene)
     assert passes.scene_info["render"]["passes"] == 4
     assert passes.H.sum() / third.H.sum() == pytest.approx(1.0, abs=0.01)
     assert not np.array_equal(passes.H, third.H)          # passes use different seeds
-    fourth = MitsubaSimulator({"spp": 256, "bounces": 4, "max_bounces": 4}).render(scene)
+    fourth = rendered(MitsubaSimulator({"spp": 256, "bounces": 4, "max_bounces": 4}), scene)
     assert fourth.H.sum() == 0                            # one plane: no fourth bounce
