@@ -1,10 +1,13 @@
 """A content-addressed cache of captures and phasor fields.
 
 An entry is keyed by the SHA-256 of the canonical JSON of everything that
-produced it (plugin name and options, scene, upstream keys, nlosfw version),
-so a sweep over models simulates each scene once. Each entry is stored with
-the SHA-256 of its bytes; an entry whose bytes no longer match, or that cannot
-be read, is reported, removed and recomputed.
+produced it (plugin, its distribution and version, its options, the scene and
+the contents of its mesh files, upstream keys), so a sweep over models
+simulates each scene once. Each entry is stored with the SHA-256 of its bytes,
+written before the entry appears; an entry whose bytes do not match, or that
+cannot be read, is reported, removed and recomputed. A lock per key makes
+concurrent runs (parallel or SLURM sweeps sharing the cache) wait for one
+computation instead of repeating it.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import contextlib
 import hashlib
 import json
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -40,6 +43,22 @@ def file_digest(path: Path) -> str:
     return digest.hexdigest()
 
 
+@contextlib.contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    """An exclusive advisory lock on ``path`` (created if needed) for the block."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX: no cross-process lock
+        yield
+        return
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 class Cache:
     """Entries under ``root/<kind>/<key>.hdf5`` with ``<key>.sha256`` beside them."""
 
@@ -54,22 +73,32 @@ class Cache:
         if not self.enabled:
             return compute(), False
         entry = self.root / kind / f"{key}.hdf5"
-        check = entry.with_suffix(".sha256")
-        if entry.exists():
-            value = self._load(entry, check, read)
-            if value is not None:
-                return value, True
-        value = compute()
         try:
             entry.parent.mkdir(parents=True, exist_ok=True)
-            with atomic_path(entry) as tmp:
-                write(tmp, value)
-            write_text(check, file_digest(entry) + "\n", overwrite=True)
-        except (OSError, DataError) as err:  # a full or read-only cache must not fail the run
-            log.warning("cache: could not store %s (%s)", entry, err)
+        except OSError as err:  # an unusable cache must not fail the run
+            log.warning("cache: %s is not usable (%s); computing without it", entry.parent, err)
+            return compute(), False
+        with _locked(entry.with_suffix(".lock")):
+            if entry.exists():
+                value = self._load(entry, read)
+                if value is not None:
+                    return value, True
+            value = compute()
+            self._store(entry, value, write)
         return value, False
 
-    def _load(self, entry: Path, check: Path, read: Callable[[Path], T]) -> T | None:
+    @staticmethod
+    def _store(entry: Path, value: Any, write: Callable[[Path, Any], Any]) -> None:
+        check = entry.with_suffix(".sha256")
+        try:
+            with atomic_path(entry) as tmp:
+                write(tmp, value)
+                write_text(check, file_digest(tmp) + "\n", overwrite=True)
+        except (OSError, DataError) as err:  # a full or read-only cache must not fail the run
+            log.warning("cache: could not store %s (%s)", entry, err)
+
+    def _load(self, entry: Path, read: Callable[[Path], T]) -> T | None:
+        check = entry.with_suffix(".sha256")
         expected = check.read_text().strip() if check.exists() else ""
         if expected != file_digest(entry):
             log.warning("cache: %s is corrupt (checksum mismatch); recomputing", entry)

@@ -24,7 +24,7 @@ from nlosfw.app.run import RunContext
 from nlosfw.app.settings import RunSettings, run_settings
 from nlosfw.capture import Capture
 from nlosfw.config import config_to_dict
-from nlosfw.errors import ConfigError, NlosfwError
+from nlosfw.errors import ConfigError
 from nlosfw.interfaces import TrainingStep
 from nlosfw.io import (
     read_capture,
@@ -89,10 +89,8 @@ class Pipeline:
         self.ctx.write_text("config", yaml_safe.dump(self.config))
         try:
             objective = self._stages()
-        except (NlosfwError, KeyboardInterrupt):
-            self.ctx.finish("failed")
-            self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics,
-                                      status="failed")
+        except BaseException:  # any failure, ours or a bug: record it, then re-raise
+            self._record_failure()
             raise
         status = "completed" if self.settings.stop_after is None else "stopped"
         if status == "stopped":
@@ -104,6 +102,15 @@ class Pipeline:
         self.console.print(summary_table(self.metrics))
         self.console.print(f"[bold green]done[/] ({status}): {self.run_dir}")
         return objective
+
+    def _record_failure(self) -> None:
+        """metrics.json with status failed and the on_run_end hook, never masking the error."""
+        try:
+            self.ctx.finish("failed")
+            self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics,
+                                      status="failed")
+        except Exception as err:  # the original failure is what the user must see
+            log.error("could not record the failed run in %s: %s", self.run_dir, err)
 
     def _stages(self) -> float | None:
         s = self.settings
@@ -142,17 +149,9 @@ class Pipeline:
             key = cache_key({"file": file_digest(source)})
             info.update(source="file", path=str(source.resolve()))
         else:
-            from nlosfw.scene import scene_from_config
-
-            scene = scene_from_config(self.config["scene"])
-            name, options = self._plugin_options("simulator")
-            simulator = self.host.registry.create("simulator", name, options)
-            key = self._capture_key(name, simulator, scene)
-            with self.console.status(f"simulating {scene.name} with {name}…"):
-                capture, hit = self._simulate(simulator, scene, key)
-                if scene.noise.model != "none" or scene.noise.jitter_ps > 0:
-                    self.clean = self._clean_capture(simulator, scene, name)
-            info.update(source="simulated", simulator=name, cache_hit=hit)
+            capture, key, hit = self._simulated_capture()
+            info.update(source="simulated", simulator=self.config["simulator"]["name"],
+                        cache_hit=hit)
         self.ctx.write("capture", lambda p: write_capture(
             p, capture, compression=self.settings.output.compression))
         truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
@@ -172,7 +171,8 @@ class Pipeline:
         canonical = config_to_dict(transform.config)
 
         def cached_field(source: Capture, source_key: str) -> tuple[PhasorField, bool]:
-            key = cache_key({"capture": source_key, "transform": name, "options": canonical})
+            key = cache_key({"capture": source_key, "transform": name, "options": canonical,
+                             "plugin": self._plugin_version("transform", name)})
             return self.cache.get_or_compute(
                 "fields", key, lambda: transform.transform(source),
                 lambda p, f: write_phasor_field(p, f), read_phasor_field)
@@ -291,26 +291,58 @@ class Pipeline:
                           single_frequency=self.single_frequency_recons)
 
     # ------------------------------------------------------------------ helpers
-    def _simulate(self, simulator: Any, scene: Any, key: str) -> tuple[Capture, bool]:
-        return self.cache.get_or_compute(
-            "captures", key, lambda: simulator.simulate(scene),
-            lambda p, c: write_capture(p, c, compression=1), read_capture)
+    def _simulated_capture(self) -> tuple[Capture, str, bool]:
+        """The scene's capture (cached), rendering the transport once even for noisy scenes.
 
-    @staticmethod
-    def _capture_key(name: str, simulator: Any, scene: Any) -> str:
-        """Cache key of a simulated capture: plugin, validated options, validated scene."""
-        return cache_key({"simulator": name, "options": config_to_dict(simulator.config),
-                          "scene": config_to_dict(scene)})
-
-    def _clean_capture(self, simulator: Any, scene: Any, name: str) -> tuple[Capture, str]:
-        """The same scene without noise (same seed), for denoising metrics."""
+        The noise-free capture is cached under its own key; a noisy scene's capture
+        is that one with noise added (cached too), and the noise-free one is kept
+        for the denoising metrics. Returns (capture, its cache key, cache hit).
+        """
         import dataclasses
 
-        from nlosfw.scene import NoiseConfig
+        from nlosfw.scene import NoiseConfig, scene_from_config
 
+        scene = scene_from_config(self.config["scene"])
+        name, options = self._plugin_options("simulator")
+        simulator = self.host.registry.create("simulator", name, options)
         clean_scene = dataclasses.replace(scene, noise=NoiseConfig())
-        key = self._capture_key(name, simulator, clean_scene)
-        return self._simulate(simulator, clean_scene, key)[0], key
+        clean_key = self._capture_key(name, simulator, clean_scene)
+        with self.console.status(f"simulating {scene.name} with {name}…"):
+            clean, hit = self._cached_capture(clean_key,
+                                              lambda: simulator.simulate_clean(clean_scene))
+            if scene.noise == NoiseConfig():
+                return clean, clean_key, hit
+            key = self._capture_key(name, simulator, scene)
+            capture, hit = self._cached_capture(key, lambda: simulator.add_noise(clean, scene))
+        self.clean = (clean, clean_key)
+        return capture, key, hit
+
+    def _cached_capture(self, key: str, compute: Any) -> tuple[Capture, bool]:
+        return self.cache.get_or_compute(
+            "captures", key, compute, lambda p, c: write_capture(p, c, compression=1),
+            read_capture)
+
+    def _capture_key(self, name: str, simulator: Any, scene: Any) -> str:
+        """Cache key of a simulated capture: the plugin and its version, its validated
+        options, the validated scene with absolute mesh paths, and the mesh files' bytes."""
+        from nlosfw.geometry import resolve_mesh_paths
+
+        scene = resolve_mesh_paths(scene)
+        meshes = {item.path: file_digest(Path(item.path)) for item in scene.geometry
+                  if item.type == "mesh" and item.path}
+        return cache_key({"simulator": name, "plugin": self._plugin_version("simulator", name),
+                          "options": config_to_dict(simulator.config),
+                          "scene": config_to_dict(scene), "meshes": meshes})
+
+    def _plugin_version(self, kind: str, name: str) -> str:
+        """``distribution==version`` of a plugin, so a plugin upgrade invalidates the cache."""
+        from importlib.metadata import PackageNotFoundError, version
+
+        dist = self.host.registry.get(kind, name).distribution
+        try:
+            return f"{dist}=={version(dist)}"
+        except PackageNotFoundError:
+            return f"{dist}==unknown"
 
     def _plugin_options(self, kind: str) -> tuple[str, dict[str, Any]]:
         node = dict(self.config.get(kind) or {})
@@ -336,7 +368,7 @@ class Pipeline:
                 val = "" if step.val_loss is None else f" val {step.val_loss:.3g}"
                 progress.update(task, completed=step.step, total=step.total_steps,
                                 info=f"loss {step.loss:.3g}{val}")
-                self.host.hook.on_training_step(model=plugin, step=step.step,
+                self.host.hook.on_training_step(source=source, model=plugin, step=step.step,
                                                 total_steps=step.total_steps, loss=step.loss,
                                                 val_loss=step.val_loss)
 
@@ -436,7 +468,8 @@ def _denoising(clean: PhasorField, noisy: PhasorField, predicted: PhasorField) -
 
 
 def _depth_span(capture: Capture) -> tuple[float, float]:
-    """Depths covering the hidden geometry: from ground truth if present, else the time window."""
+    """Depths covering the hidden scene: from the ground truth, else the hidden volume a
+    Zaragoza file declares, else the span of the signal in time (device legs removed)."""
     truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
     if truth is not None:
         depth = np.asarray(truth, dtype=float)
@@ -445,10 +478,17 @@ def _depth_span(capture: Capture) -> tuple[float, float]:
             lo, hi = float(hit.min()), float(hit.max())
             margin = max(0.15, 0.25 * (hi - lo))
             return max(0.05, lo - margin), hi + margin
-    # round trip from the wall: the earliest and latest signal bound the depth range
+    volume = capture.scene_info.get("volume") or {}
+    if volume.get("center") is not None and volume.get("size") is not None:
+        centre = float(np.asarray(volume["center"], dtype=float).reshape(-1)[2])
+        half = float(np.asarray(volume["size"], dtype=float).reshape(-1)[-1]) / 2
+        if centre - half > 0:
+            return centre - half, centre + half
     profile = capture.H.reshape(capture.n_bins, -1).sum(axis=1)
     nonzero = np.nonzero(profile > 1e-3 * profile.max())[0] if profile.max() > 0 else []
     if len(nonzero) == 0:
         return 0.3, 2.0
-    times = capture.bin_centers[[nonzero[0], nonzero[-1]]]
-    return max(0.05, float(times[0]) / 2 * 0.8), max(0.3, float(times[1]) / 2)
+    legs = float(np.mean(capture.geometry.device_path(capture.sensor_points)))
+    first, last = capture.bin_centers[[nonzero[0], nonzero[-1]]] - legs
+    # a path of length t reaches at most t/2 deep (wall -> point -> wall)
+    return max(0.05, 0.8 * float(first) / 2), max(0.3, float(last) / 2)

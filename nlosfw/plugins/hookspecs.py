@@ -48,18 +48,25 @@ def on_run_start(run_dir: str, config: dict[str, Any]) -> None:
 
 @hookspec
 def on_run_end(run_dir: str, metrics: dict[str, Any], status: str) -> None:
-    """A run ends; ``status`` is ``completed`` or ``failed``, ``metrics`` as in metrics.json."""
+    """A run ends; ``status`` is ``completed``, ``stopped`` (``stop_after``) or ``failed``.
+
+    ``metrics`` is what metrics.json holds.
+    """
 
 
 @hookspec
 def on_stage_end(stage: str, seconds: float) -> None:
-    """A pipeline stage (simulate, transform, fit, ...) has finished."""
+    """A pipeline stage has finished: capture, transform, fit, predict, reconstruct or report."""
 
 
 @hookspec
-def on_training_step(model: str, step: int, total_steps: int, loss: float,
+def on_training_step(source: str, model: str, step: int, total_steps: int, loss: float,
                      val_loss: float | None) -> None:
-    """A field model reports training progress."""
+    """A field model reports training progress.
+
+    ``source`` is its role in the run (``model``, ``interp`` or a ``compare`` label),
+    ``model`` its plugin name.
+    """
 
 
 @hookspec

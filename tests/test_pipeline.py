@@ -1,0 +1,192 @@
+"""The pipeline in-process: lifecycle hooks, failure records, the cache, single renders."""
+
+import json
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nlosfw.app.cache import Cache
+from nlosfw.app.pipeline import Pipeline
+from nlosfw.builtin.analytic import AnalyticConfig, AnalyticSimulator
+from nlosfw.builtin.interp import InterpConfig, InterpFieldModel
+from nlosfw.io import read_capture, write_capture
+from nlosfw.plugins import hookimpl, load_plugins
+from nlosfw.testing import fixtures
+
+TINY = ["scene=tiny", "model=interp", "figures.enabled=false", "transform.n_frequencies=21",
+        "reconstruction.n_depths=4"]
+
+
+class Tracker:
+    """A tracking plugin: records every lifecycle hook call."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, dict]] = []
+
+    @hookimpl
+    def on_run_start(self, run_dir, config):
+        self.calls.append(("run_start", {"run_dir": run_dir, "scene": config["scene"]["name"]}))
+
+    @hookimpl
+    def on_stage_end(self, stage, seconds):
+        self.calls.append(("stage_end", {"stage": stage, "seconds": seconds}))
+
+    @hookimpl
+    def on_training_step(self, source, model, step, total_steps, loss, val_loss):
+        self.calls.append(("training_step", {"source": source, "model": model}))
+
+    @hookimpl
+    def on_artefact_written(self, path, kind):
+        self.calls.append(("artefact", {"path": path, "kind": kind}))
+
+    @hookimpl
+    def on_run_end(self, run_dir, metrics, status):
+        self.calls.append(("run_end", {"status": status, "metrics_status": metrics["status"]}))
+
+    def names(self, event):
+        return [c[1] for c in self.calls if c[0] == event]
+
+
+class CountingSimulator(AnalyticSimulator):
+    renders = 0
+
+    def render(self, geometry):
+        type(self).renders += 1
+        return super().render(geometry)
+
+
+class BrokenModel(InterpFieldModel):
+    def fit(self, field, validation=None, on_step=None):
+        raise RuntimeError("a bug in a plugin")
+
+
+def plugins(**factories):
+    """A plugin module registering the given simulator and/or model factory in-process."""
+    module = types.ModuleType("test_plugins_module")
+
+    @hookimpl
+    def register_simulators(register):
+        if "simulator" in factories:
+            register("counting", factories["simulator"], config=AnalyticConfig)
+
+    @hookimpl
+    def register_field_models(register):
+        if "model" in factories:
+            register("broken", factories["model"], config=InterpConfig)
+
+    module.register_simulators = register_simulators
+    module.register_field_models = register_field_models
+    return module
+
+
+def compose(overrides, host):
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from omegaconf import OmegaConf
+
+    from nlosfw.app.hydra_app import config_dir, ensure_resolvers, register_plugin_configs
+
+    register_plugin_configs(host)
+    ensure_resolvers()
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+        cfg = hydra_compose(config_name="config", overrides=list(overrides))
+    GlobalHydra.instance().clear()
+    return OmegaConf.to_container(cfg, resolve=True)
+
+
+@pytest.fixture()
+def cache_dir(tmp_path, monkeypatch):
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def test_lifecycle_hooks_follow_a_run(tmp_path, cache_dir):
+    tracker = Tracker()
+    host = load_plugins(extra=[("tracking-plugin", "tracker", tracker)])
+    run_dir = tmp_path / "run"
+    Pipeline(run_dir, compose(TINY, host), host).run()
+    events = [c[0] for c in tracker.calls]
+    assert events[0] == "run_start" and events[-1] == "run_end"
+    assert tracker.names("run_start")[0] == {"run_dir": str(run_dir), "scene": "tiny"}
+    assert [s["stage"] for s in tracker.names("stage_end")] == [
+        "capture", "transform", "fit", "predict", "reconstruct", "report"]
+    written = {Path(a["path"]).relative_to(run_dir).as_posix() for a in tracker.names("artefact")}
+    on_disk = {p.relative_to(run_dir).as_posix() for p in run_dir.rglob("*") if p.is_file()}
+    assert written == on_disk  # every file of the run was announced, and nothing else
+    assert tracker.names("run_end") == [{"status": "completed", "metrics_status": "completed"}]
+    assert {s["source"] for s in tracker.names("training_step")} <= {"interp"}
+
+
+def test_a_crashing_plugin_leaves_a_failed_record(tmp_path, cache_dir):
+    tracker = Tracker()
+    host = load_plugins(extra=[("tracking-plugin", "tracker", tracker),
+                               ("broken-plugin", "broken", plugins(model=BrokenModel))])
+    run_dir = tmp_path / "run"
+    with pytest.raises(RuntimeError, match="a bug in a plugin"):
+        Pipeline(run_dir, compose([*TINY[:1], "model=broken", *TINY[2:]], host), host).run()
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    assert metrics["status"] == "failed" and "capture" in metrics["timings"]
+    assert tracker.names("run_end") == [{"status": "failed", "metrics_status": "failed"}]
+
+
+def test_noisy_scene_renders_the_transport_once(tmp_path, cache_dir):
+    host = load_plugins(extra=[("counting-plugin", "counting",
+                                plugins(simulator=CountingSimulator))])
+    config = compose([*TINY, "simulator=counting", "scene.noise.model=poisson",
+                      "scene.noise.photons=1e5", "stop_after=predict"], host)
+    CountingSimulator.renders = 0
+    Pipeline(tmp_path / "a", config, host).run()
+    assert CountingSimulator.renders == 1
+    metrics = json.loads((tmp_path / "a" / "metrics.json").read_text())
+    denoising = metrics["field"]["interp"]["denoising"]
+    assert denoising["noisy_relative_l2"] > 0.01  # 1e5 photons: visibly noisy
+    # a second run finds both captures (clean and noisy) in the cache
+    Pipeline(tmp_path / "b", config, host).run()
+    assert CountingSimulator.renders == 1
+    assert json.loads((tmp_path / "b" / "metrics.json").read_text())["capture"]["cache_hit"]
+
+
+def test_mesh_file_contents_and_plugin_version_are_part_of_the_cache_key(tmp_path, cache_dir):
+    trimesh = pytest.importorskip("trimesh")
+    from nlosfw.scene import scene_from_config
+
+    host = load_plugins()
+    pipeline = Pipeline(tmp_path / "run", compose(TINY, host), host)
+    simulator = host.registry.create("simulator", "analytic")
+    mesh_path = tmp_path / "shape.stl"
+    trimesh.creation.box(extents=(0.2, 0.2, 0.2)).export(mesh_path)
+    config = fixtures.tiny_scene_config()
+    config["geometry"] = [{"type": "mesh", "path": str(mesh_path), "position": [0, 0, 0.6]}]
+    scene = scene_from_config(config)
+    before = pipeline._capture_key("analytic", simulator, scene)
+    assert pipeline._capture_key("analytic", simulator, scene) == before
+    trimesh.creation.box(extents=(0.3, 0.2, 0.2)).export(mesh_path)   # same path, new shape
+    assert pipeline._capture_key("analytic", simulator, scene) != before
+    assert pipeline._plugin_version("simulator", "analytic").startswith("nlosfw==")
+
+
+def test_corrupt_cache_entries_are_recomputed(tmp_path):
+    cache = Cache(tmp_path)
+    capture = fixtures.tiny_capture()
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return capture
+
+    first, hit = cache.get_or_compute("captures", "k", compute, write_capture, read_capture)
+    assert not hit and len(calls) == 1
+    again, hit = cache.get_or_compute("captures", "k", compute, write_capture, read_capture)
+    assert hit and len(calls) == 1
+    np.testing.assert_array_equal(again.H, capture.H)
+    entry = tmp_path / "captures" / "k.hdf5"
+    data = bytearray(entry.read_bytes())
+    data[len(data) // 2] ^= 0xFF                      # flip one byte
+    entry.write_bytes(bytes(data))
+    healed, hit = cache.get_or_compute("captures", "k", compute, write_capture, read_capture)
+    assert not hit and len(calls) == 2
+    np.testing.assert_array_equal(healed.H, capture.H)
