@@ -15,8 +15,9 @@ Three things happen before Hydra takes over:
 
 from __future__ import annotations
 
+import itertools
 import logging
-import os
+import math
 import sys
 import uuid
 from collections.abc import Sequence
@@ -27,7 +28,7 @@ from typing import Any
 from nlosfw.app.settings import SELECTOR_GROUPS, run_settings
 from nlosfw.config import config_defaults
 from nlosfw.enums import PluginKind
-from nlosfw.errors import ConfigError, NlosfwError, PluginError
+from nlosfw.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.plugins import PluginHost
 
 log = logging.getLogger(__name__)
@@ -62,6 +63,10 @@ def register_plugin_configs(host: PluginHost) -> None:
         except NlosfwError as err:
             log.warning("plugin %s has no usable config and is not selectable: %s",
                         spec.qualified_name, err)
+            continue
+        if "name" in defaults:
+            log.warning("plugin %s is not selectable: its config has a field 'name', which is "
+                        "the group's plugin selector", spec.qualified_name)
             continue
         store.store(group=spec.kind.value, name=spec.name,
                     node={"name": spec.name, **defaults}, provider=spec.distribution)
@@ -105,7 +110,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
     try:
         parsed = OverridesParser.create().parse_overrides(list(overrides))
     except HydraException as err:
-        raise ConfigError("", f"cannot parse overrides: {_one_line(err)}") from None
+        raise ConfigError("", f"cannot parse overrides: {one_line(err, whole=True)}") from None
     fixed, sweeps = [], []
     for ov, text in zip(parsed, overrides, strict=True):
         if ov.is_sweep_override():
@@ -125,7 +130,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                     return compose(config_name=config_name, overrides=combo,
                                    return_hydra_config=with_hydra)
                 except (HydraException, OmegaConfBaseException) as err:
-                    raise ConfigError("", _one_line(err)) from None
+                    raise ConfigError("", one_line(err, whole=True)) from None
 
             if multirun:
                 given = {o.get_key_element() for o in parsed}
@@ -137,13 +142,15 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                     (ov,) = OverridesParser.create().parse_overrides([f"{key}={value}"])
                     _check_group_choice(ov.key_or_group, _values(ov), loader)
                     sweeps.append((key, _values(ov)))
-            candidates = [fixed + [f"{key}={values[0]}" for key, values in sweeps]]
-            for i, (key, values) in enumerate(sweeps):
-                for value in values[1:]:
-                    others = [f"{k}={v[0]}" for j, (k, v) in enumerate(sweeps) if j != i]
-                    candidates.append(fixed + others + [f"{key}={value}"])
-            for combo in candidates[:_MAX_PREFLIGHT_COMPOSITIONS]:
-                validate_config(composed(combo), host)
+            combos = itertools.product(*[[f"{key}={v}" for v in values]
+                                         for key, values in sweeps])
+            total = math.prod(len(values) for _, values in sweeps)
+            for combo in itertools.islice(combos, _MAX_PREFLIGHT_COMPOSITIONS):
+                validate_config(composed(fixed + list(combo)), host)
+            if total > _MAX_PREFLIGHT_COMPOSITIONS:
+                log.warning("checked the first %d of %d sweep combinations before starting; "
+                            "the others are checked when their run starts",
+                            _MAX_PREFLIGHT_COMPOSITIONS, total)
     finally:
         GlobalHydra.instance().clear()
 
@@ -170,6 +177,10 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
     for label, options in settings.compare.items():
         node = dict(options)
         spec = host.registry.get("model", str(node.pop("name")))
+        command = spec.install_command()
+        if command:
+            raise PluginError(f"compare.{label}: model plugin '{spec.name}' needs packages that "
+                              f"are not installed; run: {command}")
         try:
             spec.make_config(node)
         except ConfigError as err:
@@ -248,16 +259,3 @@ def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
                 hint = " (is its plugin installed? see: python -m nlosfw plugins)"
             valid = ", ".join(options) or "(none)"
             raise ConfigError("", f"unknown {noun} '{value}'; valid: {valid}{hint}")
-
-
-def _one_line(err: BaseException) -> str:
-    """The message of ``err`` (or of its cause, where Hydra keeps it) on one line."""
-    while not str(err).strip() and err.__cause__ is not None:
-        err = err.__cause__
-    text = " ".join(line.strip() for line in str(err).splitlines() if line.strip())
-    return text or type(err).__name__
-
-
-def debug_enabled() -> bool:
-    """Whether tracebacks were requested (``--debug`` or ``HYDRA_FULL_ERROR=1``)."""
-    return os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("NLOSFW_DEBUG") == "1"
