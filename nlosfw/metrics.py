@@ -12,6 +12,9 @@ from scipy.ndimage import gaussian_filter
 
 from nlosfw.errors import DataError
 
+#: Side of SSIM's Gaussian window (sigma 1.5 truncated at 3.5 sigma): smaller images have none.
+SSIM_WINDOW = 11
+
 
 def normalise(image: np.ndarray) -> np.ndarray:
     """``image / max(image)`` (zeros stay zeros)."""
@@ -44,7 +47,7 @@ def ssim(reference: np.ndarray, test: np.ndarray, data_range: float = 1.0,
     c1, c2 = (0.01 * data_range) ** 2, (0.03 * data_range) ** 2
     truncate = 3.5
     n = x.ndim
-    win = 2 * int(truncate * sigma + 0.5) + 1
+    win = 2 * int(truncate * sigma + 0.5) + 1  # SSIM_WINDOW for the default sigma
     if min(x.shape) < win:
         raise DataError(f"ssim: images of shape {x.shape} are smaller than the {win}-pixel window")
     cov_norm = win**n / (win**n - 1)
@@ -62,10 +65,14 @@ def ssim(reference: np.ndarray, test: np.ndarray, data_range: float = 1.0,
     return float(s[inner].mean())
 
 
-def image_metrics(reference: np.ndarray, test: np.ndarray) -> dict[str, float]:
-    """RMSE, PSNR and SSIM of ``test`` against ``reference``, both normalised to max 1."""
+def image_metrics(reference: np.ndarray, test: np.ndarray) -> dict[str, float | None]:
+    """RMSE, PSNR and SSIM of ``test`` against ``reference``, both normalised to max 1.
+
+    SSIM is None for images smaller than its 11-pixel window (it is undefined there).
+    """
     a, b = normalise(reference), normalise(test)
-    return {"rmse": rmse(a, b), "psnr": psnr(a, b), "ssim": ssim(a, b)}
+    small = min(a.shape) < SSIM_WINDOW
+    return {"rmse": rmse(a, b), "psnr": psnr(a, b), "ssim": None if small else ssim(a, b)}
 
 
 def _pair(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
