@@ -269,7 +269,7 @@ def resolve_architecture(family: str, config: NeuralFieldConfig, grid_shape: tup
     """The network of ``config`` for training data on a (Y, X) grid with F frequencies."""
     multi = config.mode == "multi"
     if family == "pe":
-        assert isinstance(config, PEFieldConfig)
+        _require_config(config, PEFieldConfig, family)
         octaves = config.octaves or default_octaves(max(grid_shape))
         f_oct = config.frequency_octaves or default_octaves(n_frequencies)
         in_dim = 2 * 2 * octaves + (2 if config.include_input else 0)
@@ -282,13 +282,19 @@ def resolve_architecture(family: str, config: NeuralFieldConfig, grid_shape: tup
                             frequency_octaves=f_oct if config.frequency_input == "encoded" else 0)
     in_dim = 3 if multi else 2
     if family == "siren":
-        assert isinstance(config, SirenFieldConfig)
+        _require_config(config, SirenFieldConfig, family)
         return Architecture("siren", config.mode, in_dim, config.hidden, activation="sine",
                             omega0_first=config.omega0_first,
                             omega0_hidden=config.omega0_hidden)
     if family == "tanh":
         return Architecture("tanh", config.mode, in_dim, config.hidden, activation="tanh")
     raise DataError(f"unknown network family {family!r}; valid: {', '.join(FAMILY_CONFIGS)}")
+
+
+def _require_config(config: NeuralFieldConfig, cls: type, family: str) -> None:
+    if not isinstance(config, cls):
+        raise DataError(f"model: the {family} family needs a {cls.__name__}, got "
+                        f"{type(config).__name__}")
 
 
 def count_parameters(arch: Architecture, n_networks: int = 1) -> int:
@@ -405,8 +411,9 @@ def estimate_delay(values: np.ndarray, frequencies: np.ndarray) -> float:
     |sum_f P_f e^{+2 pi i f tau}|^2 is evaluated over one period of the frequency
     sampling, [-1/(2 df), 1/(2 df)) with df the smallest frequency step (so fields whose
     phase grows with f, i.e. negative delays, are handled too), and the centroid of the
-    part above 1% of its peak is returned. Multiplying the field by
-    e^{+2 pi i f tau} removes that common delay: the field then turns fewer times
+    part above 1% of its peak (a circular mean: the axis is periodic) is returned.
+    Multiplying the field by e^{+2 pi i f tau} removes that common delay: the field then
+    turns fewer times
     across the band, which is what makes it easier to fit in f.
     """
     f = np.asarray(frequencies, dtype=np.float64)
@@ -425,7 +432,10 @@ def estimate_delay(values: np.ndarray, frequencies: np.ndarray) -> float:
     for k in range(0, v.shape[1], 4096):
         energy += np.sum(np.abs(v[:, k:k + 4096].T @ kernel) ** 2, axis=0)
     keep = energy >= 0.01 * energy.max()
-    return float(np.sum(taus[keep] * energy[keep]) / np.sum(energy[keep]))
+    # tau is periodic: take the circular mean. A delay modulo the period only changes a
+    # global phase of the demodulated field (f * period is an integer plus a constant).
+    turn = np.sum(energy[keep] * np.exp(2j * np.pi * taus[keep] / period))
+    return float(period / (2 * np.pi) * np.angle(turn))
 
 
 @dataclass(frozen=True)

@@ -168,3 +168,19 @@ def test_model_files(tmp_path):
     with pytest.raises(FitError, match="zero"):
         FieldNormalisation.fit(fixtures.smooth_field(n=4).replace(
             values=np.zeros((12, 4, 4))), 0.9)
+
+
+def test_estimate_delay_is_periodic_across_the_wrap_boundary():
+    """A transient at path d gives a delay equal to d modulo the period 1/df (any d)."""
+    from nlosfw.field_models import estimate_delay
+
+    f = np.linspace(4.0, 8.0, 41)                      # df = 0.1: period 10 m
+    period = 10.0
+    for d in (1.0, 4.9, 5.1, 6.5, 9.7):                # around and beyond +period/2
+        values = np.exp(-2j * np.pi * f * d)[:, None] * np.ones((1, 3))
+        tau = estimate_delay(values, f)
+        wrapped = (tau - d + period / 2) % period - period / 2
+        assert abs(wrapped) < 0.02, (d, tau)
+    two = np.exp(-2j * np.pi * f * 4.8)[:, None] + np.exp(-2j * np.pi * f * 5.2)[:, None]
+    tau = estimate_delay(two, f)                       # straddles the wrap: 5.0 (mod 10)
+    assert abs((tau - 5.0 + period / 2) % period - period / 2) < 0.05

@@ -31,6 +31,8 @@ from nlosfw.testing import fixtures
 #: Relative L2 error (on every sample of the fixture field, held-out frequencies
 #: included) that a model of each family must reach with its ``test_config``.
 FIT_TOLERANCE = {"interp": 0.02, "siren": 0.08, "pe": 0.15, "tanh": 0.15}
+#: Seeds of check_fits_smooth_field (its score is the median over them).
+FIT_SEEDS = (0, 1, 2)
 #: Tolerance of families not listed above.
 DEFAULT_TOLERANCE = 0.2
 #: The largest tolerance a plugin may declare for itself.
@@ -79,19 +81,26 @@ def check_fits_smooth_field(spec: PluginSpec) -> None:
     """Learns a sum of plane waves over (x, y, f) to the family's tolerance.
 
     Trained on 9 of the 10 frequencies (every pixel); scored on all 10 (the held-out
-    frequency lies inside the band) against the closed-form field.
+    frequency lies inside the band) against the closed-form field. Training from a
+    random initialisation is itself random, so the score is the median over three
+    seeds: one unlucky initialisation neither passes nor fails a model.
     """
     field = fit_fixture()
     split = split_field(field, spatial_step=1, spectral="interleaved", spectral_fraction=0.1)
-    model = spec.create(dict(spec.test_config))
-    model.fit(split.train_field)
-    pred = model.predict(field.wall_xyz[..., :2], field.frequencies)
-    assert pred.shape == field.values.shape, (
-        f"{spec.qualified_name}: predict returned {pred.shape}, expected {field.values.shape}")
-    err = error_metrics(field.values, pred)["relative_l2"]
+    errors = []
+    for seed in FIT_SEEDS:
+        model = spec.create({**spec.test_config, "seed": seed})
+        model.fit(split.train_field)
+        pred = model.predict(field.wall_xyz[..., :2], field.frequencies)
+        assert pred.shape == field.values.shape, (
+            f"{spec.qualified_name}: predict returned {pred.shape}, expected "
+            f"{field.values.shape}")
+        errors.append(error_metrics(field.values, pred)["relative_l2"])
+    err = float(np.median(errors))
     tol = _tolerance(spec)
-    assert err <= tol, (f"{spec.qualified_name}: relative L2 error {err:.4f} on a smooth "
-                        f"plane-wave field exceeds {tol} (with its test_config)")
+    assert err <= tol, (f"{spec.qualified_name}: median relative L2 error {err:.4f} (seeds "
+                        f"{FIT_SEEDS}: {np.round(errors, 4).tolist()}) on a smooth plane-wave "
+                        f"field exceeds {tol} (with its test_config)")
 
 
 def check_predicts_unseen_points(spec: PluginSpec) -> None:
