@@ -136,3 +136,23 @@ def test_bad_time_axis_is_refused_with_one_line():
         with pytest.raises(ConfigError, match=rf"^scene\.time\.{option}: must be a positive") as e:
             builtin_scene("plane", time=time)
         assert "\n" not in str(e.value)
+
+
+def test_scene_files_list_every_option_so_each_can_be_overridden():
+    """Hydra only lets `scene.a.b=x` override keys the file has: list them all."""
+    import dataclasses
+    from pathlib import Path
+
+    import yaml
+
+    from nlosfw.scene import Scene
+
+    def fields(cls):
+        return {f.name: f for f in dataclasses.fields(cls)}
+
+    for path in sorted((Path(__file__).parents[1] / "conf" / "scene").glob("*.yaml")):
+        data = yaml.safe_load(path.read_text())
+        assert set(data) == set(fields(Scene)), path.name
+        for section in ("wall", "capture", "time", "noise"):
+            cls = fields(Scene)[section].default_factory
+            assert set(data[section]) == set(fields(cls)), f"{path.name}: {section}"
