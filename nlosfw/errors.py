@@ -10,6 +10,20 @@ from __future__ import annotations
 USER_ERROR_EXIT_STATUS = 2
 
 
+def one_line(err: BaseException, whole: bool = False) -> str:
+    """``err``'s message on one line (of its cause when it has none), or its type name.
+
+    The first line only, or with ``whole`` every line joined by spaces. For quoting
+    another library's exception inside a one-line nlosfw error.
+    """
+    while not str(err).strip() and err.__cause__ is not None:
+        err = err.__cause__
+    lines = [line.strip() for line in str(err).strip().splitlines() if line.strip()]
+    if not lines:
+        return type(err).__name__
+    return " ".join(lines) if whole else lines[0]
+
+
 class NlosfwError(Exception):
     """Base class of errors caused by input, configuration or environment."""
 

@@ -86,9 +86,12 @@ def test_noise_study_reports_denoising(tmp_path):
     assert set(results) == {1e4, 1e8}
     # more photons, less noise in the measured field
     assert results[1e4]["noisy_relative_l2"] > 5 * results[1e8]["noisy_relative_l2"]
-    for entry in results.values():
-        assert entry["gain_db"] == pytest.approx(
-            20 * __import__("math").log10(entry["noisy_relative_l2"] / entry["relative_l2"]))
+    # 1e8 photons is nearly noise-free; 1e4 is dominated by shot noise (relative error of
+    # a Poisson count N is 1/sqrt(N): the brightest bins hold far fewer than 1e4 photons)
+    assert results[1e8]["noisy_relative_l2"] < 0.05
+    assert results[1e4]["noisy_relative_l2"] > 0.3
+    # more noise in the samples cannot bring the prediction closer to the clean field
+    assert results[1e4]["relative_l2"] > results[1e8]["relative_l2"]
 
 
 @pytest.mark.slow

@@ -9,6 +9,8 @@ import traceback
 from rich.console import Console
 from rich.markup import escape
 
+from nlosfw.errors import one_line
+
 log = logging.getLogger("nlosfw")
 
 
@@ -17,5 +19,4 @@ def report_user_error(err: BaseException) -> None:
     console = Console(stderr=True, soft_wrap=True, highlight=False)
     if os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("NLOSFW_DEBUG") == "1":
         console.print(escape("".join(traceback.format_exception(err))), end="")
-    message = " ".join(str(err).split())
-    console.print(f"[bold red]error:[/] {escape(message)}")
+    console.print(f"[bold red]error:[/] {escape(one_line(err, whole=True))}")

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from nlosfw.app.run import RunContext
 from nlosfw.metrics import normalise
@@ -37,9 +38,6 @@ def write_figures(ctx: RunContext, fields: dict[str, PhasorField],
     ``frequencies`` maps a label to a frequency index to show alone, and
     ``single_frequency`` holds the reconstructions from those frequencies.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
     for label, index in (frequencies or {}).items():
         ctx.write(f"figures/fields_f{index}.png",
                   _saver(lambda fig_index=index, lab=label: _field_figure(fields, fig_index, lab),
@@ -61,11 +59,7 @@ def write_figures(ctx: RunContext, fields: dict[str, PhasorField],
 
 def _saver(make: Callable[[], Any], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        import matplotlib.pyplot as plt
-
-        fig = make()
-        fig.savefig(path, dpi=dpi, format="png", bbox_inches="tight")
-        plt.close(fig)
+        make().savefig(path, dpi=dpi, format="png", bbox_inches="tight")
 
     return save
 
@@ -78,16 +72,14 @@ def _extent(field: PhasorField) -> list[float]:
 
 
 def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any:
-    import matplotlib.pyplot as plt
-
     true = fields["true"]
     sources = list(fields)
     amp_max = float(np.abs(true.values[index]).max()) or 1.0
     errors = {s: np.abs(fields[s].values[index] - true.values[index]) / amp_max
               for s in sources if s not in ("true", "raw")}
     err_max = _shared_scale(errors.values())
-    fig, axes = plt.subplots(len(sources), 3, figsize=(9.5, 3.0 * len(sources)),
-                             squeeze=False)
+    fig = Figure(figsize=(9.5, 3.0 * len(sources)))
+    axes = fig.subplots(len(sources), 3, squeeze=False)
     freq = true.frequencies[index]
     fig.suptitle(f"phasor field at f = {freq:.3f} cycles/m (λ = {100 / freq:.1f} cm), "
                  f"{label} frequency")
@@ -119,14 +111,13 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
 
 def _recon_figure(recons: dict[str, Reconstruction], scores: dict[str, Any],
                   truth_depth: np.ndarray | None, title: str) -> Any:
-    import matplotlib.pyplot as plt
-
     sources = list(recons)
     reference = normalise(recons["true"].max_intensity_image())
     images = {s: normalise(recons[s].max_intensity_image()) for s in sources}
     errors = {s: np.abs(images[s] - reference) for s in sources if s != "true"}
     err_max = _shared_scale(errors.values())
-    fig, axes = plt.subplots(3, len(sources), figsize=(3.3 * len(sources), 9.5), squeeze=False)
+    fig = Figure(figsize=(3.3 * len(sources), 9.5))
+    axes = fig.subplots(3, len(sources), squeeze=False)
     vox = recons["true"].voxels
     ext = [vox[0, 0, 0, 0], vox[0, 0, -1, 0], vox[0, 0, 0, 1], vox[0, -1, 0, 1]]
     depths = recons["true"].depths
@@ -181,9 +172,8 @@ def _shared_scale(maps: Any) -> float:
 
 
 def _loss_figure(histories: dict[str, list[dict[str, float]]]) -> Any:
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(6.5, 4))
+    fig = Figure(figsize=(6.5, 4))
+    ax = fig.subplots()
     for source, history in histories.items():
         steps = [h.get("step", i) for i, h in enumerate(history)]
         ax.plot(steps, [h.get("loss", np.nan) for h in history], label=f"{source} train")

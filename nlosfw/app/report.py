@@ -121,13 +121,17 @@ def to_csv(rows: list[dict[str, str]]) -> str:
     return buffer.getvalue()
 
 
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A markdown table (cells with '|' escaped)."""
+    def line(cells: Sequence[str]) -> str:
+        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+
+    return "\n".join([line(header), "|" + "---|" * len(header), *map(line, rows)]) + "\n"
+
+
 def to_markdown(rows: list[dict[str, str]], columns: Sequence[str] | None = None) -> str:
     columns = list(columns or [c for c, _ in COLUMNS])
-    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    for row in rows:
-        lines.append("| " + " | ".join(row.get(c, "").replace("|", "\\|") for c in columns)
-                     + " |")
-    return "\n".join(lines) + "\n"
+    return markdown_table(columns, [[row.get(c, "") for c in columns] for row in rows])
 
 
 def thesis_tables(records: list[dict[str, Any]]) -> str:
@@ -139,11 +143,8 @@ def thesis_tables(records: list[dict[str, Any]]) -> str:
 
 def comparison_figure(records: list[dict[str, Any]], path: Path) -> None:
     """Held-out NMSE (model vs interp) and reconstruction SSIM per run, as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.figure import Figure
 
     labels = [f"{r['run']}\n{r.get('model') or ''}" for r in records]
     x = np.arange(len(records))
@@ -152,7 +153,8 @@ def comparison_figure(records: list[dict[str, Any]], path: Path) -> None:
         return np.array([_get(r, path) if _get(r, path) is not None else np.nan
                          for r in records], dtype=float)
 
-    fig, axes = plt.subplots(1, 2, figsize=(max(8, 1.2 * len(records) + 4), 4.5))
+    fig = Figure(figsize=(max(8, 1.2 * len(records) + 4), 4.5))
+    axes = fig.subplots(1, 2)
     width = 0.38
     for offset, source in ((-width / 2, "model"), (width / 2, "interp")):
         axes[0].bar(x + offset, series(("field", source, "splits", "heldout_pixels", "nmse_db")),
@@ -166,8 +168,7 @@ def comparison_figure(records: list[dict[str, Any]], path: Path) -> None:
         ax.legend()
         ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    fig.savefig(path, dpi=110, format="png")
 
 
 def _free_dir(root: Path) -> Path:

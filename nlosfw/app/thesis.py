@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from nlosfw.app.report import markdown_table
+
 _TABLE_41 = ("experiment", "parameters (ours)", "parameters (thesis)", "data size (ours)",
              "data size (thesis)", "parameters/data % (ours)", "parameters/data % (thesis)",
              "run")
@@ -52,18 +54,14 @@ def thesis_comparison(records: list[dict[str, Any]]) -> str:
                                 _fmt(fit.get("steps"), "d"), "100000", record["run"]))
     out = []
     if table41:
-        out.append("### Table 4.1: parameters and compression\n\n" + _markdown(_TABLE_41, table41)
+        out.append("### Table 4.1: parameters and compression\n\n"
+                   + markdown_table(_TABLE_41, table41)
                    + "\nThe thesis's percentages do not follow from its own parameter and data "
                    "counts (942/2048 = 46.0 %, 914/2048 = 44.6 %); ours are computed.\n")
     if table51:
-        out.append("### Table 5.1: losses and training times\n\n" + _markdown(_TABLE_51, table51)
+        out.append("### Table 5.1: losses and training times\n\n"
+                   + markdown_table(_TABLE_51, table51)
                    + "\nLosses are mean squared errors on data normalised into (-1, 1). The "
-                   "thesis trained 100,000 full-batch epochs on a GPU; our defaults train far "
-                   "fewer minibatch steps on 2 CPU cores.\n")
+                   "thesis trained 100,000 full-batch epochs (about 675 s per scene on its "
+                   "hardware); our defaults train far fewer minibatch steps on 2 CPU cores.\n")
     return "\n".join(out)
-
-
-def _markdown(header: tuple[str, ...], rows: list[tuple[str, ...]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines) + "\n"

@@ -24,7 +24,7 @@ import scipy.fft
 from scipy.linalg import blas
 
 from nlosfw.builtin.frequencies import dft_length
-from nlosfw.errors import ConfigError
+from nlosfw.errors import ConfigError, DataError
 
 Method = Literal["auto", "direct", "fft"]
 
@@ -81,7 +81,7 @@ def temporal_dft(H: np.ndarray, t_start: float, delta_t: float, frequencies: np.
     """
     H = np.asarray(H)
     if H.ndim != 2:
-        raise ValueError(f"H must be (time, sensors), got shape {H.shape}")
+        raise DataError(f"H: must be (time, sensors) for the temporal DFT, got shape {H.shape}")
     f = np.asarray(frequencies, dtype=np.float64)
     n_bins, n_sensors = H.shape
     out_bytes = 16 * f.size * n_sensors

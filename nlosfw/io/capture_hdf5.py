@@ -18,7 +18,7 @@ import numpy as np
 
 from nlosfw.capture import YTAL_FIELDS, Capture
 from nlosfw.enums import GridFormat, HFormat, VolumeFormat
-from nlosfw.errors import DataError
+from nlosfw.errors import DataError, one_line
 from nlosfw.io import yaml_safe
 from nlosfw.io.atomic import atomic_path
 
@@ -69,7 +69,7 @@ def read_capture(path: str | Path) -> Capture:
     except DataError:
         raise
     except (OSError, RuntimeError, ValueError, KeyError) as err:
-        raise DataError(f"{path}: not a readable HDF5 capture ({_first_line(err)})") from None
+        raise DataError(f"{path}: not a readable HDF5 capture ({one_line(err)})") from None
     if "data" in raw and "H" not in raw:
         raw = _znlos_to_ytal(raw, path)
     missing = [k for k in _REQUIRED if raw.get(k) is None]
@@ -143,7 +143,7 @@ def _read_field(f: h5py.File, key: str, path: Path) -> Any:
         value = node[()]
     except (OSError, RuntimeError) as err:
         raise DataError(f"{path}: field '{key}' cannot be read (file truncated or corrupt: "
-                        f"{_first_line(err)})") from None
+                        f"{one_line(err)})") from None
     return value
 
 
@@ -162,7 +162,7 @@ def _scene_info(value: Any, path: Path) -> dict:
         try:
             value = yaml_safe.load(value)
         except Exception as err:  # yaml raises many error types
-            raise DataError(f"{path}: field 'scene_info' is not valid YAML ({_first_line(err)})"
+            raise DataError(f"{path}: field 'scene_info' is not valid YAML ({one_line(err)})"
                             ) from None
     if value is None:
         return {}
@@ -170,11 +170,6 @@ def _scene_info(value: Any, path: Path) -> dict:
         raise DataError(f"{path}: field 'scene_info' must be a YAML mapping, got "
                         f"{type(value).__name__}")
     return value
-
-
-def _first_line(err: BaseException) -> str:
-    text = str(err).strip().splitlines()
-    return text[0] if text else type(err).__name__
 
 
 # ------------------------------------------------------------------------ Zaragoza (ZNLOS)

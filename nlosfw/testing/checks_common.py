@@ -61,16 +61,25 @@ def check_interface(spec: PluginSpec) -> None:
 
 
 def check_config_round_trip(spec: PluginSpec) -> None:
-    """Defaults and test settings survive dict -> YAML -> Hydra-like mapping -> config unchanged."""
+    """Defaults and test settings survive dict -> YAML -> OmegaConf (as Hydra composes it)
+    -> config unchanged; the config has no field ``name`` (the selector key of its group)."""
+    from omegaconf import OmegaConf
+
     cls = spec.config_class()
     assert dataclasses.is_dataclass(cls), f"{spec.qualified_name}: config must be a dataclass"
     assert cls.__dataclass_params__.frozen, f"{spec.qualified_name}: config must be frozen"
+    assert "name" not in {f.name for f in dataclasses.fields(cls)}, (
+        f"{spec.qualified_name}: a config field called 'name' would collide with the plugin "
+        "name that selects it in its Hydra group")
     for options in ({}, dict(spec.test_config)):
         config = spec.make_config(options)
         plain = config_to_dict(config)
         again = yaml.safe_load(yaml.safe_dump(plain))
         assert again == json.loads(json.dumps(plain)), "config_to_dict must be YAML/JSON-safe"
-        rebuilt = config_from_mapping(cls, again, spec.kind.value)
+        node = OmegaConf.create({"name": spec.name, **again})        # the ConfigStore node
+        composed = OmegaConf.to_container(node, resolve=True)
+        composed.pop("name")
+        rebuilt = config_from_mapping(cls, composed, spec.kind.value)
         assert rebuilt == config, (
             f"{spec.qualified_name}: config changed in a round trip: {config} != {rebuilt}")
         instance = spec.create(options)

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from nlosfw.errors import ConfigError
+from nlosfw.errors import ConfigError, one_line
 from nlosfw.field_models import Architecture, PEFieldConfig, SirenFieldConfig, TanhFieldConfig
 from nlosfw.neural_field import PREDICT_CHUNK, Engine, NeuralFieldModel
 
@@ -33,8 +33,8 @@ def resolve_device(name: str) -> Any:
     try:
         return jax.devices(platform)[int(index or 0)]
     except (RuntimeError, ValueError, IndexError) as err:
-        first = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise ConfigError("model.device", f"JAX cannot use device {name!r} ({first}); valid: "
+        raise ConfigError("model.device", f"JAX cannot use device {name!r} ({one_line(err)}); "
+                          "valid: "
                           "auto, cpu, gpu, gpu:N") from None
 
 

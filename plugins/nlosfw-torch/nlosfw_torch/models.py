@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from nlosfw.errors import ConfigError
+from nlosfw.errors import ConfigError, one_line
 from nlosfw.field_models import Architecture, PEFieldConfig, SirenFieldConfig, TanhFieldConfig
 from nlosfw.neural_field import PREDICT_CHUNK, Engine, NeuralFieldModel
 
@@ -34,8 +34,8 @@ def resolve_device(name: str) -> torch.device:
         device = torch.device(name)
         torch.empty(1, device=device)
     except (RuntimeError, AssertionError) as err:
-        first = str(err).splitlines()[0] if str(err) else type(err).__name__
-        raise ConfigError("model.device", f"torch cannot use device {name!r} ({first}); "
+        raise ConfigError("model.device", f"torch cannot use device {name!r} "
+                          f"({one_line(err)}); "
                           "valid: auto, cpu, cuda, cuda:N") from None
     return device
 
