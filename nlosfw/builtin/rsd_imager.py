@@ -14,7 +14,6 @@ product, whose speed collapses when the cores are shared.
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -24,6 +23,7 @@ from nlosfw.builtin.imaging import FrequencySum, PropagationConfig, PropagationI
 from nlosfw.builtin.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
 from nlosfw.builtin.temporal_dft import unit_phasor
 from nlosfw.config import require
+from nlosfw.parallel import available_cores
 from nlosfw.phasor_field import PhasorField
 
 #: Steps of the frequency recurrence between exact recomputations of the kernel (float64:
@@ -70,7 +70,7 @@ class RSDImager(PropagationImager):
                 out[:, start:start + vox.shape[0]] = self._block(field, values, wall, vox,
                                                                  coeffs)
 
-        workers = (os.cpu_count() or 1) if self.config.workers == -1 else self.config.workers
+        workers = available_cores() if self.config.workers == -1 else self.config.workers
         workers = min(workers, len(starts))
         if workers > 1:
             with ThreadPoolExecutor(max_workers=workers) as pool:

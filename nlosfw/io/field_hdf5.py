@@ -42,7 +42,7 @@ def read_phasor_field(path: str | Path) -> PhasorField:
         values = _dataset(f, "values", p)
         freqs = _dataset(f, "frequencies", p)
         wall = _dataset(f, "wall_xyz", p)
-        weights = f["weights"][()] if "weights" in f else None
+        weights = _dataset(f, "weights", p) if "weights" in f else None
         geometry = CaptureGeometry.from_dict(_read_yaml(f, "geometry", p))
         metadata = _read_yaml(f, "metadata", p)
     try:
@@ -122,7 +122,7 @@ def _dataset(f: h5py.File, key: str, path: Path) -> np.ndarray:
 def _read_yaml(f: h5py.File, key: str, path: Path) -> dict:
     if key not in f:
         return {}
-    raw = f[key][()]
+    raw = _dataset(f, key, path)
     try:
         value = yaml_safe.load(raw)
     except Exception as err:  # yaml errors

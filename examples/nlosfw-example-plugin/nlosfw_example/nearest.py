@@ -38,8 +38,8 @@ class NearestFieldModel(FieldModel):
 
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Callable | None = None) -> FitReport:
-        if not np.any(field.values):
-            raise FitError("field: all values are zero; nothing to fit")
+        if field.values.size == 0 or not np.any(field.values):
+            raise FitError("field: empty or all zero; nothing to fit")
         order = np.argsort(field.frequencies)
         self._freqs = field.frequencies[order]
         self._xy = field.wall_xyz[..., :2].reshape(-1, 2)

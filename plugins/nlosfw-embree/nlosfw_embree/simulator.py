@@ -20,7 +20,6 @@ threads.
 from __future__ import annotations
 
 import logging
-import os
 import time
 import warnings
 from collections.abc import Callable
@@ -37,6 +36,7 @@ from nlosfw.geometry import (
     surface_points,
 )
 from nlosfw.interfaces import Simulator, scene_capture
+from nlosfw.parallel import available_cores
 from nlosfw.physics import device_legs, three_bounce
 from nlosfw.scene import Scene
 from nlosfw_embree.config import EmbreeConfig
@@ -47,14 +47,6 @@ log = logging.getLogger(__name__)
 
 #: Surface samples drawn and held in memory at once (about 100 bytes each).
 _CHUNK = 1 << 20
-
-
-def available_cores() -> int:
-    """Cores this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return max(1, os.cpu_count() or 1)
 
 
 class EmbreeSimulator(Simulator):
