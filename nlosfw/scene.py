@@ -122,6 +122,8 @@ class GeometryItem:
                     f"a box needs (width, height, depth) > 0, got {self.size}")
         if self.type == "mesh":
             require(bool(self.path), "path", "a mesh item needs the path of a mesh file")
+        require(self.type == "heightfield" or not self.params, "params",
+                f"only heightfield items take params; a {self.type} has none")
 
 
 @dataclass(frozen=True)

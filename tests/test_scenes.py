@@ -156,3 +156,11 @@ def test_scene_files_list_every_option_so_each_can_be_overridden():
         for section in ("wall", "capture", "time", "noise"):
             cls = fields(Scene)[section].default_factory
             assert set(data[section]) == set(fields(cls)), f"{path.name}: {section}"
+
+
+def test_params_are_refused_where_they_would_be_ignored():
+    from nlosfw.errors import ConfigError
+    from nlosfw.scene import GeometryItem
+
+    with pytest.raises(ConfigError, match="params: only heightfield items take params"):
+        GeometryItem(type="rectangle", params={"bumps": []})
