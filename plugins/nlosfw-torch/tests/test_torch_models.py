@@ -13,14 +13,12 @@ from nlosfw_torch.models import PETorch, SirenTorch, TanhTorch, TorchEngine  # n
 
 from nlosfw.errors import ConfigError, DataError, FitError  # noqa: E402
 from nlosfw.field_models import (  # noqa: E402
-    forward_numpy,
-    init_parameters,
     preset_config,
-    resolve_architecture,
 )
 from nlosfw.interfaces import TrainingStep  # noqa: E402
 from nlosfw.protocol import field_metrics, split_field  # noqa: E402
 from nlosfw.testing import fixtures  # noqa: E402
+from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy  # noqa: E402
 
 HAS_JAX = importlib.util.find_spec("jax") is not None and importlib.util.find_spec("optax")
 FAST = {"steps": 150, "eval_every": 25, "batch_size": 256, "device": "cpu"}
@@ -32,22 +30,10 @@ def _point_field(n: int = 24, n_f: int = 12):
                                        frequencies=np.linspace(2.0, 3.0, n_f))
 
 
-@pytest.mark.parametrize("family", ["tanh", "pe", "siren"])
-@pytest.mark.parametrize("mode", ["multi", "single"])
+@pytest.mark.parametrize(("family", "mode"), ENGINE_CASES)
 def test_forward_matches_numpy_reference(family, mode):
-    cls = MODELS[family]
-    config = cls.config_class(mode=mode, hidden=(16, 12), octaves=3) if family == "pe" else \
-        cls.config_class(mode=mode, hidden=(16, 12))
-    arch = resolve_architecture(family, config, (8, 8), 5)
-    n_net = 5 if mode == "single" else 0
-    params = init_parameters(arch, n_net, seed=4)
-    engine = TorchEngine(arch, params, n_net, "cpu", 0)
-    x = np.random.default_rng(0).uniform(-1, 1, (33, arch.in_dim)).astype(np.float32)
-    np.testing.assert_allclose(engine.forward(x), forward_numpy(arch, params, x), rtol=2e-5,
-                               atol=2e-5)
-    if mode == "single":
-        np.testing.assert_allclose(engine.forward(x, np.array([3, 1])),
-                                   forward_numpy(arch, params, x)[[3, 1]], rtol=2e-5, atol=2e-5)
+    assert_engine_matches_numpy(
+        lambda arch, params, n_net: TorchEngine(arch, params, n_net, "cpu", 0), family, mode)
 
 
 def test_fit_learns_and_reports_progress():
