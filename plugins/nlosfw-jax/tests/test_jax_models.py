@@ -21,7 +21,6 @@ from nlosfw.testing import fixtures
 from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy
 
 FAST = {"steps": 150, "eval_every": 25, "batch_size": 256, "device": "cpu"}
-MODELS = {"tanh": TanhJax, "pe": PEJax, "siren": SirenJax}
 
 
 def _point_field(n: int = 24, n_f: int = 12):
