@@ -138,6 +138,21 @@ def default_band(spacing: float, delta_t: float, f_min: float | None,
     return float(lo), float(hi)
 
 
+def uniform_step(values: np.ndarray) -> float | None:
+    """The common step of ``values`` in their given order (any sign), or None.
+
+    None for fewer than two values, a zero step, or steps that differ by more than
+    1e-9 relative: the sets a frequency recurrence or a DFT grid can use.
+    """
+    steps = np.diff(np.asarray(values, dtype=float))
+    if steps.size == 0:
+        return None
+    step = float(steps.mean())
+    if step != 0 and np.allclose(steps, step, rtol=1e-9, atol=0):
+        return step
+    return None
+
+
 def dft_length(frequencies: np.ndarray, delta_t: float, n_bins: int,
                max_factor: int = 64) -> int | None:
     """A DFT length N >= ``n_bins`` of which every frequency is an exact bin, or None.
@@ -148,13 +163,11 @@ def dft_length(frequencies: np.ndarray, delta_t: float, n_bins: int,
     """
     f = np.asarray(frequencies, dtype=float)
     candidates = [int(n_bins)]
-    if f.size >= 2:
-        fs = np.sort(f)
-        steps = np.diff(fs)
-        if steps.min() > 0 and np.allclose(steps, steps.mean(), rtol=1e-9, atol=0):
-            n = 1.0 / (steps.mean() * delta_t)
-            if abs(n - round(n)) < 1e-6 * max(1.0, n):
-                candidates.append(int(round(n)))
+    step = uniform_step(np.sort(f))
+    if step is not None and step > 0:
+        n = 1.0 / (step * delta_t)
+        if abs(n - round(n)) < 1e-6 * max(1.0, n):
+            candidates.append(int(round(n)))
     for n in candidates:
         if n < n_bins or n > max_factor * n_bins:
             continue

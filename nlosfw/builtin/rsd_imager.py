@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nlosfw.builtin.frequencies import uniform_step
 from nlosfw.builtin.imaging import FrequencySum, PropagationConfig, PropagationImager
 from nlosfw.builtin.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
 from nlosfw.builtin.temporal_dft import unit_phasor
@@ -112,10 +113,5 @@ class RSDImager(PropagationImager):
 def _uniform_order(freqs: np.ndarray) -> tuple[np.ndarray, float | None]:
     """(ascending order, step) if the frequencies are uniformly spaced, else (order, None)."""
     order = np.argsort(freqs, kind="stable")
-    if freqs.size < 2:
-        return order, None
-    steps = np.diff(freqs[order])
-    step = float(steps.mean())
-    if step > 0 and np.allclose(steps, step, rtol=1e-9, atol=0):
-        return order, step
-    return order, None
+    step = uniform_step(freqs[order])
+    return order, step if step is not None and step > 0 else None

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from nlosfw.builtin.frequencies import uniform_step
 from nlosfw.builtin.temporal_dft import unit_phasor
 from nlosfw.capture import CaptureGeometry
 from nlosfw.enums import CaptureKind
@@ -89,15 +90,14 @@ def phasor_series(frequencies: np.ndarray, path: np.ndarray, dtype: type = np.co
     path = np.asarray(path, dtype=float)
     if out is None:
         out = np.empty(f.shape + path.shape, dtype=dtype)
-    steps = np.diff(f)
-    uniform = f.size > 2 and steps[0] != 0 and np.allclose(steps, steps[0], rtol=1e-9, atol=0)
-    if not uniform:
+    step = uniform_step(f) if f.size > 2 else None
+    if step is None:
         for i, fi in enumerate(f):
             out[i] = unit_phasor(fi * path, out.dtype)
             if scale is not None:
                 out[i] *= scale
         return out
-    step = unit_phasor(steps[0] * path)
+    advance = unit_phasor(step * path)
     current = None
     for i, fi in enumerate(f):
         if i % _REFRESH == 0:
@@ -105,7 +105,7 @@ def phasor_series(frequencies: np.ndarray, path: np.ndarray, dtype: type = np.co
             if scale is not None:
                 current *= scale
         else:
-            current *= step
+            current *= advance
         out[i] = current
     return out
 
