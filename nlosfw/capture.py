@@ -15,6 +15,7 @@ import numpy as np
 
 from nlosfw.enums import CaptureKind, GridFormat, HFormat, VolumeFormat
 from nlosfw.errors import DataError
+from nlosfw.physics import device_legs
 
 #: The fields of a capture in y-tal's order; each is one top-level HDF5 dataset.
 YTAL_FIELDS = (
@@ -82,12 +83,13 @@ class CaptureGeometry:
                 "t_accounts_first_and_last_bounces is true but sensor_xyz or laser_xyz "
                 "is missing; both device positions are needed to remove the device legs"
             )
-        out = out + np.linalg.norm(wall_points - self.sensor_xyz, axis=-1)
         if self.kind is CaptureKind.CONFOCAL:
-            return out + np.linalg.norm(wall_points - self.laser_xyz, axis=-1)
-        if self.laser_point is None:
+            laser_points = wall_points
+        elif self.laser_point is None:
             raise DataError("single-spot geometry needs its laser_point")
-        return out + float(np.linalg.norm(self.laser_point - self.laser_xyz))
+        else:
+            laser_points = self.laser_point
+        return out + device_legs(laser_points, wall_points, self.laser_xyz, self.sensor_xyz)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain values for YAML or HDF5 attributes."""
