@@ -5,7 +5,7 @@ sensors on a 2 m wall, 2048 bins of 3 mm) rendered by the ``analytic``
 simulator, clean and with Poisson noise (``--photons`` expected signal photons),
 turned into 151 frequencies by the ``fft`` transform with its default band
 (f_max = 1/(2 x spacing), f_min = f_max / 4; a numpy DFT when that transform is
-not installed). Protocol: :func:`nlosfw.protocol.split_field` (every other wall
+not installed). Protocol: :func:`nlosfw.model.split_field` (every other wall
 sample, 10% of the frequencies interleaved), i.e. 32 x 32 x 135 training samples.
 
 For every model (default configs; ``--models`` to choose): training wall-clock
@@ -32,12 +32,12 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.builtin.analytic import AnalyticSimulator
-from nlosfw.interfaces import TrainingStep
-from nlosfw.phasor_field import PhasorField
+from nlosfw.model.interface import TrainingStep
+from nlosfw.model.protocol import FieldSplit, field_metrics, parameter_data_ratio, split_field
 from nlosfw.plugins import load_plugins
-from nlosfw.protocol import FieldSplit, field_metrics, parameter_data_ratio, split_field
-from nlosfw.scene import Scene, scene_from_config
+from nlosfw.simulate.analytic import AnalyticSimulator
+from nlosfw.simulate.scene import Scene, scene_from_config
+from nlosfw.transform.field import PhasorField
 
 RESULTS = Path(__file__).parent / "results" / "bench_field_models.json"
 MODELS = ("interp", "interp_raw", "siren_torch", "siren_jax", "pe_torch", "pe_jax", "tanh_torch",
@@ -64,7 +64,7 @@ def bench_scene(resolution: int, photons: float | None) -> Scene:
     noise = {"model": "poisson", "photons": photons} if photons else {"model": "none"}
     overrides = {"wall": {"resolution": [resolution, resolution]}, "noise": noise}
     try:
-        from nlosfw.scenes import builtin_scene
+        from nlosfw.simulate.builtin_scenes import builtin_scene
 
         return builtin_scene("thesis_two_planes", **overrides)
     except Exception:  # scene files not installed: same layout, inline
@@ -76,7 +76,7 @@ def bench_scene(resolution: int, photons: float | None) -> Scene:
 def to_field(capture: Any, n_frequencies: int) -> PhasorField:
     """The ``fft`` transform with its default band, or a plain numpy DFT of the same band."""
     try:
-        from nlosfw.builtin.fft_transform import FFTTransform
+        from nlosfw.transform.fft import FFTTransform
 
         return FFTTransform({"n_frequencies": n_frequencies}).transform(capture)
     except ImportError:

@@ -8,7 +8,7 @@ width is chosen so that it keeps about 90 frequencies), then:
 * ``fft``: one depth plane and a 64-plane volume (64 x 64 voxels per plane);
 * ``rsd``: a few planes, extrapolated to the 64^3 volume (``--full-rsd`` runs it all);
 * y-tal's ``tal.reconstruct.pf_dev`` on the same capture (written with
-  ``nlosfw.io.write_capture``) for one plane, when ``/work/ytal-venv/bin/python``
+  ``nlosfw.capture.write_capture``) for one plane, when ``/work/ytal-venv/bin/python``
   exists, in a subprocess; our time is reported as a ratio against it.
 
 Times are wall-clock seconds (best of ``--repeat`` for single planes); peak
@@ -35,12 +35,12 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.builtin.analytic import AnalyticSimulator
-from nlosfw.builtin.fft_imager import FFTImager
-from nlosfw.builtin.rsd_imager import RSDImager
-from nlosfw.builtin.wavelet_transform import WaveletTransform
-from nlosfw.reconstruction import volume_voxels
-from nlosfw.scene import scene_from_config
+from nlosfw.image.fft import FFTImager
+from nlosfw.image.reconstruction import volume_voxels
+from nlosfw.image.rsd import RSDImager
+from nlosfw.simulate.analytic import AnalyticSimulator
+from nlosfw.simulate.scene import scene_from_config
+from nlosfw.transform.wavelet import WaveletTransform
 
 YTAL_PYTHON = Path("/work/ytal-venv/bin/python")
 RESULTS = Path(__file__).parent / "results" / "bench_imagers.json"
@@ -111,7 +111,7 @@ def run_ytal(capture: Any, wavelength: float, sigma: float, depth: float,
     """Time y-tal's pf_dev on one plane in its own venv; None when y-tal is absent."""
     if not YTAL_PYTHON.exists():
         return None
-    from nlosfw.io import write_capture
+    from nlosfw.capture.hdf5 import write_capture
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "capture.hdf5"

@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.geometry import validate_scene
-from nlosfw.scenes import builtin_scene
+from nlosfw.simulate.builtin_scenes import builtin_scene
+from nlosfw.simulate.geometry import validate_scene
 
 
 def rendered(simulator, scene):
@@ -94,7 +94,7 @@ def raw_embree_throughput(scene: Any, threads: int, n_samples: int,
     from nlosfw_embree.tracer import OcclusionTracer
     from nlosfw_embree.transport import laser_side
 
-    from nlosfw.geometry import scene_mesh, sobol_engine, surface_points
+    from nlosfw.simulate.geometry import scene_mesh, sobol_engine, surface_points
 
     mesh = scene_mesh(scene)
     tracer = OcclusionTracer(mesh)
@@ -189,7 +189,7 @@ def main(argv: list[str] | None = None) -> int:
     console.print(f"reference: embree, {reference_samples} samples, "
                   f"{reference['seconds']:.1f} s")
     ref_H = reference["H"].astype(np.float64)
-    from nlosfw.builtin.analytic import AnalyticSimulator
+    from nlosfw.simulate.analytic import AnalyticSimulator
 
     start = time.perf_counter()
     analytic_H = rendered(AnalyticSimulator(), scene).H

@@ -1,35 +1,40 @@
 """nlosfw: non-line-of-sight transient imaging with implicit neural phasor fields.
 
-Importing this package loads only numpy and the core data types; plugins and
+The package is organised by pipeline stage, each a subpackage whose ``__all__`` is
+its public API:
+
+* :mod:`nlosfw.capture`: the transient capture, its geometry and file formats;
+* :mod:`nlosfw.simulate`: scenes and the simulators that render them;
+* :mod:`nlosfw.transform`: phasor fields and the transforms that make them;
+* :mod:`nlosfw.model`: field models fitted to sparse fields, and their protocol;
+* :mod:`nlosfw.image`: imagers and reconstructions;
+* :mod:`nlosfw.plugins`: plugin discovery and hooks; :mod:`nlosfw.testing`: the kit;
+* :mod:`nlosfw.app`: the command line (Hydra), pipeline, cache, figures and reports.
+
+Importing this package loads only numpy, scipy and the core data types; plugins and
 their heavy backends (torch, JAX, mitsuba, embreex) load on demand.
 """
 
-from nlosfw.capture import Capture, CaptureGeometry
-from nlosfw.enums import CaptureKind, GridFormat, HFormat, PluginKind, VolumeFormat
-from nlosfw.errors import ConfigError, DataError, FitError, NlosfwError, PluginError
-from nlosfw.interfaces import (
-    FieldModel,
-    FieldModelConfig,
-    FitReport,
-    Imager,
-    ImagerConfig,
-    PhasorTransform,
-    PhasorTransformConfig,
-    Simulator,
-    SimulatorConfig,
-    TrainingStep,
+from nlosfw.capture import Capture, CaptureGeometry, CaptureKind, GridFormat, HFormat, VolumeFormat
+from nlosfw.common import (
+    ConfigError,
+    DataError,
+    FitError,
+    NlosfwError,
+    PluginError,
+    __version__,
+    require,
 )
-from nlosfw.phasor_field import PhasorField
-from nlosfw.plugins.hookspecs import hookimpl
-from nlosfw.reconstruction import Reconstruction
-from nlosfw.scene import Scene
-
-__version__ = "0.1.0"
+from nlosfw.image import Imager, ImagerConfig, Reconstruction
+from nlosfw.model import FieldModel, FieldModelConfig, FitReport, TrainingStep
+from nlosfw.plugins import PluginKind, hookimpl
+from nlosfw.simulate import Scene, Simulator, SimulatorConfig
+from nlosfw.transform import PhasorField, PhasorTransform, PhasorTransformConfig
 
 __all__ = [
     "Capture", "CaptureGeometry", "CaptureKind", "ConfigError", "DataError", "FieldModel",
     "FieldModelConfig", "FitError", "FitReport", "GridFormat", "HFormat", "Imager",
     "ImagerConfig", "NlosfwError", "PhasorField", "PhasorTransform", "PhasorTransformConfig",
     "PluginError", "PluginKind", "Reconstruction", "Scene", "Simulator", "SimulatorConfig",
-    "TrainingStep", "VolumeFormat", "hookimpl", "__version__",
+    "TrainingStep", "VolumeFormat", "__version__", "hookimpl", "require",
 ]

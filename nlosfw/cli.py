@@ -6,7 +6,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from nlosfw.errors import USER_ERROR_EXIT_STATUS, NlosfwError
+from nlosfw.common.errors import USER_ERROR_EXIT_STATUS, NlosfwError
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,4 +1,4 @@
-"""The analytic simulator and nlosfw.physics against closed forms written out here."""
+"""The analytic simulator and nlosfw.simulate.physics against closed forms written out here."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from nlosfw.builtin.analytic import AnalyticSimulator
-from nlosfw.errors import ConfigError
-from nlosfw.geometry import validate_scene
-from nlosfw.physics import three_bounce
-from nlosfw.scene import scene_from_config
+from nlosfw.common.errors import ConfigError
+from nlosfw.simulate.analytic import AnalyticSimulator
+from nlosfw.simulate.geometry import validate_scene
+from nlosfw.simulate.physics import three_bounce
+from nlosfw.simulate.scene import scene_from_config
 from nlosfw.testing.fixtures import tiny_scene_config
 
 
@@ -114,14 +114,14 @@ def test_items_needing_visibility_are_refused():
 def test_shadowing_scenes_are_flagged(caplog):
     import logging
 
-    from nlosfw.scenes import builtin_scene
+    from nlosfw.simulate.builtin_scenes import builtin_scene
 
     small = {"wall": {"resolution": [4, 4]}, "time": {"bins": 256, "bin_width": 0.024}}
-    with caplog.at_level(logging.WARNING, logger="nlosfw.builtin.analytic"):
+    with caplog.at_level(logging.WARNING, logger="nlosfw.simulate.analytic"):
         rendered(AnalyticSimulator({"patch_size": 0.05}),
                  builtin_scene("thesis_two_planes", **small))
     assert "ignores shadowing" not in caplog.text
-    with caplog.at_level(logging.WARNING, logger="nlosfw.builtin.analytic"):
+    with caplog.at_level(logging.WARNING, logger="nlosfw.simulate.analytic"):
         rendered(AnalyticSimulator({"patch_size": 0.05}),
                  builtin_scene("thesis_occluded", **small))
     assert "ignores shadowing" in caplog.text

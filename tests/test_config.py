@@ -5,8 +5,8 @@ from typing import Literal
 
 import pytest
 
-from nlosfw.config import config_from_mapping, config_to_dict, require
-from nlosfw.errors import ConfigError
+from nlosfw.common.config import config_from_mapping, config_to_dict, require
+from nlosfw.common.errors import ConfigError
 
 
 @dataclass(frozen=True)

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from nlosfw.errors import ConfigError, DataError, FitError
-from nlosfw.field_models import (
+from nlosfw.common.errors import ConfigError, DataError, FitError
+from nlosfw.model.networks import (
     PRESETS,
     FieldNormalisation,
     NeuralFieldConfig,
@@ -172,7 +172,7 @@ def test_model_files(tmp_path):
 
 def test_estimate_delay_is_periodic_across_the_wrap_boundary():
     """A transient at path d gives a delay equal to d modulo the period 1/df (any d)."""
-    from nlosfw.field_models import estimate_delay
+    from nlosfw.model.networks import estimate_delay
 
     f = np.linspace(4.0, 8.0, 41)                      # df = 0.1: period 10 m
     period = 10.0

@@ -7,8 +7,9 @@ import logging
 import numpy as np
 import pytest
 
-from nlosfw.errors import ConfigError
-from nlosfw.geometry import (
+from nlosfw.capture.geometry import device_legs
+from nlosfw.common.errors import ConfigError
+from nlosfw.simulate.geometry import (
     TriangleMesh,
     ground_truth_maps,
     item_mesh,
@@ -20,8 +21,8 @@ from nlosfw.geometry import (
     unit_square_samples,
     validate_scene,
 )
-from nlosfw.physics import device_legs, three_bounce
-from nlosfw.scene import GeometryItem, scene_from_config
+from nlosfw.simulate.physics import three_bounce
+from nlosfw.simulate.scene import GeometryItem, scene_from_config
 from nlosfw.testing.fixtures import tiny_scene_config
 
 
@@ -131,7 +132,7 @@ def test_time_window_without_any_path_is_refused_with_the_path_range():
 
 
 def test_partial_window_is_allowed_with_a_warning(caplog):
-    with caplog.at_level(logging.WARNING, logger="nlosfw.geometry"):
+    with caplog.at_level(logging.WARNING, logger="nlosfw.simulate.geometry"):
         validate_scene(scene([{"type": "patch"}], time={"start": 2.2, "bins": 40}))
     assert "paths outside it are not recorded" in caplog.text
 
@@ -187,8 +188,8 @@ def test_ground_truth_sees_the_nearest_surface():
 
 
 def test_blocked_fraction_finds_shadowing_only_where_it_exists():
-    from nlosfw.geometry import blocked_fraction
-    from nlosfw.scenes import builtin_scene
+    from nlosfw.simulate.builtin_scenes import builtin_scene
+    from nlosfw.simulate.geometry import blocked_fraction
 
     for name, shadowed in (("thesis_two_planes", False), ("thesis_planes", False),
                            ("thesis_occluded", True), ("thesis_concave", True)):

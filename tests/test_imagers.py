@@ -13,16 +13,16 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from nlosfw.builtin.fft_imager import FFTImager
-from nlosfw.builtin.fft_transform import FFTTransform
-from nlosfw.builtin.rsd_imager import RSDImager
-from nlosfw.builtin.wavelet_transform import WaveletTransform
-from nlosfw.capture import CaptureGeometry
-from nlosfw.enums import CaptureKind
-from nlosfw.errors import DataError
-from nlosfw.phasor_field import PhasorField
-from nlosfw.reconstruction import Reconstruction, volume_voxels
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.errors import DataError
+from nlosfw.image.fft import FFTImager
+from nlosfw.image.reconstruction import Reconstruction, volume_voxels
+from nlosfw.image.rsd import RSDImager
 from nlosfw.testing import fixtures, reference
+from nlosfw.transform.fft import FFTTransform
+from nlosfw.transform.field import PhasorField
+from nlosfw.transform.wavelet import WaveletTransform
 
 SPACING = 1 / 16
 

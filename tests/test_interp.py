@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlosfw.builtin.interp import InterpFieldModel, spline_weights
-from nlosfw.capture import CaptureGeometry
-from nlosfw.enums import CaptureKind
-from nlosfw.errors import DataError, FitError
-from nlosfw.phasor_field import PhasorField
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.errors import DataError, FitError
+from nlosfw.model.interp import InterpFieldModel, spline_weights
 from nlosfw.testing import fixtures
+from nlosfw.transform.field import PhasorField
 
 GEOM = CaptureGeometry(kind=CaptureKind.SINGLE_SPOT, laser_point=np.zeros(3))
 

@@ -11,17 +11,12 @@ import numpy as np
 import pytest
 
 from nlosfw import CaptureKind, DataError, HFormat, Reconstruction
-from nlosfw.capture import YTAL_FIELDS
-from nlosfw.io import (
-    read_capture,
-    read_phasor_field,
-    read_reconstruction,
-    write_capture,
-    write_phasor_field,
-    write_reconstruction,
-)
-from nlosfw.io.atomic import atomic_path
+from nlosfw.capture.data import YTAL_FIELDS
+from nlosfw.capture.hdf5 import read_capture, write_capture
+from nlosfw.common.files import atomic_path
+from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
 from nlosfw.testing import fixtures
+from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 
 DATA = Path(__file__).parent / "data"
 EXPECTED = np.load(DATA / "ytal_expected.npz")

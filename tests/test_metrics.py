@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from nlosfw.errors import DataError
-from nlosfw.metrics import image_metrics, psnr, rmse, ssim
+from nlosfw.common.errors import DataError
+from nlosfw.image.scores import image_metrics, psnr, rmse, ssim
 
 skimage_metrics = pytest.importorskip("skimage.metrics")
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlosfw.builtin.analytic import AnalyticSimulator
-from nlosfw.errors import ConfigError
-from nlosfw.noise import apply_noise
-from nlosfw.physics import SPEED_OF_LIGHT
-from nlosfw.scene import NoiseConfig, scene_from_config
+from nlosfw.capture.geometry import SPEED_OF_LIGHT
+from nlosfw.common.errors import ConfigError
+from nlosfw.simulate.analytic import AnalyticSimulator
+from nlosfw.simulate.noise import apply_noise
+from nlosfw.simulate.scene import NoiseConfig, scene_from_config
 from nlosfw.testing.fixtures import tiny_scene_config
 
 

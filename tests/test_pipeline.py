@@ -9,10 +9,10 @@ import pytest
 
 from nlosfw.app.cache import Cache
 from nlosfw.app.pipeline import Pipeline
-from nlosfw.builtin.analytic import AnalyticConfig, AnalyticSimulator
-from nlosfw.builtin.interp import InterpConfig, InterpFieldModel
-from nlosfw.io import read_capture, write_capture
+from nlosfw.capture.hdf5 import read_capture, write_capture
+from nlosfw.model.interp import InterpConfig, InterpFieldModel
 from nlosfw.plugins import hookimpl, load_plugins
+from nlosfw.simulate.analytic import AnalyticConfig, AnalyticSimulator
 from nlosfw.testing import fixtures
 
 TINY = ["scene=tiny", "model=interp", "figures.enabled=false", "transform.n_frequencies=21",
@@ -152,7 +152,7 @@ def test_noisy_scene_renders_the_transport_once(tmp_path, cache_dir):
 
 def test_mesh_file_contents_and_plugin_version_are_part_of_the_cache_key(tmp_path, cache_dir):
     trimesh = pytest.importorskip("trimesh")
-    from nlosfw.scene import scene_from_config
+    from nlosfw.simulate.scene import scene_from_config
 
     host = load_plugins()
     pipeline = Pipeline(tmp_path / "run", compose(TINY, host), host)

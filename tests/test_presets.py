@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from nlosfw.field_models import FAMILY_CONFIGS, PRESETS, count_parameters, resolve_architecture
-from nlosfw.io import yaml_safe
+from nlosfw.common import yaml_safe
+from nlosfw.model.networks import FAMILY_CONFIGS, PRESETS, count_parameters, resolve_architecture
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

@@ -7,11 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from nlosfw.capture import CaptureGeometry
-from nlosfw.enums import CaptureKind
-from nlosfw.errors import DataError
-from nlosfw.phasor_field import PhasorField
-from nlosfw.protocol import (
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.errors import DataError
+from nlosfw.model.protocol import (
     error_metrics,
     field_metrics,
     heldout_frequency_indices,
@@ -19,6 +18,7 @@ from nlosfw.protocol import (
     split_field,
 )
 from nlosfw.testing import fixtures
+from nlosfw.transform.field import PhasorField
 
 
 def _field(n: int = 64, n_f: int = 151, seed: int = 0) -> PhasorField:

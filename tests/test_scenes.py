@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import yaml
 
-from nlosfw.errors import ConfigError
-from nlosfw.geometry import ground_truth_maps, sample_surface, validate_scene
-from nlosfw.scene import Scene
-from nlosfw.scenes import builtin_scene, builtin_scene_config, builtin_scene_names
+from nlosfw.common.errors import ConfigError
+from nlosfw.simulate.builtin_scenes import builtin_scene, builtin_scene_config, builtin_scene_names
+from nlosfw.simulate.geometry import ground_truth_maps, sample_surface, validate_scene
+from nlosfw.simulate.scene import Scene
 
 THESIS = ("thesis_planes", "thesis_concave", "thesis_two_planes", "thesis_occluded")
 QUICK = ("plane", "letter_t", "point")
@@ -145,7 +145,7 @@ def test_scene_files_list_every_option_so_each_can_be_overridden():
 
     import yaml
 
-    from nlosfw.scene import Scene
+    from nlosfw.simulate.scene import Scene
 
     def fields(cls):
         return {f.name: f for f in dataclasses.fields(cls)}
@@ -159,8 +159,8 @@ def test_scene_files_list_every_option_so_each_can_be_overridden():
 
 
 def test_params_are_refused_where_they_would_be_ignored():
-    from nlosfw.errors import ConfigError
-    from nlosfw.scene import GeometryItem
+    from nlosfw.common.errors import ConfigError
+    from nlosfw.simulate.scene import GeometryItem
 
     with pytest.raises(ConfigError, match="params: only heightfield items take params"):
         GeometryItem(type="rectangle", params={"bumps": []})

@@ -13,14 +13,14 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from nlosfw.builtin.fft_transform import FFTTransform
-from nlosfw.builtin.frequencies import dft_length, grid_spacing
-from nlosfw.builtin.temporal_dft import temporal_dft
-from nlosfw.builtin.wavelet_transform import WaveletTransform
-from nlosfw.capture import Capture
-from nlosfw.enums import GridFormat, HFormat
-from nlosfw.errors import ConfigError, DataError
+from nlosfw.capture.data import Capture
+from nlosfw.capture.enums import GridFormat, HFormat
+from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.testing import fixtures, reference
+from nlosfw.transform.fft import FFTTransform
+from nlosfw.transform.frequencies import dft_length, grid_spacing
+from nlosfw.transform.temporal_dft import temporal_dft
+from nlosfw.transform.wavelet import WaveletTransform
 
 SPACING = 0.1   # of fixtures.point_capture: 0.8 x 0.6 m wall, 8 x 6 sensors
 

@@ -20,9 +20,9 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
 
-from nlosfw import __version__
-from nlosfw.errors import DataError
-from nlosfw.io.atomic import atomic_path, write_text
+from nlosfw.common.errors import DataError
+from nlosfw.common.files import atomic_path, write_text
+from nlosfw.common.version import __version__
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")

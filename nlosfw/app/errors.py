@@ -9,7 +9,7 @@ import traceback
 from rich.console import Console
 from rich.markup import escape
 
-from nlosfw.errors import one_line
+from nlosfw.common.errors import one_line
 
 log = logging.getLogger("nlosfw")
 

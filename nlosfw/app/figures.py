@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from nlosfw.app.run import RunContext
-from nlosfw.metrics import normalise
-from nlosfw.phasor_field import PhasorField
-from nlosfw.reconstruction import Reconstruction
+from nlosfw.app.run_dir import RunContext
+from nlosfw.image.reconstruction import Reconstruction
+from nlosfw.image.scores import normalise
+from nlosfw.transform.field import PhasorField
 
 _SOURCE_TITLES = {"true": "true field", "raw": "raw (training grid)", "model": "model",
                   "interp": "interp baseline"}

@@ -26,10 +26,10 @@ from pathlib import Path
 from typing import Any
 
 from nlosfw.app.settings import SELECTOR_GROUPS, run_settings
-from nlosfw.config import config_defaults
-from nlosfw.enums import PluginKind
-from nlosfw.errors import ConfigError, NlosfwError, PluginError, one_line
+from nlosfw.common.config import config_defaults
+from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.plugins import PluginHost
+from nlosfw.plugins.kinds import PluginKind
 
 log = logging.getLogger(__name__)
 
@@ -159,7 +159,7 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
     """Check a composed config: plugin names, installed dependencies, options, scene, settings."""
     from omegaconf import OmegaConf
 
-    from nlosfw.scene import scene_from_config
+    from nlosfw.simulate.scene import scene_from_config
 
     plain = OmegaConf.to_container(cfg, resolve=True)
     settings = run_settings(plain)
@@ -187,7 +187,7 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
     if settings.capture.path is None:
-        from nlosfw.geometry import validate_scene
+        from nlosfw.simulate.geometry import validate_scene
 
         scene = validate_scene(scene_from_config(plain.get("scene"))).scene
         node = dict(plain["simulator"])
@@ -196,7 +196,7 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
     path = Path(settings.capture.path).expanduser()
     if not path.is_file():
         raise ConfigError("capture.path", f"file not found: {settings.capture.path}")
-    from nlosfw.io import read_capture
+    from nlosfw.capture.hdf5 import read_capture
 
     read_capture(path)  # a malformed file must fail here, before any output exists
 

@@ -17,27 +17,23 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw import __version__
 from nlosfw.app.cache import Cache, cache_key, file_digest
 from nlosfw.app.console import config_tree, progress_bar
-from nlosfw.app.run import RunContext
+from nlosfw.app.run_dir import RunContext
 from nlosfw.app.settings import RunSettings, run_settings
-from nlosfw.capture import Capture
-from nlosfw.config import config_to_dict
-from nlosfw.errors import ConfigError
-from nlosfw.interfaces import TrainingStep
-from nlosfw.io import (
-    read_capture,
-    read_phasor_field,
-    write_capture,
-    write_phasor_field,
-    write_reconstruction,
-    yaml_safe,
-)
-from nlosfw.metrics import image_metrics
-from nlosfw.phasor_field import PhasorField
+from nlosfw.capture.data import Capture
+from nlosfw.capture.hdf5 import read_capture, write_capture
+from nlosfw.common import yaml_safe
+from nlosfw.common.config import config_to_dict
+from nlosfw.common.errors import ConfigError
+from nlosfw.common.version import __version__
+from nlosfw.image.reconstruction import Reconstruction, volume_voxels
+from nlosfw.image.reconstruction_io import write_reconstruction
+from nlosfw.image.scores import image_metrics
+from nlosfw.model.interface import TrainingStep
 from nlosfw.plugins import PluginHost, load_plugins
-from nlosfw.reconstruction import Reconstruction, volume_voxels
+from nlosfw.transform.field import PhasorField
+from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 
 log = logging.getLogger(__name__)
 
@@ -190,7 +186,7 @@ class Pipeline:
 
     def fit(self, field: PhasorField) -> dict[str, Any]:
         """Split the field, fit the selected model and the interp baseline."""
-        from nlosfw.protocol import split_field
+        from nlosfw.model.protocol import split_field
 
         s = self.settings.split
         split = split_field(field, spatial_step=s.spatial_step, spectral=s.spectral,
@@ -220,7 +216,7 @@ class Pipeline:
 
     def predict(self, field: PhasorField, fitted: dict[str, Any]) -> dict[str, PhasorField]:
         """The fields to image: true, raw (training grid, all frequencies), model, interp."""
-        from nlosfw.protocol import field_metrics
+        from nlosfw.model.protocol import field_metrics
 
         split = fitted["split"]
         step = self.settings.split.spatial_step
@@ -300,7 +296,7 @@ class Pipeline:
         """
         import dataclasses
 
-        from nlosfw.scene import NoiseConfig, scene_from_config
+        from nlosfw.simulate.scene import NoiseConfig, scene_from_config
 
         scene = scene_from_config(self.config["scene"])
         name, options = self._plugin_options("simulator")
@@ -325,7 +321,7 @@ class Pipeline:
     def _capture_key(self, name: str, simulator: Any, scene: Any) -> str:
         """Cache key of a simulated capture: the plugin and its version, its validated
         options, the validated scene with absolute mesh paths, and the mesh files' bytes."""
-        from nlosfw.geometry import resolve_mesh_paths
+        from nlosfw.simulate.geometry import resolve_mesh_paths
 
         scene = resolve_mesh_paths(scene)
         meshes = {item.path: file_digest(Path(item.path)) for item in scene.geometry

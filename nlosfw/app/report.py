@@ -22,8 +22,10 @@ import yaml
 from rich.console import Console
 from rich.table import Table
 
-from nlosfw.errors import ConfigError, DataError
-from nlosfw.io.atomic import atomic_path, write_text
+from nlosfw.app.tables import markdown_table
+from nlosfw.app.thesis import thesis_comparison
+from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.common.files import atomic_path, write_text
 
 log = logging.getLogger(__name__)
 
@@ -121,24 +123,9 @@ def to_csv(rows: list[dict[str, str]]) -> str:
     return buffer.getvalue()
 
 
-def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A markdown table (cells with '|' escaped)."""
-    def line(cells: Sequence[str]) -> str:
-        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
-
-    return "\n".join([line(header), "|" + "---|" * len(header), *map(line, rows)]) + "\n"
-
-
 def to_markdown(rows: list[dict[str, str]], columns: Sequence[str] | None = None) -> str:
     columns = list(columns or [c for c, _ in COLUMNS])
     return markdown_table(columns, [[row.get(c, "") for c in columns] for row in rows])
-
-
-def thesis_tables(records: list[dict[str, Any]]) -> str:
-    """Markdown tables of our numbers next to the thesis's, for runs of thesis presets."""
-    from nlosfw.app.thesis import thesis_comparison
-
-    return thesis_comparison(records)
 
 
 def comparison_figure(records: list[dict[str, Any]], path: Path) -> None:
@@ -191,7 +178,7 @@ def write_report(root: Path) -> tuple[Path, list[dict[str, str]]]:
     out.mkdir(parents=True)
     write_text(out / "report.csv", to_csv(rows))
     markdown = f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n" + to_markdown(rows)
-    tables = thesis_tables(records)
+    tables = thesis_comparison(records)
     if tables:
         markdown += "\n## Next to the thesis\n\n" + tables
     write_text(out / "report.md", markdown)

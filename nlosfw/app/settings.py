@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from nlosfw.config import config_from_mapping, require
+from nlosfw.common.config import config_from_mapping, require
 
 #: The config groups that select a scene or a plugin (plus presets).
 SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment")

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from nlosfw.app.report import markdown_table
+from nlosfw.app.tables import markdown_table
 
 _TABLE_41 = ("experiment", "parameters (ours)", "parameters (thesis)", "data size (ours)",
              "data size (thesis)", "parameters/data % (ours)", "parameters/data % (thesis)",

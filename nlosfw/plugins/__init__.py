@@ -1,4 +1,4 @@
-"""Plugin discovery and registries.
+"""The plugin system: discovery through the ``nlosfw`` entry-point group, registries, hooks.
 
 Entry points in the ``nlosfw`` group name plugin modules; their hook
 implementations register factories by name into one registry per kind. Loading
@@ -6,8 +6,21 @@ the registries imports the plugin modules only: factories (and with them
 torch, JAX, mitsuba or embreex) are imported when a plugin is instantiated.
 """
 
-from nlosfw.plugins.hookspecs import hookimpl
-from nlosfw.plugins.manager import ENV_VAR, PluginHost, load_plugins
-from nlosfw.plugins.registry import PluginSpec, Registry
+from nlosfw.plugins.hookspecs import hookimpl, hookspec
+from nlosfw.plugins.kinds import INTERFACES, PluginKind
+from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_plugins
+from nlosfw.plugins.registry import PluginSpec, Registry, import_object
 
-__all__ = ["ENV_VAR", "PluginHost", "PluginSpec", "Registry", "hookimpl", "load_plugins"]
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "ENV_VAR",
+    "INTERFACES",
+    "PluginHost",
+    "PluginKind",
+    "PluginSpec",
+    "Registry",
+    "hookimpl",
+    "hookspec",
+    "import_object",
+    "load_plugins",
+]

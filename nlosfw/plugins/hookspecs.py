@@ -22,22 +22,22 @@ hookimpl = pluggy.HookimplMarker(PROJECT)
 # ------------------------------------------------------------------ registration
 @hookspec
 def register_simulators(register: Any) -> None:
-    """Register :class:`~nlosfw.interfaces.Simulator` plugins: ``register(name, factory, ...)``."""
+    """Register :class:`~nlosfw.simulate.Simulator` plugins: ``register(name, factory, ...)``."""
 
 
 @hookspec
 def register_phasor_transforms(register: Any) -> None:
-    """Register :class:`~nlosfw.interfaces.PhasorTransform` plugins."""
+    """Register :class:`~nlosfw.transform.PhasorTransform` plugins."""
 
 
 @hookspec
 def register_field_models(register: Any) -> None:
-    """Register :class:`~nlosfw.interfaces.FieldModel` plugins."""
+    """Register :class:`~nlosfw.model.FieldModel` plugins."""
 
 
 @hookspec
 def register_imagers(register: Any) -> None:
-    """Register :class:`~nlosfw.interfaces.Imager` plugins."""
+    """Register :class:`~nlosfw.image.Imager` plugins."""
 
 
 # ------------------------------------------------------------------ run lifecycle

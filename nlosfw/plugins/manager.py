@@ -12,8 +12,8 @@ from typing import Any
 
 import pluggy
 
-from nlosfw.enums import PluginKind
 from nlosfw.plugins import hookspecs
+from nlosfw.plugins.kinds import PluginKind
 from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
 
 log = logging.getLogger(__name__)

@@ -13,9 +13,9 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from nlosfw.config import config_from_mapping
-from nlosfw.enums import PluginKind
-from nlosfw.errors import PluginError
+from nlosfw.common.config import config_from_mapping
+from nlosfw.common.errors import PluginError
+from nlosfw.plugins.kinds import PluginKind
 
 
 def import_object(path: str) -> Any:

@@ -23,9 +23,12 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from nlosfw.enums import PluginKind
+from nlosfw.plugins.kinds import PluginKind
 from nlosfw.plugins.registry import PluginSpec, Registry
+from nlosfw.testing import fixtures
 from nlosfw.testing.checks_common import COMMON_CHECKS
+from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy
+from nlosfw.testing.fixtures import tiny_scene_config
 
 Check = Callable[[PluginSpec], None]
 
@@ -81,4 +84,13 @@ def parametrize_with_checks(registry: Registry | None = None, kinds: Iterable[st
     return pytest.mark.parametrize("spec, check", params)
 
 
-__all__ = ["Check", "check_cases", "checks_for", "parametrize_with_checks"]
+__all__ = [
+    "ENGINE_CASES",
+    "Check",
+    "assert_engine_matches_numpy",
+    "check_cases",
+    "checks_for",
+    "fixtures",
+    "parametrize_with_checks",
+    "tiny_scene_config",
+]

@@ -18,10 +18,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from nlosfw.config import config_from_mapping, config_to_dict
-from nlosfw.enums import PluginKind
-from nlosfw.errors import ConfigError
-from nlosfw.interfaces import INTERFACES
+from nlosfw.common.config import config_from_mapping, config_to_dict
+from nlosfw.common.errors import ConfigError
+from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures
 

@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from nlosfw.errors import DataError
-from nlosfw.phasor_field import PhasorField
+from nlosfw.common.errors import DataError
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures, reference
+from nlosfw.transform.field import PhasorField
 
 SHAPE = (12, 16)
 SPACING = 1 / 16

@@ -18,15 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.capture import CaptureGeometry
-from nlosfw.enums import CaptureKind
-from nlosfw.errors import NlosfwError
-from nlosfw.field_models import write_model_file
-from nlosfw.interfaces import FieldModelConfig
-from nlosfw.phasor_field import PhasorField
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.errors import NlosfwError
+from nlosfw.model.interface import FieldModelConfig
+from nlosfw.model.networks import write_model_file
+from nlosfw.model.protocol import error_metrics, split_field
 from nlosfw.plugins.registry import PluginSpec
-from nlosfw.protocol import error_metrics, split_field
 from nlosfw.testing import fixtures
+from nlosfw.transform.field import PhasorField
 
 #: Relative L2 error (on every sample of the fixture field, held-out frequencies
 #: included) that a model of each family must reach with its ``test_config``.

@@ -1,6 +1,6 @@
 """Conformance checks for every simulator plugin (see :mod:`nlosfw.testing.checks_common`).
 
-Every expected number comes from :mod:`nlosfw.physics` evaluated on a dense
+Every expected number comes from :mod:`nlosfw.simulate.physics` evaluated on a dense
 grid of points over the hidden patch (an independent quadrature), never from
 the simulator under test. Scenes are tiny (a 1 m wall, 8 x 8 sensors, a few
 hundred bins) and simulators run with their registered ``test_config``.
@@ -14,11 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.enums import GridFormat, HFormat
-from nlosfw.errors import ConfigError
-from nlosfw.physics import bin_index, device_legs, three_bounce
+from nlosfw.capture.enums import GridFormat, HFormat
+from nlosfw.capture.geometry import device_legs
+from nlosfw.common.errors import ConfigError
 from nlosfw.plugins.registry import PluginSpec
-from nlosfw.scene import Scene, scene_from_config
+from nlosfw.simulate.physics import bin_index, three_bounce
+from nlosfw.simulate.scene import Scene, scene_from_config
 from nlosfw.testing import fixtures
 
 #: Energy and energy-ratio tolerance (relative).
@@ -33,7 +34,7 @@ def _patch_quadrature(scene: Scene, n: int = 64) -> tuple[np.ndarray, np.ndarray
     """Exact-physics (path, weight) of every (patch point, sensor) pair, (n^2, S) each.
 
     Uses the scene's first item, a wall-facing patch or rectangle, split into n x n
-    cells evaluated at their centres with :func:`nlosfw.physics.three_bounce`.
+    cells evaluated at their centres with :func:`nlosfw.simulate.physics.three_bounce`.
     """
     item = scene.geometry[0]
     w, h = item.size
@@ -58,7 +59,7 @@ def _profiles(H: np.ndarray) -> np.ndarray:
 
 def check_capture_layout(spec: PluginSpec) -> None:
     """Layout, dtype, units and metadata are those of the scene, and survive HDF5."""
-    from nlosfw.io import read_capture, write_capture
+    from nlosfw.capture.hdf5 import read_capture, write_capture
 
     for confocal, legs in ((False, False), (True, True)):
         scene = fixtures.tiny_scene(confocal=confocal, device_legs=legs, bins=400)
@@ -121,7 +122,7 @@ def check_onset_matches_path_length(spec: PluginSpec) -> None:
 
 
 def check_absolute_energy(spec: PluginSpec) -> None:
-    """Total and per-sensor energy of a 4 cm patch match nlosfw.physics within 5%.
+    """Total and per-sensor energy of a 4 cm patch match nlosfw.simulate.physics within 5%.
 
     The patch is off-centre, so a transposed sensor grid or a missing cosine
     changes the per-sensor totals.
@@ -135,7 +136,8 @@ def check_absolute_energy(spec: PluginSpec) -> None:
         total = got.sum() / expected.sum()
         assert abs(total - 1) < ENERGY_RTOL, (
             f"{spec.qualified_name} (confocal={confocal}): total energy is {total:.4f} x the "
-            "analytic value; every simulator must follow nlosfw.physics' radiometric convention")
+            "analytic value; every simulator must follow the radiometric convention of "
+            "nlosfw.simulate.physics")
         ratio = got / expected
         worst = int(np.argmax(np.abs(ratio - 1)))
         assert np.all(np.abs(ratio - 1) < ENERGY_RTOL), (

@@ -22,11 +22,11 @@ import unittest
 
 import numpy as np
 
-from nlosfw.capture import Capture
-from nlosfw.errors import DataError
-from nlosfw.phasor_field import PhasorField
+from nlosfw.capture.data import Capture
+from nlosfw.common.errors import DataError
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures, reference
+from nlosfw.transform.field import PhasorField
 
 #: Target of the point-scatterer captures (m); off-centre so no symmetry hides errors.
 TARGET = (0.1, -0.05, 0.5)
@@ -136,7 +136,7 @@ def check_wavelet_weights_are_kernel_spectrum(spec: PluginSpec) -> None:
     Applies to transforms whose config derives from ``WaveletTransformConfig``;
     the spectrum is integrated numerically from K(t), not from a closed form.
     """
-    from nlosfw.builtin.wavelet_transform import WaveletTransformConfig
+    from nlosfw.transform.wavelet import WaveletTransformConfig
 
     config = spec.make_config(dict(spec.test_config))
     if not isinstance(config, WaveletTransformConfig):

@@ -1,7 +1,7 @@
 """Checks for backend engines of the neural field models (torch, JAX, or a new backend).
 
-A backend implements :class:`nlosfw.neural_field.Engine`; these helpers compare it
-with the plain numpy forward pass of :mod:`nlosfw.field_models`, so every backend
+A backend implements :class:`nlosfw.model.trainer.Engine`; these helpers compare it
+with the plain numpy forward pass of :mod:`nlosfw.model.networks`, so every backend
 computes the same network from the same weights.
 """
 
@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.field_models import (
+from nlosfw.model.networks import (
     FAMILY_CONFIGS,
     forward_numpy,
     init_parameters,

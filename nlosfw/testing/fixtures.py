@@ -10,11 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.capture import Capture, CaptureGeometry
-from nlosfw.enums import CaptureKind
-from nlosfw.phasor_field import PhasorField
-from nlosfw.reconstruction import volume_voxels
-from nlosfw.scene import Scene, scene_from_config
+from nlosfw.capture.data import Capture
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.image.reconstruction import volume_voxels
+from nlosfw.simulate.scene import Scene, scene_from_config
+from nlosfw.transform.field import PhasorField
 
 #: Position of the hidden patch of :func:`tiny_scene` (m).
 TINY_TARGET = (0.1, -0.05, 0.6)
@@ -42,7 +43,7 @@ def tiny_scene(**kwargs: Any) -> Scene:
 
 def tiny_capture(**kwargs: Any) -> Capture:
     """The analytic transient of :func:`tiny_scene` (no noise)."""
-    from nlosfw.builtin.analytic import AnalyticSimulator
+    from nlosfw.simulate.analytic import AnalyticSimulator
 
     return AnalyticSimulator().simulate(tiny_scene(**kwargs))
 
@@ -191,7 +192,7 @@ def point_scene_config(target: tuple[float, float, float] = (0.1, -0.05, 0.5),
 
 def point_capture(**kwargs: Any) -> Capture:
     """The analytic transient of :func:`point_scene_config` (one bin per sensor, no noise)."""
-    from nlosfw.builtin.analytic import AnalyticSimulator
+    from nlosfw.simulate.analytic import AnalyticSimulator
 
     return AnalyticSimulator().simulate(scene_from_config(point_scene_config(**kwargs)))
 
@@ -206,7 +207,7 @@ def random_capture(seed: int = 0, **kwargs: Any) -> Capture:
 
 def exhaustive_capture() -> Capture:
     """A tiny exhaustive capture (T_Lx_Ly_Sx_Sy): every laser point with every sensor."""
-    from nlosfw.enums import GridFormat, HFormat
+    from nlosfw.capture.enums import GridFormat, HFormat
 
     grid = np.moveaxis(rect_wall_grid((2, 3), 0.2), 0, 1)     # (X, Y, 3)
     normals = np.broadcast_to(np.array([0.0, 0.0, 1.0]), grid.shape).copy()

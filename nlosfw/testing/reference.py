@@ -16,9 +16,10 @@ import math
 
 import numpy as np
 
-from nlosfw.capture import Capture, CaptureGeometry
-from nlosfw.enums import CaptureKind
-from nlosfw.phasor_field import PhasorField
+from nlosfw.capture.data import Capture
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.transform.field import PhasorField
 
 
 def naive_dft(H: np.ndarray, t_start: float, delta_t: float,

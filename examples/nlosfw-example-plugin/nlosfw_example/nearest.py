@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from nlosfw import DataError, FieldModel, FieldModelConfig, FitError, FitReport, PhasorField
-from nlosfw.config import config_from_mapping, config_to_dict
+from nlosfw.common import config_from_mapping, config_to_dict
 
 _FORMAT = "nlosfw-example-nearest"
 

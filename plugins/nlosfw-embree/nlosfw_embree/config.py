@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from nlosfw.config import require
-from nlosfw.interfaces import SimulatorConfig
+from nlosfw.common import require
+from nlosfw.simulate import SimulatorConfig
 
 
 @dataclass(frozen=True)

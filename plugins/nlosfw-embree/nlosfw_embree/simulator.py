@@ -1,10 +1,10 @@
 """The ``embree`` simulator: three-bounce transients with Embree visibility.
 
 Estimator. ``samples`` points are drawn area-uniformly on every hidden triangle
-(scrambled Sobol by default, see :func:`nlosfw.geometry.surface_points`); each
+(scrambled Sobol by default, see :func:`nlosfw.simulate.geometry.surface_points`); each
 stands for ``total area / samples`` of surface. For every sample and every
 sensor the path laser spot -> p -> sensor is weighted exactly as in
-:mod:`nlosfw.physics` and binned by its length; both hidden legs are tested
+:mod:`nlosfw.simulate.physics` and binned by its length; both hidden legs are tested
 with Embree occlusion rays, so surfaces shadow each other. The estimate is
 unbiased for any scene and agrees in absolute value with the ``analytic``
 simulator on scenes without shadowing. Point scatterers are not sampled: each
@@ -28,17 +28,18 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.capture import Capture
-from nlosfw.geometry import (
+from nlosfw.capture import Capture, device_legs
+from nlosfw.common import available_cores
+from nlosfw.simulate import (
     PointScatterers,
+    Scene,
     SceneGeometry,
+    Simulator,
+    scene_capture,
     sobol_engine,
     surface_points,
+    three_bounce,
 )
-from nlosfw.interfaces import Simulator, scene_capture
-from nlosfw.parallel import available_cores
-from nlosfw.physics import device_legs, three_bounce
-from nlosfw.scene import Scene
 from nlosfw_embree.config import EmbreeConfig
 from nlosfw_embree.tracer import OcclusionTracer
 from nlosfw_embree.transport import SingleSpotRows, confocal_rows, laser_side

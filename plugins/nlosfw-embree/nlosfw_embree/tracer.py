@@ -11,14 +11,14 @@ import numpy as np
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh as EmbreeTriangles
 
-from nlosfw.geometry import TriangleMesh
+from nlosfw.simulate import TriangleMesh
 
 #: Value of ``occluded`` for a ray that reaches its end unobstructed (embreex convention).
 FREE = -1
 
 
 class OcclusionTracer:
-    """A committed Embree scene of a :class:`~nlosfw.geometry.TriangleMesh`."""
+    """A committed Embree scene of a :class:`~nlosfw.simulate.geometry.TriangleMesh`."""
 
     def __init__(self, mesh: TriangleMesh) -> None:
         self.n_faces = mesh.n_faces

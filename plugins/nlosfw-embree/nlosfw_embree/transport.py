@@ -1,7 +1,7 @@
 """Vectorised three-bounce transport for batches of hidden-surface samples.
 
 Every sample p (area dA, albedo rho, normal n) is shared by all sensors x_s of
-the wall grid. Following :mod:`nlosfw.physics`, a laser spot x_l -> p -> x_s
+the wall grid. Following :mod:`nlosfw.simulate.physics`, a laser spot x_l -> p -> x_s
 path carries
 
     rho dA cos_l cos_in cos_out cos_s / (pi^3 r_l^2 r_s^2),

@@ -5,18 +5,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlosfw.builtin.analytic import AnalyticSimulator
-from nlosfw.errors import ConfigError
-from nlosfw.physics import bin_index, three_bounce
-from nlosfw.scene import scene_from_config
-from nlosfw.scenes import builtin_scene
-from nlosfw.testing.fixtures import tiny_scene_config
+from nlosfw.common import ConfigError
+from nlosfw.simulate import (
+    AnalyticSimulator,
+    bin_index,
+    builtin_scene,
+    scene_from_config,
+    three_bounce,
+)
+from nlosfw.testing import tiny_scene_config
 
 pytest.importorskip("embreex")
 
 from nlosfw_embree.simulator import EmbreeSimulator
 
-from nlosfw.geometry import validate_scene
+from nlosfw.simulate import validate_scene
 
 
 def rendered(simulator, scene):

@@ -1,4 +1,4 @@
-"""JAX engines of the neural field models (see :mod:`nlosfw.neural_field`).
+"""JAX engines of the neural field models (see :mod:`nlosfw.model.trainer`).
 
 The training loop, initial weights, batches and files are shared with the
 torch backend; this module only runs jitted Adam steps (optax) and forward
@@ -16,9 +16,16 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from nlosfw.errors import ConfigError, one_line
-from nlosfw.field_models import Architecture, PEFieldConfig, SirenFieldConfig, TanhFieldConfig
-from nlosfw.neural_field import PREDICT_CHUNK, Engine, NeuralFieldModel
+from nlosfw.common import ConfigError, one_line
+from nlosfw.model import (
+    PREDICT_CHUNK,
+    Architecture,
+    Engine,
+    NeuralFieldModel,
+    PEFieldConfig,
+    SirenFieldConfig,
+    TanhFieldConfig,
+)
 
 #: Adam exactly as torch.optim.Adam with its defaults (eps outside the square root).
 _ADAM = optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8)

@@ -13,12 +13,9 @@ pytest.importorskip("optax")
 
 from nlosfw_jax.models import JaxEngine, PEJax, SirenJax, TanhJax
 
-from nlosfw.errors import ConfigError, DataError, FitError
-from nlosfw.field_models import (
-    preset_config,
-)
-from nlosfw.testing import fixtures
-from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy
+from nlosfw.common import ConfigError, DataError, FitError
+from nlosfw.model import preset_config
+from nlosfw.testing import ENGINE_CASES, assert_engine_matches_numpy, fixtures
 
 FAST = {"steps": 150, "eval_every": 25, "batch_size": 256, "device": "cpu"}
 

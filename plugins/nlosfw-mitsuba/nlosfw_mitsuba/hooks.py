@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from nlosfw.plugins.hookspecs import hookimpl
+from nlosfw.plugins import hookimpl
 
 
 @hookimpl

@@ -15,7 +15,7 @@ import sys
 from collections.abc import Iterable, Mapping, MutableMapping
 from pathlib import Path
 
-from nlosfw.errors import PluginError
+from nlosfw.common import PluginError
 
 ENV_VAR = "DRJIT_LIBLLVM_PATH"
 #: Oldest LLVM major version that works with Dr.Jit here (15 crashes).

@@ -5,12 +5,12 @@ The scene becomes a Mitsuba scene: the relay wall is a diffuse ``rectangle``
 ``transient_hdr_film`` of the wall's resolution and time axis; the laser is a
 narrow ``projector`` at the laser device aimed at the spot; every hidden item is
 a triangle mesh with a two-sided diffuse BSDF of its albedo, built from the very
-triangles :mod:`nlosfw.geometry` gives every simulator. The integrator uses laser
+triangles :mod:`nlosfw.simulate.geometry` gives every simulator. The integrator uses laser
 sampling, hidden-geometry sampling (optional), a box temporal filter, keeps only
 the configured bounce order, and counts the device legs in the time axis exactly
 when the scene does.
 
-Conventions, checked against :mod:`nlosfw.physics` by the tests:
+Conventions, checked against :mod:`nlosfw.simulate.physics` by the tests:
 
 * mitransient's transient is [y, x, t, channel]; nlosfw's H is [t, x, y].
 * Its values are nlosfw's times ``pi cos(theta_l) / d_l^2`` for a projector of unit
@@ -35,10 +35,15 @@ from typing import Any
 import numpy as np
 
 from nlosfw.capture import Capture
-from nlosfw.errors import ConfigError, PluginError, one_line
-from nlosfw.geometry import SceneGeometry, TriangleMesh, sample_surface
-from nlosfw.interfaces import Simulator, scene_capture
-from nlosfw.scene import Scene
+from nlosfw.common import ConfigError, PluginError, one_line
+from nlosfw.simulate import (
+    Scene,
+    SceneGeometry,
+    Simulator,
+    TriangleMesh,
+    sample_surface,
+    scene_capture,
+)
 from nlosfw_mitsuba.config import MitsubaConfig
 from nlosfw_mitsuba.llvm import configure_llvm
 

@@ -10,12 +10,9 @@ import numpy as np
 import pytest
 from nlosfw_mitsuba.llvm import configure_llvm, find_libllvm, llvm_version
 
-from nlosfw.builtin.analytic import AnalyticSimulator
-from nlosfw.errors import ConfigError, PluginError
-from nlosfw.geometry import validate_scene
-from nlosfw.scene import scene_from_config
-from nlosfw.scenes import builtin_scene
-from nlosfw.testing.fixtures import tiny_scene_config
+from nlosfw.common import ConfigError, PluginError
+from nlosfw.simulate import AnalyticSimulator, builtin_scene, scene_from_config, validate_scene
+from nlosfw.testing import tiny_scene_config
 
 TILTED = [{"type": "rectangle", "position": [0.1, -0.05, 0.6], "size": [0.3, 0.2],
            "rotation": [10.0, -20.0, 5.0], "albedo": 0.7}]

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from nlosfw.plugins.hookspecs import hookimpl
+from nlosfw.plugins import hookimpl
 
 _REQUIRES = {"torch": "torch==2.13.0"}
 #: Small, fast settings for the conformance kit (tiny fields: full batch, small networks,
@@ -31,7 +31,7 @@ def register_field_models(register: Any) -> None:
         register(
             f"{family}_torch",
             f"nlosfw_torch.models:{cls}",
-            config=f"nlosfw.field_models:{config}",
+            config=f"nlosfw.model:{config}",
             requires=_REQUIRES,
             description=description,
             test_config={**_TEST_CONFIG, "lr": _TEST_LR[family]},

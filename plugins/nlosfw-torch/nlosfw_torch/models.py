@@ -1,4 +1,4 @@
-"""PyTorch engines of the neural field models (see :mod:`nlosfw.neural_field`).
+"""PyTorch engines of the neural field models (see :mod:`nlosfw.model.trainer`).
 
 The training loop, initial weights, batches and files are shared with the JAX
 backend; this module only runs Adam steps and forward passes with torch.
@@ -13,9 +13,16 @@ from typing import Any
 import numpy as np
 import torch
 
-from nlosfw.errors import ConfigError, one_line
-from nlosfw.field_models import Architecture, PEFieldConfig, SirenFieldConfig, TanhFieldConfig
-from nlosfw.neural_field import PREDICT_CHUNK, Engine, NeuralFieldModel
+from nlosfw.common import ConfigError, one_line
+from nlosfw.model import (
+    PREDICT_CHUNK,
+    Architecture,
+    Engine,
+    NeuralFieldModel,
+    PEFieldConfig,
+    SirenFieldConfig,
+    TanhFieldConfig,
+)
 
 #: torch's own CPU thread count (one per core), read before any model changes it.
 DEFAULT_THREADS = torch.get_num_threads()

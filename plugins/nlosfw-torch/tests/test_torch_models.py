@@ -11,14 +11,18 @@ torch = pytest.importorskip("torch")
 
 from nlosfw_torch.models import PETorch, SirenTorch, TanhTorch, TorchEngine  # noqa: E402
 
-from nlosfw.errors import ConfigError, DataError, FitError  # noqa: E402
-from nlosfw.field_models import (  # noqa: E402
+from nlosfw.common import ConfigError, DataError, FitError  # noqa: E402
+from nlosfw.model import (  # noqa: E402
+    TrainingStep,
+    field_metrics,
     preset_config,
+    split_field,
 )
-from nlosfw.interfaces import TrainingStep  # noqa: E402
-from nlosfw.protocol import field_metrics, split_field  # noqa: E402
-from nlosfw.testing import fixtures  # noqa: E402
-from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy  # noqa: E402
+from nlosfw.testing import (  # noqa: E402
+    ENGINE_CASES,
+    assert_engine_matches_numpy,
+    fixtures,
+)
 
 HAS_JAX = importlib.util.find_spec("jax") is not None and importlib.util.find_spec("optax")
 FAST = {"steps": 150, "eval_every": 25, "batch_size": 256, "device": "cpu"}

@@ -1,1 +1,0 @@
-"""The light, numpy-only plugins shipped with the core."""

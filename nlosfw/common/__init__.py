@@ -1,0 +1,44 @@
+"""Infrastructure every stage shares: errors, typed configs, atomic files, cores.
+
+The names in ``__all__`` are the public API of this stage: plugins, examples and docs
+import only these."""
+
+
+from nlosfw.common.config import (
+    Configurable,
+    config_defaults,
+    config_from_mapping,
+    config_to_dict,
+    require,
+)
+from nlosfw.common.cores import available_cores
+from nlosfw.common.errors import (
+    USER_ERROR_EXIT_STATUS,
+    ConfigError,
+    DataError,
+    FitError,
+    NlosfwError,
+    PluginError,
+    one_line,
+)
+from nlosfw.common.files import atomic_path, write_text
+from nlosfw.common.version import __version__
+
+__all__ = [
+    "__version__",
+    "atomic_path",
+    "available_cores",
+    "config_defaults",
+    "config_from_mapping",
+    "config_to_dict",
+    "ConfigError",
+    "Configurable",
+    "DataError",
+    "FitError",
+    "NlosfwError",
+    "one_line",
+    "PluginError",
+    "require",
+    "USER_ERROR_EXIT_STATUS",
+    "write_text",
+]

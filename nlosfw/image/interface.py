@@ -1,0 +1,31 @@
+"""The imager interface: a phasor field in, a reconstruction of the hidden volume out."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from nlosfw.common.config import Configurable
+from nlosfw.image.reconstruction import Reconstruction
+from nlosfw.transform.field import PhasorField
+
+
+@dataclass(frozen=True)
+class ImagerConfig:
+    """Options shared by every imager (none yet)."""
+
+
+class Imager(Configurable, ABC):
+    """Propagates a :class:`PhasorField` into the hidden volume and images it."""
+
+    config_class: ClassVar[type] = ImagerConfig
+
+    @abstractmethod
+    def reconstruct(self, field: PhasorField, voxels: np.ndarray) -> Reconstruction:
+        """Intensity at ``voxels``: a plane (Y, X, 3), planes (Z, Y, X, 3) or points (N, 3)."""
+
+
+#: The interface class of each plugin kind (by :class:`~nlosfw.plugins.PluginKind` value).

@@ -1,0 +1,92 @@
+"""The field-model interface: a continuous F(x, y, f) -> P fitted to a discrete phasor field."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.config import Configurable, require
+from nlosfw.transform.field import PhasorField
+
+
+@dataclass(frozen=True)
+class FieldModelConfig:
+    """Options shared by every field model."""
+
+    seed: int = 0
+    """Seed of initialisation and batching: same seed and data, same model (on CPU)."""
+    device: str = "auto"
+    """Where to train: ``auto`` (a GPU when present), ``cpu``, or a backend device name."""
+
+    def __post_init__(self) -> None:
+        require(bool(self.device), "device", "must be auto, cpu or a device name")
+
+
+@dataclass(frozen=True)
+class TrainingStep:
+    """Progress of a fit, reported to ``on_step`` callbacks."""
+
+    step: int
+    total_steps: int
+    loss: float
+    val_loss: float | None = None
+    seconds: float = 0.0
+
+
+@dataclass
+class FitReport:
+    """What happened during :meth:`FieldModel.fit`."""
+
+    steps: int
+    seconds: float
+    final_loss: float
+    best_val_loss: float | None = None
+    stopped_early: bool = False
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+class FieldModel(Configurable, ABC):
+    """A continuous representation F(x, y, omega) -> P fitted to a discrete phasor field."""
+
+    config_class: ClassVar[type] = FieldModelConfig
+
+    @abstractmethod
+    def fit(self, field: PhasorField, validation: PhasorField | None = None,
+            on_step: Callable[[TrainingStep], None] | None = None) -> FitReport:
+        """Fit to ``field``; ``validation`` (if given) drives early stopping."""
+
+    @abstractmethod
+    def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
+        """Complex field at wall points ``wall_xy`` (..., 2) and ``frequencies`` (F,).
+
+        Returns shape (F, ...). Works after :meth:`fit` or :meth:`load` only.
+        """
+
+    @property
+    @abstractmethod
+    def n_parameters(self) -> int:
+        """Number of trainable parameters (or stored values for non-neural models)."""
+
+    @abstractmethod
+    def save(self, path: str | Path) -> None:
+        """Write weights, config and normalisation to one file."""
+
+    @classmethod
+    @abstractmethod
+    def load(cls, path: str | Path) -> FieldModel:
+        """Read a file written by :meth:`save` of the same model class."""
+
+    def predict_field(self, wall_xyz: np.ndarray, frequencies: np.ndarray,
+                      geometry: CaptureGeometry, weights: np.ndarray | None = None,
+                      metadata: Mapping[str, Any] | None = None) -> PhasorField:
+        """The model evaluated on a wall grid ``wall_xyz`` (Y, X, 3) as a :class:`PhasorField`."""
+        wall_xyz = np.asarray(wall_xyz, dtype=float)
+        values = self.predict(wall_xyz[..., :2], np.asarray(frequencies, dtype=float))
+        return PhasorField(values=values, frequencies=frequencies, wall_xyz=wall_xyz,
+                           geometry=geometry, weights=weights, metadata=dict(metadata or {}))

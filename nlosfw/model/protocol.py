@@ -1,0 +1,195 @@
+"""The thesis's evaluation protocol: train/held-out splits of a phasor field and metrics.
+
+Thesis ch. 4-5: train on every other wall sample in x and y (32 x 32 of
+64 x 64) and on 90% of 151 frequencies, then predict the full field.
+:func:`split_field` makes the split, :func:`field_metrics` scores a prediction
+on three sets (held-out pixels at training frequencies, every pixel at held-out
+frequencies, everything), and :func:`parameter_data_ratio` gives Table 4.1's
+parameters/data percentage.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+from nlosfw.common.errors import DataError
+from nlosfw.transform.field import PhasorField
+
+SpectralSplit = Literal["interleaved", "tail", "none"]
+
+
+@dataclass(frozen=True, eq=False)
+class FieldSplit:
+    """A field split into training samples and held-out samples.
+
+    ``train_field`` holds the training pixels (a sub-grid) at the training
+    frequencies; ``spatial_mask[y, x]`` is True at training pixels of the full grid;
+    ``train_frequencies`` and ``heldout_frequencies`` index the full field's
+    frequencies (both sorted).
+    """
+
+    train_field: PhasorField
+    spatial_mask: np.ndarray
+    train_frequencies: np.ndarray
+    heldout_frequencies: np.ndarray
+    spatial_step: int = 2
+    spectral: str = "interleaved"
+
+    @property
+    def n_train_values(self) -> int:
+        """Real training values (2 per complex sample), the "data size" of thesis Table 4.1."""
+        return int(2 * self.train_field.values.size)
+
+
+def heldout_frequency_indices(n_frequencies: int, spectral: str, fraction: float) -> np.ndarray:
+    """Indices of the held-out frequencies (sorted).
+
+    ``interleaved``: ceil(fraction * F) indices spread evenly over the band, never the
+    first or last (so held-out frequencies are interpolated); ``tail``: the highest
+    ceil(fraction * F) (extrapolated); ``none``: no frequency held out.
+    """
+    if spectral == "none" or n_frequencies < 3:
+        return np.zeros(0, dtype=np.int64)
+    n_hold = int(math.ceil(fraction * n_frequencies - 1e-9))
+    n_hold = min(max(n_hold, 1), n_frequencies - 2)
+    if spectral == "tail":
+        return np.arange(n_frequencies - n_hold, n_frequencies, dtype=np.int64)
+    step = n_frequencies / n_hold
+    idx = np.clip(np.round((np.arange(n_hold) + 0.5) * step).astype(np.int64), 1,
+                  n_frequencies - 2)
+    return np.unique(idx)
+
+
+def split_field(field: PhasorField, spatial_step: int = 2,
+                spectral: SpectralSplit = "interleaved", spectral_fraction: float = 0.1
+                ) -> FieldSplit:
+    """Split ``field`` for training as in the thesis.
+
+    Spatial: keep every ``spatial_step``-th sample in x and y starting at index 0
+    (64 x 64 -> 32 x 32 with the default 2; 1 keeps everything). Spectral: hold out
+    ``spectral_fraction`` of the frequencies, ``interleaved`` (every tenth or so:
+    interpolation), ``tail`` (the highest ones: extrapolation) or ``none``. The thesis
+    setting, 151 frequencies, holds out 16 and trains on 135.
+    """
+    if not isinstance(field, PhasorField):
+        raise DataError(f"split_field: expected a PhasorField, got {type(field).__name__}")
+    if int(spatial_step) != spatial_step or spatial_step < 1:
+        raise DataError(f"split_field: spatial_step must be an integer >= 1, got {spatial_step}")
+    if spectral not in ("interleaved", "tail", "none"):
+        raise DataError(f"split_field: spectral must be interleaved, tail or none, got "
+                        f"{spectral!r}")
+    if not 0 < spectral_fraction < 1:
+        raise DataError(f"split_field: spectral_fraction must be in (0, 1), got "
+                        f"{spectral_fraction}")
+    k = int(spatial_step)
+    ny, nx = field.grid_shape
+    mask = np.zeros((ny, nx), dtype=bool)
+    mask[::k, ::k] = True
+    held = heldout_frequency_indices(field.n_frequencies, spectral, spectral_fraction)
+    train = np.setdiff1d(np.arange(field.n_frequencies), held)
+    train_field = field.select(train, slice(None, None, k), slice(None, None, k))
+    return FieldSplit(train_field=train_field, spatial_mask=mask, train_frequencies=train,
+                      heldout_frequencies=held, spatial_step=k, spectral=spectral)
+
+
+def error_metrics(true: np.ndarray, predicted: np.ndarray) -> dict[str, Any]:
+    """Errors of complex ``predicted`` against ``true`` (same shape), over all their elements.
+
+    * ``relative_l2``: ||P^ - P|| / ||P|| (complex L2 norms);
+    * ``nmse_db``: 10 log10(||P^ - P||^2 / ||P||^2) = 20 log10(relative_l2);
+    * ``amplitude_rmse``: sqrt(mean((|P^| - |P|)^2)) in the field's units, and
+      ``relative_amplitude_rmse``, the same divided by sqrt(mean(|P|^2));
+    * ``phase_error``: sum(|P| |wrap(arg P^ - arg P)|) / sum(|P|), radians in [0, pi].
+
+    Values are None when the set is empty; ``n_samples`` counts complex samples.
+    """
+    t = np.asarray(true, dtype=np.complex128).ravel()
+    p = np.asarray(predicted, dtype=np.complex128).ravel()
+    if t.shape != p.shape:
+        raise DataError(f"error_metrics: shapes differ: true {t.shape}, predicted {p.shape}")
+    empty = {"relative_l2": None, "nmse_db": None, "amplitude_rmse": None,
+             "relative_amplitude_rmse": None, "phase_error": None, "n_samples": 0}
+    if t.size == 0:
+        return empty
+    err2 = float(np.sum(np.abs(p - t) ** 2))
+    ref2 = float(np.sum(np.abs(t) ** 2))
+    rel = math.sqrt(err2 / ref2) if ref2 > 0 else math.inf
+    mag_t, mag_p = np.abs(t), np.abs(p)
+    amp_rmse = float(np.sqrt(np.mean((mag_p - mag_t) ** 2)))
+    rms = math.sqrt(ref2 / t.size)
+    dphi = np.abs(np.angle(p * np.conj(t)))
+    phase = float(np.sum(mag_t * dphi) / np.sum(mag_t)) if ref2 > 0 else math.nan
+    return {
+        "relative_l2": rel,
+        "nmse_db": 10 * math.log10(err2 / ref2) if ref2 > 0 and err2 > 0 else (
+            -math.inf if ref2 > 0 else math.inf),
+        "amplitude_rmse": amp_rmse,
+        "relative_amplitude_rmse": amp_rmse / rms if rms > 0 else math.inf,
+        "phase_error": phase,
+        "n_samples": int(t.size),
+    }
+
+
+def field_metrics(true_field: PhasorField | np.ndarray, predicted_field: PhasorField | np.ndarray,
+                  split: FieldSplit) -> dict[str, dict[str, Any]]:
+    """Errors of a prediction of the full field on the three sets of the protocol.
+
+    ``true_field`` and ``predicted_field`` are the full fields (or their complex
+    ``values`` arrays, shape (F, Y, X)) that ``split`` was made from. Returns
+    ``{"heldout_pixels": ..., "heldout_frequencies": ..., "all": ...}``, each the dict
+    of :func:`error_metrics`: held-out pixels at training frequencies, every pixel at
+    held-out frequencies, and every sample; plus ``heldout_pixels_inside``, the held-out
+    pixels inside the training pixels' bounding box (with the default split the last
+    row and column lie outside it, half a training step beyond: an extrapolation that
+    often dominates ``heldout_pixels``). Sets that are empty (no spatial or no spectral
+    hold-out) have None values.
+    """
+    t = true_field.values if isinstance(true_field, PhasorField) else np.asarray(true_field)
+    p = (predicted_field.values if isinstance(predicted_field, PhasorField)
+         else np.asarray(predicted_field))
+    if t.shape != p.shape or t.ndim != 3:
+        raise DataError(f"field_metrics: true {t.shape} and predicted {p.shape} must both be the "
+                        "full (frequency, y, x) field")
+    if t.shape[1:] != split.spatial_mask.shape:
+        raise DataError(f"field_metrics: the fields' grid {t.shape[1:]} is not the split's "
+                        f"{split.spatial_mask.shape}")
+    n_f = split.train_frequencies.size + split.heldout_frequencies.size
+    if t.shape[0] != n_f:
+        raise DataError(f"field_metrics: the fields have {t.shape[0]} frequencies, the split "
+                        f"{n_f}")
+    held_px = ~split.spatial_mask
+    inside = held_px & hull_mask(split.spatial_mask)
+    tf, hf = split.train_frequencies, split.heldout_frequencies
+    return {
+        "heldout_pixels": error_metrics(t[tf][:, held_px], p[tf][:, held_px]),
+        "heldout_frequencies": error_metrics(t[hf], p[hf]),
+        "all": error_metrics(t, p),
+        "heldout_pixels_inside": error_metrics(t[tf][:, inside], p[tf][:, inside]),
+    }
+
+
+def hull_mask(spatial_mask: np.ndarray) -> np.ndarray:
+    """Pixels inside the bounding box of the training pixels (rows and columns between the
+    first and last ones holding a training pixel)."""
+    rows = np.flatnonzero(spatial_mask.any(axis=1))
+    cols = np.flatnonzero(spatial_mask.any(axis=0))
+    out = np.zeros_like(spatial_mask, dtype=bool)
+    if rows.size and cols.size:
+        out[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1] = True
+    return out
+
+
+def parameter_data_ratio(n_parameters: int, n_values: int | FieldSplit) -> float:
+    """Parameters per training value in percent (thesis Table 4.1's "Parameters/Data (%)").
+
+    ``n_values`` counts real values (2 per complex sample) or is a :class:`FieldSplit`.
+    E.g. SIREN, 3362 parameters, 32 x 32 x 135 x 2 = 276,480 values: 1.22%.
+    """
+    n = n_values.n_train_values if isinstance(n_values, FieldSplit) else int(n_values)
+    if n <= 0:
+        raise DataError(f"parameter_data_ratio: need a positive number of values, got {n}")
+    return 100.0 * int(n_parameters) / n

@@ -1,0 +1,71 @@
+"""Registration of the built-in plugins.
+
+This module is the core distribution's ``nlosfw`` entry point: the built-ins
+register through exactly the same hooks as third-party plugins. Factories and
+config classes are named by import path so nothing is imported until used.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from nlosfw.plugins.hookspecs import hookimpl
+
+
+@hookimpl
+def register_simulators(register: Any) -> None:
+    register(
+        "analytic",
+        "nlosfw.simulate.analytic:AnalyticSimulator",
+        config="nlosfw.simulate.analytic:AnalyticConfig",
+        description="Exact three-bounce transients of points and patches (no visibility)",
+        test_config={"patch_size": 0.05},
+        expected_failures={"check_occlusion": "no visibility: the analytic simulator ignores "
+                           "shadowing (by design; use a ray tracer such as embree)"},
+    )
+
+
+@hookimpl
+def register_phasor_transforms(register: Any) -> None:
+    register(
+        "fft",
+        "nlosfw.transform.fft:FFTTransform",
+        config="nlosfw.transform.fft:FFTTransformConfig",
+        description="Temporal Fourier transform at any set of frequencies",
+        test_config={"n_frequencies": 16},
+    )
+    register(
+        "wavelet",
+        "nlosfw.transform.wavelet:WaveletTransform",
+        config="nlosfw.transform.wavelet:WaveletTransformConfig",
+        description="Liu's Gaussian-enveloped virtual illumination (spectral bins and weights)",
+        test_config={"n_cycles": 4.0},
+    )
+
+
+@hookimpl
+def register_field_models(register: Any) -> None:
+    register(
+        "interp",
+        "nlosfw.model.interp:InterpFieldModel",
+        config="nlosfw.model.interp:InterpConfig",
+        description="Cubic interpolation of the complex field in x, y and frequency (baseline)",
+    )
+
+
+@hookimpl
+def register_imagers(register: Any) -> None:
+    register(
+        "rsd",
+        "nlosfw.image.rsd:RSDImager",
+        config="nlosfw.image.rsd:RSDImagerConfig",
+        description="Direct Rayleigh-Sommerfeld sum over any voxel set",
+        test_config={"chunk_mb": 1.0},
+    )
+    register(
+        "fft",
+        "nlosfw.image.fft:FFTImager",
+        config="nlosfw.image.fft:FFTImagerConfig",
+        description="Fast RSD: per-plane FFT convolution (Liu 2020)",
+        test_config={"workers": 2},
+    )

@@ -1,0 +1,174 @@
+"""Scene descriptions: relay wall, capture setup, time axis, hidden geometry, noise.
+
+A :class:`Scene` is what every :class:`~nlosfw.simulate.Simulator` renders.
+It is built from the ``scene`` Hydra config group with
+:func:`scene_from_config`, which checks every option by name.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from nlosfw.common.config import config_from_mapping, require
+
+#: Geometry item types understood by :mod:`nlosfw.simulate.geometry`.
+GEOMETRY_TYPES = ("rectangle", "box", "mesh", "patch", "point", "heightfield")
+
+
+@dataclass(frozen=True)
+class WallConfig:
+    """The relay wall: a rectangle in the plane z = 0 facing +z."""
+
+    size: tuple[float, float] = (2.0, 2.0)
+    """Extent in metres along x and y."""
+    resolution: tuple[int, int] = (64, 64)
+    """Number of sensor points along x and y (cell-centred)."""
+    center: tuple[float, float] = (0.0, 0.0)
+    """Centre of the wall (x, y) in metres."""
+
+    def __post_init__(self) -> None:
+        require(all(s > 0 for s in self.size), "size", f"must be > 0 metres, got {self.size}")
+        require(all(r >= 1 for r in self.resolution), "resolution",
+                f"must be >= 1 sensor per axis, got {self.resolution}")
+
+    @property
+    def spacing(self) -> tuple[float, float]:
+        """Sensor spacing (dx, dy) in metres."""
+        return (self.size[0] / self.resolution[0], self.size[1] / self.resolution[1])
+
+    def grid_xyz(self) -> np.ndarray:
+        """Cell-centred sensor points, shape (X, Y, 3) as in y-tal's ``X_Y_3``."""
+        nx, ny = self.resolution
+        dx, dy = self.spacing
+        xs = self.center[0] - self.size[0] / 2 + (np.arange(nx) + 0.5) * dx
+        ys = self.center[1] - self.size[1] / 2 + (np.arange(ny) + 0.5) * dy
+        x, y = np.meshgrid(xs, ys, indexing="ij")
+        return np.stack([x, y, np.zeros_like(x)], axis=-1)
+
+
+@dataclass(frozen=True)
+class CaptureSetup:
+    """Where the laser hits the wall and where the devices are."""
+
+    type: Literal["single_spot", "confocal"] = "single_spot"
+    laser_spot: tuple[float, float] = (0.0, 0.0)
+    """Laser spot (x, y) on the wall for single-spot captures."""
+    laser_position: tuple[float, float, float] = (-0.5, 0.0, 0.25)
+    """Position of the laser device (m)."""
+    sensor_position: tuple[float, float, float] = (-0.5, 0.0, 0.25)
+    """Position of the sensor device (m)."""
+    device_legs: bool = False
+    """Count the device-to-wall legs in the time axis (t_accounts_first_and_last_bounces)."""
+
+    def __post_init__(self) -> None:
+        require(self.laser_position[2] > 0, "laser_position",
+                "must be in front of the wall (z > 0)")
+        require(self.sensor_position[2] > 0, "sensor_position",
+                "must be in front of the wall (z > 0)")
+
+
+@dataclass(frozen=True)
+class TimeAxis:
+    """Histogram bins of optical path length, all in metres."""
+
+    bins: int = 2048
+    bin_width: float = 0.003
+    start: float = 0.0
+
+    def __post_init__(self) -> None:
+        require(self.bins > 0, "bins", f"must be a positive number of bins, got {self.bins}")
+        require(self.bin_width > 0, "bin_width",
+                f"must be a positive number of metres, got {self.bin_width}")
+
+    @property
+    def end(self) -> float:
+        return self.start + self.bins * self.bin_width
+
+
+@dataclass(frozen=True)
+class GeometryItem:
+    """One hidden object. Rectangles and patches face the wall (normal -z) before rotation."""
+
+    type: str = "rectangle"
+    """One of rectangle, box, mesh, patch, point, heightfield."""
+    position: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    """Centre of the item (m)."""
+    size: tuple[float, ...] = (0.5, 0.5)
+    """rectangle/patch/heightfield: (width, height); box: (width, height, depth); mesh: ignored."""
+    rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Rotation in degrees about x, then y, then z, around the item's centre."""
+    albedo: float = 1.0
+    """Diffuse albedo in [0, 1]; for a point, its effective scattering area (m^2)."""
+    path: str | None = None
+    """Mesh file (OBJ, PLY, STL, ...) for type mesh."""
+    scale: float = 1.0
+    """Uniform scale of a mesh file's coordinates."""
+    params: dict[str, Any] = field(default_factory=dict)
+    """Shape-specific parameters (e.g. a heightfield's bumps)."""
+
+    def __post_init__(self) -> None:
+        require(self.type in GEOMETRY_TYPES, "type",
+                f"unknown geometry type {self.type!r}; valid: {', '.join(GEOMETRY_TYPES)}")
+        require(self.albedo >= 0, "albedo", f"must be >= 0, got {self.albedo}")
+        require(self.scale > 0, "scale", f"must be > 0, got {self.scale}")
+        if self.type in ("rectangle", "patch", "heightfield"):
+            require(len(self.size) == 2 and all(s > 0 for s in self.size), "size",
+                    f"a {self.type} needs (width, height) > 0, got {self.size}")
+        if self.type == "box":
+            require(len(self.size) == 3 and all(s > 0 for s in self.size), "size",
+                    f"a box needs (width, height, depth) > 0, got {self.size}")
+        if self.type == "mesh":
+            require(bool(self.path), "path", "a mesh item needs the path of a mesh file")
+        require(self.type == "heightfield" or not self.params, "params",
+                f"only heightfield items take params; a {self.type} has none")
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Measurement noise applied after rendering (see :mod:`nlosfw.simulate.noise`)."""
+
+    model: Literal["none", "poisson"] = "none"
+    photons: float = 1e6
+    """Expected number of signal photons in the whole capture (poisson)."""
+    dark_counts: float = 0.0
+    """Expected dark counts per sensor over the whole time window (poisson)."""
+    jitter_ps: float = 0.0
+    """Standard deviation of Gaussian timing jitter in picoseconds (any model)."""
+
+    def __post_init__(self) -> None:
+        require(self.photons > 0, "photons", f"must be > 0, got {self.photons}")
+        require(self.dark_counts >= 0, "dark_counts", f"must be >= 0, got {self.dark_counts}")
+        require(self.jitter_ps >= 0, "jitter_ps", f"must be >= 0, got {self.jitter_ps}")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """Everything a simulator needs to produce a :class:`~nlosfw.capture.Capture`."""
+
+    name: str = "custom"
+    wall: WallConfig = field(default_factory=WallConfig)
+    capture: CaptureSetup = field(default_factory=CaptureSetup)
+    time: TimeAxis = field(default_factory=TimeAxis)
+    geometry: tuple[GeometryItem, ...] = ()
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    ground_truth_resolution: tuple[int, int] | None = None
+    """Resolution (x, y) of the ground-truth maps; default the sensor grid's."""
+
+    def __post_init__(self) -> None:
+        require(len(self.geometry) > 0, "geometry", "the hidden scene needs at least one item")
+
+    @property
+    def is_confocal(self) -> bool:
+        return self.capture.type == "confocal"
+
+    def laser_spot_xyz(self) -> np.ndarray:
+        """The single laser spot on the wall (3,)."""
+        return np.array([self.capture.laser_spot[0], self.capture.laser_spot[1], 0.0])
+
+
+def scene_from_config(mapping: Any, where: str = "scene") -> Scene:
+    """Build and validate a :class:`Scene` from a plain mapping (e.g. Hydra's ``cfg.scene``)."""
+    return config_from_mapping(Scene, mapping, where)

@@ -1,0 +1,43 @@
+"""Stage 2, the phasor transform: a transient capture becomes complex wall fields,
+one per frequency.
+
+The names in ``__all__`` are the public API of this stage: plugins, examples and docs
+import only these."""
+
+
+from nlosfw.transform.fft import FFTTransform, FFTTransformConfig
+from nlosfw.transform.field import PhasorField, regular_grid_spacing
+from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
+from nlosfw.transform.frequencies import (
+    default_band,
+    dft_length,
+    spatial_limit,
+    temporal_nyquist,
+    uniform_step,
+    wall_spacing,
+)
+from nlosfw.transform.interface import PhasorTransform, PhasorTransformConfig
+from nlosfw.transform.temporal_dft import temporal_dft, unit_phasor
+from nlosfw.transform.wavelet import GaussianWavelet, WaveletTransform, WaveletTransformConfig
+
+__all__ = [
+    "default_band",
+    "dft_length",
+    "FFTTransform",
+    "FFTTransformConfig",
+    "GaussianWavelet",
+    "PhasorField",
+    "PhasorTransform",
+    "PhasorTransformConfig",
+    "read_phasor_field",
+    "regular_grid_spacing",
+    "spatial_limit",
+    "temporal_dft",
+    "temporal_nyquist",
+    "uniform_step",
+    "unit_phasor",
+    "wall_spacing",
+    "WaveletTransform",
+    "WaveletTransformConfig",
+    "write_phasor_field",
+]

@@ -1,0 +1,132 @@
+"""Phasor fields: complex wavefronts on the relay wall, one per temporal frequency."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.errors import DataError
+
+
+@dataclass(frozen=True, eq=False)
+class PhasorField:
+    """Complex field ``values[f, y, x]`` at ``frequencies[f]`` over wall points ``wall_xyz[y, x]``.
+
+    Frequencies are in cycles per metre of optical path (wavelength = 1/f).
+    ``weights`` are the spectral weights of the virtual illumination (one per
+    frequency; ``None`` means all ones) that an imager applies when it sums
+    frequencies. ``geometry`` says how the field was captured.
+    """
+
+    values: np.ndarray
+    frequencies: np.ndarray
+    wall_xyz: np.ndarray
+    geometry: CaptureGeometry
+    weights: np.ndarray | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        values = np.asarray(self.values)
+        if not np.iscomplexobj(values):
+            values = values.astype(np.complex64)
+        set_(self, "values", values)
+        set_(self, "frequencies", np.atleast_1d(np.asarray(self.frequencies, dtype=np.float64)))
+        set_(self, "wall_xyz", np.asarray(self.wall_xyz, dtype=np.float64))
+        if self.weights is not None:
+            set_(self, "weights", np.atleast_1d(np.asarray(self.weights, dtype=np.complex128)))
+        set_(self, "metadata", dict(self.metadata or {}))
+        self._validate()
+
+    def _validate(self) -> None:
+        v, f, w = self.values, self.frequencies, self.wall_xyz
+        if v.ndim != 3:
+            raise DataError(f"values: must have shape (frequency, y, x), got {v.shape}")
+        if f.shape != (v.shape[0],):
+            raise DataError(f"frequencies: {f.shape[0]} given for {v.shape[0]} field slices")
+        if not np.all(np.isfinite(f)) or np.any(f <= 0):
+            raise DataError("frequencies: must be finite and > 0 (cycles per metre)")
+        if w.shape != v.shape[1:] + (3,):
+            raise DataError(f"wall_xyz: shape {w.shape} does not match the field's "
+                            f"(y, x) = {v.shape[1:]} plus 3 coordinates")
+        if not np.all(np.isfinite(w)):
+            raise DataError("wall_xyz: contains NaN or inf")
+        if not np.all(np.isfinite(v)):
+            raise DataError("values: contains NaN or inf")
+        if self.weights is not None and (
+            self.weights.shape != f.shape or not np.all(np.isfinite(self.weights))
+        ):
+            raise DataError(f"weights: need {f.shape[0]} finite values, got shape "
+                            f"{self.weights.shape}")
+
+    @property
+    def n_frequencies(self) -> int:
+        return int(self.values.shape[0])
+
+    @property
+    def grid_shape(self) -> tuple[int, int]:
+        """(ny, nx)."""
+        return (int(self.values.shape[1]), int(self.values.shape[2]))
+
+    @property
+    def wavelengths(self) -> np.ndarray:
+        """Wavelengths in metres (1/frequency)."""
+        return 1.0 / self.frequencies
+
+    @property
+    def effective_weights(self) -> np.ndarray:
+        """The weights, or ones when none were given."""
+        if self.weights is None:
+            return np.ones(self.n_frequencies, dtype=np.complex128)
+        return self.weights
+
+    def grid_spacing(self) -> tuple[float, float] | None:
+        """(dy, dx) in metres if the wall points form a regular axis-aligned grid, else None."""
+        return regular_grid_spacing(self.wall_xyz)
+
+    def select(self, frequency_index: Any = slice(None), y: Any = slice(None),
+               x: Any = slice(None)) -> PhasorField:
+        """A sub-field: some frequencies and/or a window or stride of wall samples."""
+        fi = np.arange(self.n_frequencies)[frequency_index]
+        fi = np.atleast_1d(fi)
+        values = self.values[fi][:, y, x]
+        return dataclasses.replace(
+            self,
+            values=values,
+            frequencies=self.frequencies[fi],
+            wall_xyz=self.wall_xyz[y, x],
+            weights=None if self.weights is None else self.weights[fi],
+        )
+
+    def replace(self, **changes: Any) -> PhasorField:
+        """A new field with some attributes replaced (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+
+def regular_grid_spacing(wall_xyz: np.ndarray, rtol: float = 1e-4) -> tuple[float, float] | None:
+    """(dy, dx) if ``wall_xyz[y, x]`` is a regular grid in the plane z = 0, else None.
+
+    x must vary along axis 1 and y along axis 0 with constant positive steps.
+    A single row or column has spacing 0 along its degenerate axis.
+    """
+    w = np.asarray(wall_xyz, dtype=float)
+    if w.ndim != 3 or w.shape[-1] != 3:
+        return None
+    scale = max(float(np.ptp(w[..., :2])), 1e-12)
+    if np.max(np.abs(w[..., 2])) > rtol * scale:
+        return None
+    xs, ys = w[0, :, 0], w[:, 0, 1]
+    if not (np.allclose(w[..., 0], xs[None, :], atol=rtol * scale)
+            and np.allclose(w[..., 1], ys[:, None], atol=rtol * scale)):
+        return None
+    dx = float(np.mean(np.diff(xs))) if xs.size > 1 else 0.0
+    dy = float(np.mean(np.diff(ys))) if ys.size > 1 else 0.0
+    if xs.size > 1 and (dx <= 0 or not np.allclose(np.diff(xs), dx, atol=rtol * scale)):
+        return None
+    if ys.size > 1 and (dy <= 0 or not np.allclose(np.diff(ys), dy, atol=rtol * scale)):
+        return None
+    return dy, dx

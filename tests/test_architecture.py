@@ -1,0 +1,131 @@
+"""The package layout's rules: stages depend only on earlier stages, no import cycles, and
+plugins and examples use only the public names (``__all__``) of the stage packages."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CORE = ROOT / "nlosfw"
+
+#: Each package may import only packages of the same or an earlier layer.
+LAYERS = {
+    "nlosfw.common": 0,
+    "nlosfw.capture": 1,
+    "nlosfw.simulate": 2,
+    "nlosfw.transform": 2,
+    "nlosfw.model": 3,
+    "nlosfw.image": 3,
+    "nlosfw.plugins": 4,
+    "nlosfw.testing": 5,
+    "nlosfw.app": 5,
+    "nlosfw": 6,
+    "nlosfw.cli": 6,
+    "nlosfw.__main__": 6,
+}
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _is_module(name: str) -> bool:
+    base = ROOT.joinpath(*name.split("."))
+    return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
+
+
+def _imports(path: Path) -> set[str]:
+    """nlosfw modules imported anywhere in ``path`` (function-level imports included)."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if node.module.split(".")[0] != "nlosfw":
+                continue
+            for alias in node.names:
+                sub = f"{node.module}.{alias.name}"
+                found.add(sub if _is_module(sub) else node.module)
+        elif isinstance(node, ast.Import):
+            found.update(a.name for a in node.names if a.name.split(".")[0] == "nlosfw")
+    return found
+
+
+def _graph() -> dict[str, set[str]]:
+    return {_module_name(p): _imports(p) for p in CORE.rglob("*.py")}
+
+
+def _layer(module: str) -> int:
+    best = max((k for k in LAYERS if module == k or module.startswith(k + ".")), key=len)
+    return LAYERS[best]
+
+
+def test_stages_import_only_earlier_stages():
+    wrong = sorted((src, dst) for src, deps in _graph().items() for dst in deps
+                   if _layer(dst) > _layer(src))
+    assert not wrong, f"imports against the stage order (importer, imported): {wrong}"
+
+
+def test_no_import_cycles():
+    graph = _graph()
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(v: str) -> None:  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def _third_party_sources() -> list[Path]:
+    return sorted([*ROOT.glob("plugins/*/**/*.py"), *ROOT.glob("examples/**/*.py")])
+
+
+@pytest.mark.parametrize("path", _third_party_sources(), ids=lambda p: str(p.relative_to(ROOT)))
+def test_plugins_and_examples_use_only_public_names(path):
+    private = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            private += [a.name for a in node.names if a.name.split(".")[0] == "nlosfw"]
+        if not (isinstance(node, ast.ImportFrom) and node.module
+                and node.module.split(".")[0] == "nlosfw"):
+            continue
+        module = importlib.import_module(node.module)
+        public = set(getattr(module, "__all__", ()))
+        for alias in node.names:
+            if node.module.count(".") > 1 or alias.name not in public:
+                private.append(f"{node.module}.{alias.name}")
+    assert not private, (f"{path.relative_to(ROOT)} imports names outside the stage packages' "
+                         f"__all__: {private}")
+
+
+def test_every_public_name_exists():
+    for package in [m for m in LAYERS if m.count(".") == 1 and m != "nlosfw.cli"
+                    and m != "nlosfw.__main__"] + ["nlosfw"]:
+        module = importlib.import_module(package)
+        missing = [n for n in getattr(module, "__all__", ()) if not hasattr(module, n)]
+        assert not missing, f"{package}.__all__ names what it does not define: {missing}"
