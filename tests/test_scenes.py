@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from importlib.resources import files
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
+from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.builtin_scenes import builtin_scene, builtin_scene_config, builtin_scene_names
 from nlosfw.simulate.geometry import ground_truth_maps, sample_surface, validate_scene
@@ -164,3 +167,19 @@ def test_params_are_refused_where_they_would_be_ignored():
 
     with pytest.raises(ConfigError, match="params: only heightfield items take params"):
         GeometryItem(type="rectangle", params={"bumps": []})
+
+
+@pytest.mark.parametrize("name", builtin_scene_names())
+def test_builtin_scenes_are_unchanged(name):
+    """Every built-in scene equals the one recorded in tests/data/builtin_scenes.json.
+
+    The file holds ``config_to_dict(builtin_scene(name))`` of every scene as written by
+    commit 343f1f1, when each YAML file still spelled out all of its blocks; it guards
+    the scenes against changes in how their files share those blocks.
+    """
+    recorded = json.loads((Path(__file__).parent / "data" / "builtin_scenes.json").read_text())
+    assert sorted(recorded) == builtin_scene_names()
+    scene = builtin_scene(name)
+    assert config_to_dict(scene) == recorded[name]
+    assert isinstance(scene.geometry, tuple) and isinstance(scene.wall.resolution, tuple)
+    assert all(isinstance(item.position, tuple) for item in scene.geometry)
