@@ -1,12 +1,16 @@
 """Typed configs: names, types and ranges are checked with one-line errors."""
 
 from dataclasses import dataclass, field
-from typing import Literal
 
 import pytest
 
-from nlosfw.common.config import config_from_mapping, config_to_dict, require
+from nlosfw.common.config import Choice, config_from_mapping, config_to_dict, require
 from nlosfw.common.errors import ConfigError
+
+
+class Mode(Choice):
+    a = "a"
+    b = "b"
 
 
 @dataclass(frozen=True)
@@ -19,7 +23,7 @@ class Inner:
 class Outer:
     name: str = "x"
     lr: float = 1e-3
-    mode: Literal["a", "b"] = "a"
+    mode: Mode = Mode.a
     inner: Inner = field(default_factory=Inner)
     items: tuple[Inner, ...] = ()
     maybe: float | None = None

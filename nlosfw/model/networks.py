@@ -24,11 +24,11 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-from nlosfw.common.config import config_from_mapping, config_to_dict, require
+from nlosfw.common.config import Choice, config_from_mapping, config_to_dict, require
 from nlosfw.common.errors import DataError, FitError
 from nlosfw.model.interface import FieldModelConfig
 from nlosfw.transform.field import PhasorField
@@ -39,11 +39,40 @@ FILE_VERSION = 1
 
 
 # --------------------------------------------------------------------------- configs
+class NetworkMode(Choice):
+    """One network F(x, y, f) for every frequency, or one F_f(x, y) per frequency."""
+
+    multi = "multi"
+    single = "single"
+
+
+class LrSchedule(Choice):
+    """How the learning rate decays after warm-up."""
+
+    constant = "constant"
+    cosine = "cosine"
+    exponential = "exponential"
+
+
+class FrequencyInput(Choice):
+    """How a multi-frequency PE network sees the frequency."""
+
+    raw = "raw"
+    encoded = "encoded"
+
+
+class Activation(Choice):
+    """Activation of a PE network's hidden layers."""
+
+    relu = "relu"
+    tanh = "tanh"
+
+
 @dataclass(frozen=True)
 class NeuralFieldConfig(FieldModelConfig):
     """Options shared by every neural field model (architecture, training, normalisation)."""
 
-    mode: Literal["multi", "single"] = "multi"
+    mode: NetworkMode = NetworkMode.multi
     """``multi``: one network F(x, y, f); ``single``: one network F_f(x, y) per training
     frequency (other frequencies are interpolated linearly between the two nearest networks)."""
     hidden: tuple[int, ...] = (32, 32, 32, 32)
@@ -54,7 +83,7 @@ class NeuralFieldConfig(FieldModelConfig):
     """Training samples per step (in ``single`` mode: pixels per network); 0 = full batch."""
     lr: float = 1e-3
     """Peak learning rate of Adam."""
-    lr_schedule: Literal["constant", "cosine", "exponential"] = "cosine"
+    lr_schedule: LrSchedule = LrSchedule.cosine
     """Decay after warm-up: constant, cosine or exponential down to ``lr * lr_final``."""
     lr_final: float = 0.05
     """Final learning rate as a fraction of ``lr`` (cosine and exponential)."""
@@ -124,14 +153,14 @@ class PEFieldConfig(NeuralFieldConfig):
     """L, the number of octaves of gamma(x, y); 0: 2^L closest to the training resolution."""
     include_input: bool = False
     """Also feed the raw (normalised) x and y to the network."""
-    frequency_input: Literal["raw", "encoded"] = "encoded"
+    frequency_input: FrequencyInput = FrequencyInput.encoded
     """Multi mode: pass the normalised frequency raw (as the thesis), or encoded with gamma
     as well (default: a raw f cannot make the field turn across the band; held-out error
     on the two-planes benchmark 1.1 raw against 0.75 encoded, ReLU)."""
     frequency_octaves: int = 0
     """Octaves of gamma(f) when ``frequency_input`` is ``encoded`` (0: 2^L closest to the
     number of training frequencies)."""
-    activation: Literal["relu", "tanh"] = "tanh"
+    activation: Activation = Activation.tanh
     """Activation of the hidden layers (NeRF uses ReLU; tanh fits phasor fields better:
     held-out error 0.52 against 0.75 on the two-planes benchmark)."""
 

@@ -19,7 +19,7 @@ from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.transform.field import PhasorField
-from nlosfw.transform.temporal_dft import Method, temporal_dft, unit_phasor
+from nlosfw.transform.temporal_dft import temporal_dft, unit_phasor
 
 
 def check_capture(capture: Capture, transform: str) -> None:
@@ -60,7 +60,7 @@ def to_field_layout(values: np.ndarray, capture: Capture) -> np.ndarray:
 
 
 def transform_capture(capture: Capture, frequencies: np.ndarray, *, transform: str,
-                      method: Method, remove_device_legs: bool,
+                      method: str, remove_device_legs: bool,
                       weights: np.ndarray | None = None,
                       metadata: Mapping[str, Any] | None = None) -> PhasorField:
     """The phasor field of ``capture`` at ``frequencies`` (already validated).

@@ -94,7 +94,7 @@ class EmbreeSimulator(Simulator):
         info["render"] = {
             "simulator": "embree",
             "samples": int(cfg.samples) if mesh.n_faces else 0,
-            "sampler": cfg.sampler,
+            "sampler": str(cfg.sampler),
             "threads": int(threads),
             "rays": int(stats["rays"]),
             "unobstructed_fraction": (stats["unobstructed"] / stats["rays"]
