@@ -21,6 +21,7 @@ import dataclasses
 import itertools
 import logging
 import math
+import re
 import sys
 import uuid
 from collections.abc import Sequence
@@ -116,7 +117,14 @@ def parse_command_line(args: Sequence[str]) -> argparse.Namespace:
     parser.add_argument("--info", "-i", nargs="?", const="all",
                         choices=["all", "config", "defaults", "defaults-tree", "plugins",
                                  "searchpath"])
-    return parser.parse_args(list(args))
+    parsed = parser.parse_args(list(args))
+    modes = [flag for flag, given in (("--run", parsed.run), ("--multirun", parsed.multirun),
+                                      ("--cfg", parsed.cfg), ("--info", parsed.info),
+                                      ("--shell-completion", parsed.shell_completion)) if given]
+    if len(modes) > 1:
+        raise ConfigError("", f"command line: {' and '.join(modes)} cannot be given together; "
+                              "use one of --run, --multirun, --cfg, --info, --shell-completion")
+    return parsed
 
 
 def ensure_resolvers() -> None:
@@ -200,7 +208,14 @@ def composition_error(err: Exception) -> NlosfwError:
             return _unknown_choice(group, name, sorted(err.options or []))
     cause = err if isinstance(err, OmegaConfBaseException) else err.__cause__
     if isinstance(cause, OmegaConfBaseException) and cause.full_key:
-        return ConfigError(str(cause.full_key), problem(cause, cause.value))
+        key, what = str(cause.full_key), problem(cause, cause.value)
+        override = re.match(r"(?:Error merging override |Could not override ')([^=']+)", str(err))
+        dotted = re.sub(r"\[(\d+)\]", r".\1", key)             # geometry[0] -> geometry.0
+        if override and not (dotted.startswith(override.group(1))
+                             or override.group(1).startswith(dotted)):
+            # OmegaConf names a key inside a merged value relative to that value
+            return ConfigError(override.group(1), f"{key}: {what}")
+        return ConfigError(key, what)
     return ConfigError("", one_line(err, whole=True))
 
 

@@ -285,6 +285,8 @@ def problem(err: OmegaConfBaseException, value: Any) -> str:
         return "is required"
     if isinstance(err, (ConfigKeyError, ConfigAttributeError)) and isinstance(
             err.parent_node, DictConfig):
+        if not dataclasses.is_dataclass(OmegaConf.get_type(err.parent_node)):
+            return "not in the config (to add it, start the override with +)"
         return f"unknown option; valid options: {_keys(err.parent_node)}"
     expected = _expected_of_node(err.child_node) or _expected_of_message(err.msg)
     if expected is not None:
