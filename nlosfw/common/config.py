@@ -89,7 +89,7 @@ class Configurable:
     config_class: ClassVar[type] = object
 
     def __init__(self, config: Any = None) -> None:
-        self.config = config_from_mapping(self.config_class, config)
+        self.config: Any = config_from_mapping(self.config_class, config)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({config_to_dict(self.config)})"

@@ -29,7 +29,7 @@ import operator
 import re
 import types
 from collections.abc import Mapping
-from typing import Any, Union, get_args, get_origin, get_type_hints
+from typing import Any, TypeGuard, Union, get_args, get_origin, get_type_hints
 
 import numpy as np
 from omegaconf import (
@@ -103,10 +103,10 @@ def schema_node(cls: type) -> DictConfig:
         return OmegaConf.structured(schema_class(cls))
     except OmegaConfBaseException as err:
         raise TypeError(f"{cls.__qualname__} cannot be used as a Hydra structured config: "
-                        f"{err.msg.splitlines()[0]}") from None
+                        f"{_message(err)}") from None
 
 
-def is_schema_node(value: Any, cls: type) -> bool:
+def is_schema_node(value: Any, cls: type) -> TypeGuard[DictConfig]:
     """Whether ``value`` is a node Hydra or OmegaConf made from the schema of ``cls``."""
     if not isinstance(value, DictConfig):
         return False
@@ -158,7 +158,8 @@ def fill(node: DictConfig, mapping: Mapping[str, Any], where: str) -> None:
         _put(node, str(key), value, _join(where, str(key)))
 
 
-def _put(parent: DictConfig | ListConfig, key: str | int, value: Any, where: str) -> None:
+def _put(parent: Any, key: Any, value: Any, where: str) -> None:
+    """Write ``value`` at ``key`` of ``parent`` (a DictConfig; a ListConfig: its next index)."""
     value = _plain_input(value)
     if isinstance(value, Mapping):
         if not isinstance(_child(parent, key), DictConfig):
@@ -177,7 +178,8 @@ def _put(parent: DictConfig | ListConfig, key: str | int, value: Any, where: str
             _put(child, i, item, f"{where}[{i}]")
     else:
         _set(parent, key, value, where, value)
-        if OmegaConf.get_type(parent, key) is bool and not isinstance(value, bool):
+        kind = OmegaConf.get_type(parent, key)   # type: ignore[arg-type]  # or a list index
+        if kind is bool and not isinstance(value, bool):
             raise ConfigError(where, f"must be true or false, got {_describe(value)}")
 
 
@@ -190,14 +192,13 @@ def _plain_input(value: Any) -> Any:
     return value
 
 
-def _child(parent: DictConfig | ListConfig, key: str | int) -> Any:
+def _child(parent: Any, key: Any) -> Any:
     if isinstance(parent, ListConfig):
         return parent[key] if isinstance(key, int) and key < len(parent) else None
     return parent.get(key)
 
 
-def _set(parent: DictConfig | ListConfig, key: str | int, value: Any, where: str,
-         given: Any) -> None:
+def _set(parent: Any, key: Any, value: Any, where: str, given: Any) -> None:
     """Put ``value`` at ``key`` (appending to a list) as OmegaConf merges it into a config."""
     try:
         try:
@@ -242,7 +243,7 @@ def build(cls: type, node: DictConfig, where: str) -> Any:
         raise (err.within(where) if where else err) from None
 
 
-def _value(node: DictConfig | ListConfig, key: str | int, where: str) -> Any:
+def _value(node: Any, key: Any, where: str) -> Any:
     """``node[key]`` with interpolations resolved; a missing value is a one-line error."""
     try:
         return node[key]
@@ -260,7 +261,7 @@ def _python(value: Any, tp: Any, where: str) -> Any:
     if origin in (Union, types.UnionType):
         (tp,) = [a for a in args if a is not _NONE_TYPE] or [Any]
         origin, args = get_origin(tp), get_args(tp)
-    if dataclasses.is_dataclass(tp):
+    if isinstance(tp, type) and dataclasses.is_dataclass(tp):
         return build(tp, value, where)
     if tp is float and isinstance(value, float) and math.isnan(value):
         raise ConfigError(where, "must be a number, got NaN")
@@ -288,17 +289,18 @@ def problem(err: OmegaConfBaseException, value: Any) -> str:
         if not dataclasses.is_dataclass(OmegaConf.get_type(err.parent_node)):
             return "not in the config (to add it, start the override with +)"
         return f"unknown option; valid options: {_keys(err.parent_node)}"
-    expected = _expected_of_node(err.child_node) or _expected_of_message(err.msg)
+    message = _message(err)
+    expected = _expected_of_node(err.child_node) or _expected_of_message(message)
     if expected is not None:
         enum_value = isinstance(err.child_node, EnumNode) and value is not None
         return f"{expected}, got {repr(value) if enum_value else _describe(value)}"
-    if "is not a DictConfig" in err.msg or "merge ListConfig with DictConfig" in err.msg:
+    if "is not a DictConfig" in message or "merge ListConfig with DictConfig" in message:
         return f"expected a mapping of options, got {_describe(value)}"
-    if "is not a ListConfig" in err.msg or "merge DictConfig with ListConfig" in err.msg:
+    if "is not a ListConfig" in message or "merge DictConfig with ListConfig" in message:
         return f"must be a list, got {_describe(value)}"
-    if "is not Optional" in err.msg:
+    if "is not Optional" in message:
         return "must not be null"
-    return err.msg.strip().splitlines()[0]
+    return message
 
 
 def _expected_of_node(node: Any) -> str | None:
@@ -332,7 +334,13 @@ def _join(prefix: str, name: str) -> str:
     return f"{prefix}.{name}" if prefix else name
 
 
-def _keys(node: DictConfig) -> str:
+def _message(err: OmegaConfBaseException) -> str:
+    """The first line of OmegaConf's message (without its key and type context)."""
+    lines = str(err.msg or err).strip().splitlines()
+    return lines[0] if lines else type(err).__name__
+
+
+def _keys(node: Any) -> str:
     return ", ".join(sorted(str(k) for k in node)) or "(none)"
 
 

@@ -87,8 +87,9 @@ def check_config_round_trip(spec: PluginSpec) -> None:
         assert again == json.loads(json.dumps(plain)), "config_to_dict must be YAML/JSON-safe"
         entry = OmegaConf.structured(schema_class(cls, spec.name))     # the ConfigStore entry
         composed = OmegaConf.to_container(OmegaConf.merge(entry, again), resolve=True)
-        composed.pop("name")
-        rebuilt = config_from_mapping(cls, composed, spec.kind.value)
+        assert isinstance(composed, dict) and composed.pop("name") == spec.name
+        rebuilt = config_from_mapping(cls, {str(k): v for k, v in composed.items()},
+                                      spec.kind.value)
         assert rebuilt == config, (
             f"{spec.qualified_name}: config changed in a round trip: {config} != {rebuilt}")
         instance = spec.create(options)
