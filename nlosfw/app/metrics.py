@@ -226,10 +226,7 @@ class RunMetrics:
             raise DataError(f"{where + ': ' if where else ''}schema_version is {version!r}; this "
                             f"nlosfw reads version {SCHEMA_VERSION} (written by another nlosfw "
                             "version: rerun it, or read it with the version that wrote it)")
-        try:
-            return from_json(cls, data)
-        except DataError as err:
-            raise DataError(f"{where}: {err}" if where else str(err)) from None
+        return from_json(cls, data, where)
 
     @classmethod
     def read(cls, path: Path) -> RunMetrics:

@@ -141,9 +141,14 @@ def _bug(where: str, problem: str) -> TypeError:
 def from_json(cls: type[T], data: Any, where: str = "") -> T:
     """The dataclass ``cls`` from its JSON value, checking every key and type.
 
-    Raises :class:`DataError` ``"<key path>: <problem>"`` (``where`` prefixes the path).
+    Raises :class:`DataError` ``"<where>: <key path>: <problem>"`` on one line (``where``
+    names the document, e.g. its file). Like JSON Schema, an integer may be written
+    ``3.0``.
     """
-    return _decode(data, cls, where)  # type: ignore[no-any-return]
+    try:
+        return _decode(data, cls, "")  # type: ignore[no-any-return]
+    except DataError as err:
+        raise DataError(f"{where}: {err}" if where else str(err)) from None
 
 
 def _decode(value: Any, tp: Any, where: str) -> Any:
@@ -156,7 +161,9 @@ def _decode(value: Any, tp: Any, where: str) -> Any:
                 return None
             raise _invalid(where, f"must be {_type_word(tp)}, got null")
         (inner,) = [a for a in args if a is not _NONE]
-        return _decode(value, inner, where)
+        if _is_dataclass(inner) or get_origin(inner) in (dict, list, tuple):
+            return _decode(value, inner, where)
+        return _decode_scalar(value, inner, where, expected=_type_word(tp))
     if _is_dataclass(tp):
         return _decode_dataclass(value, tp, where)
     if origin is dict:
@@ -185,33 +192,38 @@ def _decode_dataclass(value: Any, cls: Any, where: str) -> Any:
     kwargs = {}
     for f, ftype in fields:
         if f.name in value:
-            kwargs[f.name] = _decode(value[f.name], ftype, _join(where, f.name))
+            optional_key = f.metadata.get(_OPTIONAL)  # absent rather than null
+            kwargs[f.name] = _decode(value[f.name], _without_none(ftype) if optional_key
+                                     else ftype, _join(where, f.name))
         elif not f.metadata.get(_OPTIONAL):
             raise _invalid(_join(where, f.name), "is missing")
     return cls(**kwargs)
 
 
-def _decode_scalar(value: Any, tp: Any, where: str) -> Any:
+def _decode_scalar(value: Any, tp: Any, where: str, expected: str = "") -> Any:
+    expected = expected or _type_word(tp)
     if get_origin(tp) is Literal:
-        if value in get_args(tp) and type(value) in {type(a) for a in get_args(tp)}:
-            return value
-        raise _invalid(where, f"must be {_type_word(tp)}, got {_describe(value)}")
+        for choice in get_args(tp):
+            if value == choice and isinstance(value, bool) == isinstance(choice, bool):
+                return choice
+        raise _invalid(where, f"must be {expected}, got {_describe(value)}")
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         try:
             return tp(value)
         except ValueError:
-            raise _invalid(where, f"must be {_type_word(tp)}, got {_describe(value)}") from None
+            raise _invalid(where, f"must be {expected}, got {_describe(value)}") from None
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
     ok = {
         bool: isinstance(value, bool),
-        int: isinstance(value, int) and not isinstance(value, bool),
-        float: isinstance(value, (int, float)) and not isinstance(value, bool),
+        int: number and (isinstance(value, int) or value.is_integer()),
+        float: number,
         str: isinstance(value, str),
     }.get(tp)
     if ok is None:
         raise TypeError(f"{where}: unsupported type {tp!r} in a JSON document")
     if not ok:
-        raise _invalid(where, f"must be {_type_word(tp)}, got {_describe(value)}")
-    return float(value) if tp is float else value
+        raise _invalid(where, f"must be {expected}, got {_describe(value)}")
+    return tp(value) if tp in (int, float) else value
 
 
 def _invalid(where: str, problem: str) -> DataError:
@@ -389,9 +401,13 @@ def _suffix(tp: Any) -> str:
         return ": " + " | ".join(str(m.value) for m in tp)
     if origin in (list, tuple):
         if origin is tuple and args[-1] is not Ellipsis:
-            return f": [{len(args)} {_type_word(args[0])}s]"
-        return f": [{_type_word(_without_none(args[0]))}s]"
+            return f": [{len(args)} {_plural(args[0])}]"
+        return f": [{_plural(_without_none(args[0]))}]"
     return ""
+
+
+def _plural(tp: Any) -> str:
+    return {bool: "booleans", int: "integers", float: "numbers", str: "strings"}.get(tp, "values")
 
 
 def _is_structured(tp: Any) -> bool:
@@ -453,7 +469,7 @@ def _type_word(tp: Any) -> str:
         return "one of " + ", ".join(repr(m.value) for m in tp)
     if _is_dataclass(tp) or origin is dict:
         return "an object"
-    return {bool: "boolean", int: "integer", float: "number", str: "string",
+    return {bool: "true or false", int: "an integer", float: "a number", str: "a string",
             _NONE: "null"}.get(tp, str(tp))
 
 
