@@ -244,41 +244,71 @@ def json_schema(cls: type, title: str = "", schema_id: str = "") -> dict[str, An
     The root is ``cls`` itself; nested dataclasses are ``$defs`` referenced by name,
     every object is closed (``additionalProperties: false``).
     """
-    defs: dict[str, Any] = {}
-    root = _dataclass_schema(cls, defs)
+    builder = _SchemaBuilder()
+    root = builder.dataclass_schema(cls)
     head: dict[str, Any] = {"$schema": JSON_SCHEMA_DIALECT}
     if schema_id:
         head["$id"] = schema_id
     if title:
         head["title"] = title
-    defs.pop(cls.__name__, None)
+    defs = {name: schema for name, schema in builder.defs.items() if name != cls.__name__}
     return {**head, **root, "$defs": dict(sorted(defs.items()))}
 
 
-def _schema(tp: Any, defs: dict[str, Any]) -> dict[str, Any]:
-    if tp is Any:
-        return {}
-    origin, args = get_origin(tp), get_args(tp)
-    if origin in (Union, types.UnionType):
-        (inner,) = [a for a in args if a is not _NONE]
-        schema = _schema(inner, defs)
-        if set(schema) == {"type"} and isinstance(schema["type"], str):
-            return {"type": [schema["type"], "null"]}
-        return {"anyOf": [schema, {"type": "null"}]}
-    if _is_dataclass(tp):
-        name = tp.__name__
-        if name not in defs:
-            defs[name] = {}  # placeholder: recursion and repeated use
-            defs[name] = _dataclass_schema(tp, defs)
-        return {"$ref": f"#/$defs/{name}"}
-    if origin is dict:
-        return {"type": "object", "additionalProperties": _schema(args[1], defs)}
-    if origin in (list, tuple):
-        if origin is tuple and args[-1] is not Ellipsis:
-            return {"type": "array", "prefixItems": [_schema(a, defs) for a in args],
-                    "minItems": len(args), "maxItems": len(args)}
-        return {"type": "array", "items": _schema(args[0], defs)}
-    if origin is Literal:
+class _SchemaBuilder:
+    """Builds the schemas of one document, collecting its nested dataclasses in ``defs``."""
+
+    def __init__(self) -> None:
+        self.defs: dict[str, Any] = {}
+
+    def schema(self, tp: Any) -> dict[str, Any]:
+        if tp is Any:
+            return {}
+        origin, args = get_origin(tp), get_args(tp)
+        if origin in (Union, types.UnionType):
+            (inner,) = [a for a in args if a is not _NONE]
+            schema = self.schema(inner)
+            if set(schema) == {"type"} and isinstance(schema["type"], str):
+                return {"type": [schema["type"], "null"]}
+            return {"anyOf": [schema, {"type": "null"}]}
+        if _is_dataclass(tp):
+            name = tp.__name__
+            if name not in self.defs:
+                self.defs[name] = {}  # placeholder: recursion and repeated use
+                self.defs[name] = self.dataclass_schema(tp)
+            return {"$ref": f"#/$defs/{name}"}
+        if origin is dict:
+            return {"type": "object", "additionalProperties": self.schema(args[1])}
+        if origin in (list, tuple):
+            if origin is tuple and args[-1] is not Ellipsis:
+                return {"type": "array", "prefixItems": [self.schema(a) for a in args],
+                        "minItems": len(args), "maxItems": len(args)}
+            return {"type": "array", "items": self.schema(args[0])}
+        return _scalar_schema(tp)
+
+    def dataclass_schema(self, cls: Any) -> dict[str, Any]:
+        properties, required = {}, []
+        for f, ftype in _fields(cls):
+            inner = ftype
+            if f.metadata.get(_OPTIONAL):  # absent rather than null
+                inner = _without_none(ftype)
+            else:
+                required.append(f.name)
+            schema = self.schema(inner)
+            if f.metadata.get(_DOC):
+                schema = {"description": f.metadata[_DOC], **schema}
+            properties[f.name] = schema
+        out: dict[str, Any] = {"type": "object"}
+        doc = _summary(cls)
+        if doc:
+            out["description"] = doc
+        return {**out, "properties": properties, "required": required,
+                "additionalProperties": False}
+
+
+def _scalar_schema(tp: Any) -> dict[str, Any]:
+    args = get_args(tp)
+    if get_origin(tp) is Literal:
         return {"const": args[0]} if len(args) == 1 else {"enum": list(args)}
     if isinstance(tp, type) and issubclass(tp, enum.Enum):
         return {"enum": [m.value for m in tp]}
@@ -286,26 +316,6 @@ def _schema(tp: Any, defs: dict[str, Any]) -> dict[str, Any]:
     if tp not in words:
         raise TypeError(f"unsupported type {tp!r} in a JSON document")
     return {"type": words[tp]}
-
-
-def _dataclass_schema(cls: Any, defs: dict[str, Any]) -> dict[str, Any]:
-    properties, required = {}, []
-    for f, ftype in _fields(cls):
-        inner = ftype
-        if f.metadata.get(_OPTIONAL):  # absent rather than null
-            inner = _without_none(ftype)
-        else:
-            required.append(f.name)
-        schema = _schema(inner, defs)
-        if f.metadata.get(_DOC):
-            schema = {"description": f.metadata[_DOC], **schema}
-        properties[f.name] = schema
-    out: dict[str, Any] = {"type": "object"}
-    doc = _summary(cls)
-    if doc:
-        out["description"] = doc
-    return {**out, "properties": properties, "required": required,
-            "additionalProperties": False}
 
 
 def _summary(cls: Any) -> str:
