@@ -193,6 +193,8 @@ class SingleSpotRows:
         zero-gain padding, traced but not counted in the ray statistics).
         """
         s = self._batch
+        if s is None:
+            raise RuntimeError("SingleSpotRows.row: load() a batch first")
         px, pz = s.position[:, 0], s.position[:, 2]
         ax = self.xs[ix] - px                                           # (x_s - p)_x
         # signed n.(x_s - p) times the sample gain: > 0 when x_s sees the lit side
