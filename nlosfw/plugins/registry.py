@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from nlosfw.common.config import config_from_mapping
@@ -158,6 +158,21 @@ class Registry:
         return (PluginKind(kind), name) in self._specs
 
 
+@dataclass(frozen=True)
+class RegistrationOptions:
+    """The keyword options of ``register(name, factory, **options)`` (see :class:`PluginSpec`).
+
+    ``requires`` lists importable modules the factory needs, or maps each to the pip
+    requirement that provides it (``{"torch": "torch==2.13.0"}``).
+    """
+
+    config: str | type | None = None
+    requires: Sequence[str] | Mapping[str, str] = ()
+    description: str = ""
+    test_config: Mapping[str, Any] | None = None
+    expected_failures: Mapping[str, str] | None = None
+
+
 @dataclass
 class Registrar:
     """The ``register`` callable handed to ``register_*`` hooks of one plugin module."""
@@ -168,34 +183,27 @@ class Registrar:
     accept: Callable[[PluginSpec], bool]
     registry: Registry
 
-    def __call__(
-        self,
-        name: str,
-        factory: str | Callable[..., Any],
-        *,
-        config: str | type | None = None,
-        requires: Sequence[str] | Mapping[str, str] = (),
-        description: str = "",
-        test_config: Mapping[str, Any] | None = None,
-        expected_failures: Mapping[str, str] | None = None,
-    ) -> None:
-        """Register plugin ``name`` of this hook's kind.
-
-        ``requires`` lists importable modules the factory needs, or maps each
-        to the pip requirement that provides it (``{"torch": "torch==2.13.0"}``).
-        """
+    def __call__(self, name: str, factory: str | Callable[..., Any], **options: Any) -> None:
+        """Register plugin ``name`` of this hook's kind, with :class:`RegistrationOptions`."""
         if not name or not name.replace("_", "").replace("-", "").isalnum():
             raise PluginError(f"{self.distribution}: invalid {self.kind.value} plugin name "
                               f"{name!r}; use letters, digits, '_' and '-'")
-        if isinstance(requires, Mapping):
-            reqs = tuple((str(m), str(r)) for m, r in requires.items())
+        valid = [f.name for f in fields(RegistrationOptions)]
+        unknown = sorted(set(options) - set(valid))
+        if unknown:
+            raise PluginError(f"{self.distribution}: {self.kind.value} plugin {name!r} is "
+                              f"registered with unknown option {unknown[0]!r}; valid: "
+                              f"{', '.join(valid)}")
+        opts = RegistrationOptions(**options)
+        if isinstance(opts.requires, Mapping):
+            reqs = tuple((str(m), str(r)) for m, r in opts.requires.items())
         else:
-            reqs = tuple((str(m), str(m)) for m in requires)
+            reqs = tuple((str(m), str(m)) for m in opts.requires)
         spec = PluginSpec(
             kind=self.kind, name=name, factory=factory, distribution=self.distribution,
-            entry_point=self.entry_point, config=config, requires=reqs,
-            description=description, test_config=dict(test_config or {}),
-            expected_failures=dict(expected_failures or {}),
+            entry_point=self.entry_point, config=opts.config, requires=reqs,
+            description=opts.description, test_config=dict(opts.test_config or {}),
+            expected_failures=dict(opts.expected_failures or {}),
         )
         if self.accept(spec):
             self.registry.add(spec)
