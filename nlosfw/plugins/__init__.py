@@ -4,14 +4,21 @@ Entry points in the ``nlosfw`` group name plugin modules; their hook
 implementations register factories by name into one registry per kind. Loading
 the registries imports the plugin modules only: factories (and with them
 torch, JAX, mitsuba or embreex) are imported when a plugin is instantiated.
+Plugins declare what they can do from their kind's :data:`CAPABILITIES` vocabulary.
 """
 
+from nlosfw.plugins.capabilities import DEFAULTS as DEFAULT_CAPABILITIES
+from nlosfw.plugins.capabilities import VOCABULARY as CAPABILITIES
+from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.hookspecs import hookimpl, hookspec
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_plugins
 from nlosfw.plugins.registry import PluginSpec, Registry, import_object
 
 __all__ = [
+    "CAPABILITIES",
+    "DEFAULT_CAPABILITIES",
+    "Capability",
     "ENTRY_POINT_GROUP",
     "ENV_VAR",
     "INTERFACES",

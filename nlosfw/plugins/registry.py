@@ -15,6 +15,7 @@ from typing import Any
 
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import PluginError
+from nlosfw.plugins.capabilities import Capability, parse_capabilities
 from nlosfw.plugins.kinds import PluginKind
 
 
@@ -49,11 +50,34 @@ class PluginSpec:
     test_config: Mapping[str, Any] = field(default_factory=dict)
     """Small, fast settings used by the conformance checks."""
     expected_failures: Mapping[str, str] = field(default_factory=dict)
-    """Conformance check name -> reason it is expected to fail for this plugin."""
+    """Conformance check (``check_x`` or ``check_x[variant]``) -> the known bug that makes
+    it fail; it runs as a strict xfail. Not for what the plugin cannot do: declare
+    ``capabilities`` instead."""
+    declared_capabilities: tuple[Capability, ...] | None = None
+    """What the plugin declared it can do (``None``: declared nothing, see :attr:`capabilities`)."""
+
+    def __post_init__(self) -> None:
+        if self.declared_capabilities is not None:
+            found = parse_capabilities(self.kind, self.label, self.declared_capabilities)
+            object.__setattr__(self, "declared_capabilities",
+                               tuple(sorted(found, key=lambda c: c.value)))
+        else:
+            parse_capabilities(self.kind, self.label, None)
 
     @property
     def qualified_name(self) -> str:
         return f"{self.kind.value}:{self.name}"
+
+    @property
+    def label(self) -> str:
+        """``<distribution>: <kind> plugin '<name>'``, for messages."""
+        return f"{self.distribution}: {self.kind.value} plugin '{self.name}'"
+
+    @property
+    def capabilities(self) -> frozenset[Capability]:
+        """The declared capabilities, or the kind's defaults when it declared none
+        (:data:`nlosfw.plugins.capabilities.DEFAULTS`)."""
+        return parse_capabilities(self.kind, self.label, self.declared_capabilities)
 
     def missing_requirements(self) -> list[tuple[str, str]]:
         """Required modules that cannot be found (checked without importing them)."""
@@ -171,6 +195,11 @@ class RegistrationOptions:
     description: str = ""
     test_config: Mapping[str, Any] | None = None
     expected_failures: Mapping[str, str] | None = None
+    capabilities: Iterable[str | Capability] | None = None
+    """What the plugin can do, from its kind's vocabulary
+    (:data:`nlosfw.plugins.capabilities.VOCABULARY`; a name outside it is a one-line
+    :class:`PluginError`); ``None`` takes the kind's defaults. The conformance kit picks
+    its checks from them."""
 
 
 @dataclass
@@ -204,9 +233,19 @@ class Registrar:
             entry_point=self.entry_point, config=opts.config, requires=reqs,
             description=opts.description, test_config=dict(opts.test_config or {}),
             expected_failures=dict(opts.expected_failures or {}),
+            declared_capabilities=(None if opts.capabilities is None
+                                   else _as_tuple(opts.capabilities)),
         )
         if self.accept(spec):
             self.registry.add(spec)
+
+
+def _as_tuple(capabilities: Any) -> Any:
+    """A tuple of the declared names; a single string or enum member is left for
+    :func:`parse_capabilities` to refuse."""
+    if isinstance(capabilities, (str, Capability)) or not isinstance(capabilities, Iterable):
+        return capabilities
+    return tuple(capabilities)
 
 
 def _quote(requirement: str) -> str:

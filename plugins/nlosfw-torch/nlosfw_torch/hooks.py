@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from nlosfw.plugins import Capability as C
 from nlosfw.plugins import hookimpl
 
 _REQUIRES = {"torch": "torch==2.13.0"}
@@ -35,4 +36,5 @@ def register_field_models(register: Any) -> None:
             requires=_REQUIRES,
             description=description,
             test_config={**_TEST_CONFIG, "lr": _TEST_LR[family]},
+            capabilities=[C.MULTI_FREQUENCY, C.SAVE_LOAD, C.NEURAL, C.GPU],
         )
