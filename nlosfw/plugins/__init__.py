@@ -9,12 +9,26 @@ torch, JAX, mitsuba or embreex) are imported when a plugin is instantiated.
 from nlosfw.plugins.hookspecs import hookimpl, hookspec
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_plugins
-from nlosfw.plugins.registry import PluginSpec, Registry, import_object
+from nlosfw.plugins.networks import (
+    ENGINES,
+    NetworkEngine,
+    NetworkRegistrar,
+    NetworkSpec,
+    network_model,
+    register_thesis_networks,
+    thesis_network_model,
+)
+from nlosfw.plugins.registry import LazyFactory, PluginSpec, Registry, import_object
 
 __all__ = [
+    "ENGINES",
     "ENTRY_POINT_GROUP",
     "ENV_VAR",
     "INTERFACES",
+    "LazyFactory",
+    "NetworkEngine",
+    "NetworkRegistrar",
+    "NetworkSpec",
     "PluginHost",
     "PluginKind",
     "PluginSpec",
@@ -23,4 +37,7 @@ __all__ = [
     "hookspec",
     "import_object",
     "load_plugins",
+    "network_model",
+    "register_thesis_networks",
+    "thesis_network_model",
 ]

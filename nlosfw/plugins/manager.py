@@ -14,6 +14,7 @@ import pluggy
 
 from nlosfw.plugins import hookspecs
 from nlosfw.plugins.kinds import PluginKind
+from nlosfw.plugins.networks import NetworkRegistrar
 from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
 
 log = logging.getLogger(__name__)
@@ -113,9 +114,12 @@ def load_plugins(env: Mapping[str, str] | None = None,
         origins[key] = (dist, name)
 
     registry = Registry()
-    for kind, hook_name in _HOOK_OF_KIND.items():
+    for hook_name, kind in [*((h, k) for k, h in _HOOK_OF_KIND.items()),
+                            ("register_networks", None)]:
         for key, (dist, ep_name) in origins.items():
             others = [p for k, p in manager.list_name_plugin() if k != key]
             caller = manager.subset_hook_caller(hook_name, remove_plugins=others)
-            caller(register=Registrar(kind, dist, ep_name, rules.accepts, registry))
+            register = (NetworkRegistrar(dist, ep_name, rules.accepts, registry) if kind is None
+                        else Registrar(kind, dist, ep_name, rules.accepts, registry))
+            caller(register=register)
     return PluginHost(manager=manager, registry=registry, broken=broken)

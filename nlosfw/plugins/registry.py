@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -30,14 +31,23 @@ def import_object(path: str) -> Any:
     return obj
 
 
+class LazyFactory(ABC):
+    """A factory made on first use (e.g. a field model bound to a registered network)."""
+
+    @abstractmethod
+    def load(self) -> Any:
+        """The factory (imports what it needs)."""
+
+
 @dataclass(frozen=True)
 class PluginSpec:
     """One registered plugin: what it is, where it comes from, how to build it."""
 
     kind: PluginKind
     name: str
-    factory: str | Callable[..., Any]
-    """The implementation class, or ``"module:Class"`` imported on first use."""
+    factory: str | Callable[..., Any] | LazyFactory
+    """The implementation class, ``"module:Class"`` imported on first use, or a
+    :class:`LazyFactory` that makes it on first use."""
     distribution: str
     """The installed distribution that registered it (``nlosfw``, ``nlosfw-torch``, ...)."""
     entry_point: str = ""
@@ -76,13 +86,15 @@ class PluginSpec:
 
     def load(self) -> Any:
         """The factory, imported on first use; a one-line error says what to install."""
-        if not isinstance(self.factory, str):
+        if not isinstance(self.factory, (str, LazyFactory)):
             return self.factory
         command = self.install_command()
         if command:
             modules = ", ".join(m for m, _ in self.missing_requirements())
             raise PluginError(f"{self.kind.value} plugin '{self.name}' needs {modules}, which is "
                               f"not installed; run: {command}")
+        if isinstance(self.factory, LazyFactory):
+            return self.factory.load()
         try:
             return import_object(self.factory)
         except ImportError as err:
