@@ -374,8 +374,9 @@ def thesis_architecture(config: NeuralFieldConfig, shape: FieldShape) -> Archite
     (the family follows from the config's class: tanh, pe or siren)."""
     family = next((f for f, cls in FAMILY_CONFIGS.items() if type(config) is cls), None)
     if family is None:
+        valid = ", ".join(c.__name__ for c in FAMILY_CONFIGS.values())
         raise DataError(f"model: {type(config).__name__} configures none of the thesis "
-                        f"networks; valid: {', '.join(c.__name__ for c in FAMILY_CONFIGS.values())}")
+                        f"networks; valid: {valid}")
     return resolve_architecture(family, config, shape.grid_shape, shape.n_frequencies)
 
 

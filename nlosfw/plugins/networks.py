@@ -48,6 +48,9 @@ ENGINES: dict[NetworkEngine, tuple[str, Mapping[str, str]]] = {
 }
 
 
+_ENGINE_TITLES = {"torch": "PyTorch", "jax": "JAX"}
+
+
 @dataclass(frozen=True)
 class NetworkSpec(LazyFactory):
     """One registered network: builds its field-model class on first use."""
@@ -157,7 +160,7 @@ def register_thesis_networks(register: Callable[..., None], engine: str, factory
     network from its config's class, see :func:`nlosfw.model.thesis_architecture`)."""
     for name, network in THESIS_NETWORKS.items():
         register(name, engine=engine, factory=factory, config=network.config,
-                 description=f"{network.description}, {engine}",
+                 description=f"{network.description}, {_ENGINE_TITLES[engine]}",
                  test_config={**THESIS_TEST_CONFIG, "lr": network.test_lr},
                  presets=presets_of(name))
 
@@ -166,4 +169,5 @@ def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFie
     """The field-model class of thesis network ``name`` on ``engine`` (as registered)."""
     network = THESIS_NETWORKS[name]
     return NetworkSpec(name, NetworkEngine(engine), factory, network.config,
-                       f"{network.description}, {engine}", presets_of(name)).load()
+                       f"{network.description}, {_ENGINE_TITLES[engine]}",
+                       presets_of(name)).load()

@@ -3,7 +3,8 @@
 Parts: :class:`Linear` (weights (fan_in, fan_out), the layout the numpy reference
 and the JAX plugin share), :class:`Sine` (sin(omega0 z)), :class:`PositionalEncoding`
 (NeRF's gamma) and :class:`MLP` (linear layers with an activation after each hidden
-one). The factory :func:`thesis_network` builds the thesis networks for the shared trainer; they start from the backend-neutral weights of
+one). The factory :func:`thesis_network` builds the thesis networks for the shared
+trainer; they start from the backend-neutral weights of
 :func:`nlosfw.model.reference_state`, so torch and JAX train the same network.
 """
 
