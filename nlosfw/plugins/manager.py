@@ -33,6 +33,7 @@ _HOOK_OF_KIND = {
     PluginKind.FIELD_MODEL: "register_field_models",
     PluginKind.IMAGER: "register_imagers",
 }
+_NETWORK_HOOK = "register_networks"
 
 
 @dataclass(frozen=True)
@@ -114,12 +115,13 @@ def load_plugins(env: Mapping[str, str] | None = None,
         origins[key] = (dist, name)
 
     registry = Registry()
-    for hook_name, kind in [*((h, k) for k, h in _HOOK_OF_KIND.items()),
-                            ("register_networks", None)]:
+    # networks register field models (``<name>_<engine>``), after the kinds' own hooks
+    hooks = [*_HOOK_OF_KIND.items(), (PluginKind.FIELD_MODEL, _NETWORK_HOOK)]
+    for kind, hook_name in hooks:
         for key, (dist, ep_name) in origins.items():
             others = [p for k, p in manager.list_name_plugin() if k != key]
             caller = manager.subset_hook_caller(hook_name, remove_plugins=others)
-            register = (NetworkRegistrar(dist, ep_name, rules.accepts, registry) if kind is None
-                        else Registrar(kind, dist, ep_name, rules.accepts, registry))
-            caller(register=register)
+            register = Registrar(kind, dist, ep_name, rules.accepts, registry)
+            caller(register=NetworkRegistrar(register) if hook_name == _NETWORK_HOOK
+                   else register)
     return PluginHost(manager=manager, registry=registry, broken=broken)

@@ -25,8 +25,7 @@ from nlosfw.common.errors import PluginError
 from nlosfw.model.neural_config import NeuralFieldConfig, Preset
 from nlosfw.model.thesis_networks import THESIS_NETWORKS, THESIS_TEST_CONFIG, presets_of
 from nlosfw.model.trainer import NeuralFieldModel
-from nlosfw.plugins.kinds import PluginKind
-from nlosfw.plugins.registry import LazyFactory, PluginSpec, Registry, import_object
+from nlosfw.plugins.registry import LazyFactory, Registrar, import_object
 
 
 class NetworkEngine(str, Enum):
@@ -103,12 +102,10 @@ def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
 
 @dataclass
 class NetworkRegistrar:
-    """The ``register`` callable handed to ``register_networks`` hooks of one plugin module."""
+    """The ``register`` callable handed to ``register_networks`` hooks of one plugin module;
+    it registers field models through ``models`` (the module's field-model registrar)."""
 
-    distribution: str
-    entry_point: str
-    accept: Callable[[PluginSpec], bool]
-    registry: Registry
+    models: Registrar
 
     def __call__(
         self,
@@ -137,22 +134,13 @@ class NetworkRegistrar:
             chosen = NetworkEngine(engine)
         except ValueError:
             valid = ", ".join(e.value for e in NetworkEngine)
-            raise PluginError(f"{self.distribution}: network {name!r} names engine {engine!r}; "
-                              f"valid: {valid}") from None
-        if not name or not name.replace("_", "").isalnum():
-            raise PluginError(f"{self.distribution}: invalid network name {name!r}; use "
-                              "letters, digits and '_'")
+            raise PluginError(f"{self.models.distribution}: network {name!r} names engine "
+                              f"{engine!r}; valid: {valid}") from None
         network = NetworkSpec(name, chosen, factory, config, description, dict(presets or {}))
-        needs = {**ENGINES[chosen][1], **dict(requires or {})}
-        spec = PluginSpec(
-            kind=PluginKind.FIELD_MODEL, name=network.model_name, factory=network,
-            distribution=self.distribution, entry_point=self.entry_point, config=config,
-            requires=tuple(needs.items()), description=description,
-            test_config=dict(test_config or {}),
-            expected_failures=dict(expected_failures or {}),
-        )
-        if self.accept(spec):
-            self.registry.add(spec)
+        self.models(network.model_name, network, config=config,
+                    requires={**ENGINES[chosen][1], **dict(requires or {})},
+                    description=description, test_config=test_config,
+                    expected_failures=expected_failures)
 
 
 def register_thesis_networks(register: Callable[..., None], engine: str, factory: str) -> None:

@@ -183,7 +183,7 @@ class Registrar:
     def __call__(
         self,
         name: str,
-        factory: str | Callable[..., Any],
+        factory: str | Callable[..., Any] | LazyFactory,
         *,
         config: str | type | None = None,
         requires: Sequence[str] | Mapping[str, str] = (),
