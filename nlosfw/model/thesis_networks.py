@@ -23,7 +23,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -36,6 +36,8 @@ from nlosfw.model.neural_config import (
     Preset,
     set_choice,
 )
+
+C = TypeVar("C", bound=NeuralFieldConfig)
 
 
 class FrequencyInput(str, Enum):
@@ -214,37 +216,38 @@ def resolve_architecture(family: str, config: NeuralFieldConfig,
     mode = FieldMode(config.mode).value
     multi = mode == FieldMode.multi.value
     if family == "pe":
-        _require_config(config, PEFieldConfig, family)
-        encoded = multi and config.frequency_input == FrequencyInput.encoded
-        if (not config.octaves and grid_shape is None) or (
-                encoded and not config.frequency_octaves and n_frequencies is None):
+        pe = _config_of(config, PEFieldConfig, family)
+        encoded = multi and pe.frequency_input == FrequencyInput.encoded
+        if (not pe.octaves and grid_shape is None) or (
+                encoded and not pe.frequency_octaves and n_frequencies is None):
             raise FitError("model: the positional encoding's octaves follow the training grid; "
                            "the architecture is known after fit or load")
-        octaves = config.octaves or default_octaves(max(grid_shape or (1,)))
-        f_oct = config.frequency_octaves or default_octaves(n_frequencies or 1)
-        in_dim = 2 * 2 * octaves + (2 if config.include_input else 0)
+        octaves = pe.octaves or default_octaves(max(grid_shape or (1,)))
+        f_oct = pe.frequency_octaves or default_octaves(n_frequencies or 1)
+        in_dim = 2 * 2 * octaves + (2 if pe.include_input else 0)
         if multi:
             in_dim += 2 * f_oct if encoded else 1
-        return Architecture("pe", mode, in_dim, config.hidden,
-                            activation=PEActivation(config.activation).value, octaves=octaves,
-                            include_input=config.include_input,
-                            frequency_input=FrequencyInput(config.frequency_input).value,
+        return Architecture("pe", mode, in_dim, pe.hidden,
+                            activation=PEActivation(pe.activation).value, octaves=octaves,
+                            include_input=pe.include_input,
+                            frequency_input=FrequencyInput(pe.frequency_input).value,
                             frequency_octaves=f_oct if encoded else 0)
     in_dim = 3 if multi else 2
     if family == "siren":
-        _require_config(config, SirenFieldConfig, family)
-        return Architecture("siren", mode, in_dim, config.hidden, activation="sine",
-                            omega0_first=config.omega0_first,
-                            omega0_hidden=config.omega0_hidden)
+        siren = _config_of(config, SirenFieldConfig, family)
+        return Architecture("siren", mode, in_dim, siren.hidden, activation="sine",
+                            omega0_first=siren.omega0_first,
+                            omega0_hidden=siren.omega0_hidden)
     if family == "tanh":
         return Architecture("tanh", mode, in_dim, config.hidden, activation="tanh")
     raise DataError(f"unknown network family {family!r}; valid: {', '.join(FAMILY_CONFIGS)}")
 
 
-def _require_config(config: NeuralFieldConfig, cls: type, family: str) -> None:
+def _config_of(config: NeuralFieldConfig, cls: type[C], family: str) -> C:
     if not isinstance(config, cls):
         raise DataError(f"model: the {family} family needs a {cls.__name__}, got "
                         f"{type(config).__name__}")
+    return config
 
 
 def count_parameters(arch: Architecture, n_networks: int = 1) -> int:

@@ -192,6 +192,8 @@ class NeuralFieldModel(FieldModel):
         rng = np.random.default_rng([cfg.seed, 0x6261746368])  # "batch" stream
         x, y = self._samples(norm, field)
         n = x.shape[0]
+        val_x: np.ndarray | None
+        val_y: np.ndarray | None
         if validation is not None:
             check_training_field(validation, f"{who} validation")
             if single and (validation.frequencies.shape != field.frequencies.shape or not
@@ -384,7 +386,8 @@ class NeuralFieldModel(FieldModel):
             names += tuple(f"{cls.family}_{b}" for b in ("torch", "jax") if b != cls.backend)
         header, arrays = read_model_file(path, names)
         try:
-            config = config_from_mapping(cls.config_class, header["config"], "model")
+            config: NeuralFieldConfig = config_from_mapping(cls.config_class, header["config"],
+                                                            "model")
             norm = FieldNormalisation.from_dict(header["normalisation"])
             trained = header.get("train_frequencies")
             if "field_shape" in header:

@@ -15,6 +15,8 @@ class FourierFeatureMLP(nn.Module):
     v: normalised (x, y[, f]) of shape (N, shape.in_dim); returns (N, 2) = (Re, Im).
     """
 
+    B: torch.Tensor
+
     def __init__(self, config: FourierConfig, shape: FieldShape) -> None:
         super().__init__()
         # a buffer, not a parameter: saved with the model, never trained

@@ -121,7 +121,10 @@ class JaxEngine(Engine):
     def __init__(self, build: NetworkBuild, state: Mapping[str, np.ndarray] | None = None
                  ) -> None:
         self.device = resolve_device(build.config.device)
-        self.x = self.y = self.val_x = self.val_y = None
+        self.x: Any = None
+        self.y: Any = None
+        self.val_x: Any = None
+        self.val_y: Any = None
         super().__init__(build, state)
 
     # ------------------------------------------------------------------ building

@@ -10,7 +10,7 @@ train the same network.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax
@@ -24,6 +24,9 @@ from nlosfw.model import (
     reference_state,
     thesis_architecture,
 )
+
+#: An activation: a function (or parameter-free module) of one array.
+Activation = Callable[[jax.Array], jax.Array]
 
 #: Odd polynomial for sin on [-pi/2, pi/2] (Taylor-minimax, float32 accuracy).
 _SIN_COEFFS = (1.0, -1.6666667163e-01, 8.3333337680e-03, -1.9841270114e-04, 2.7557314297e-06,
@@ -100,9 +103,9 @@ class MLP(eqx.Module):
     """Linear layers ``dims[0] -> ... -> dims[-1]``, ``activations[i]`` after hidden layer i."""
 
     layers: list[Linear]
-    activations: list[eqx.Module]
+    activations: list[Activation]
 
-    def __init__(self, dims: Sequence[int], activations: Sequence[eqx.Module],
+    def __init__(self, dims: Sequence[int], activations: Sequence[Activation],
                  key: jax.Array) -> None:
         if len(activations) != len(dims) - 2:
             raise ValueError(f"{len(dims) - 2} hidden layers need as many activations")
@@ -143,9 +146,10 @@ class ThesisNetwork(MLP):
 
     def __init__(self, arch: Architecture, key: jax.Array) -> None:
         n_hidden = len(arch.hidden)
+        acts: list[Activation]
         if arch.activation == "sine":
-            acts: list[eqx.Module] = [Sine(arch.omega0_first if i == 0 else arch.omega0_hidden)
-                                      for i in range(n_hidden)]
+            acts = [Sine(arch.omega0_first if i == 0 else arch.omega0_hidden)
+                    for i in range(n_hidden)]
         else:
             acts = [ReLU() if arch.activation == "relu" else Tanh() for _ in range(n_hidden)]
         super().__init__([arch.in_dim, *arch.hidden, arch.out_dim], acts, key)

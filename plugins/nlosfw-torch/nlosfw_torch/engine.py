@@ -51,7 +51,10 @@ class TorchEngine(Engine):
                  ) -> None:
         self.threads = build.config.threads
         self.device = resolve_device(build.config.device)
-        self.x = self.y = self.val_x = self.val_y = None
+        self.x: Any = None
+        self.y: Any = None
+        self.val_x: Any = None
+        self.val_y: Any = None
         super().__init__(build, state)
 
     # ------------------------------------------------------------------ building
@@ -85,7 +88,7 @@ class TorchEngine(Engine):
     def _apply(self, state: Mapping[str, torch.Tensor], x: torch.Tensor) -> torch.Tensor:
         """(N, 2) outputs, or (K, N, 2) of K stacked networks (single mode)."""
         def call(s: Mapping[str, torch.Tensor]) -> torch.Tensor:
-            out = torch.func.functional_call(self.network, s, (x,))
+            out = torch.func.functional_call(self.network, dict(s), (x,))
             return torch.view_as_real(out) if out.is_complex() else out
 
         if self.n_networks:
@@ -164,5 +167,5 @@ class TorchEngine(Engine):
             if networks is not None:
                 sel = torch.from_numpy(networks).to(self.device)
                 state = {k: v.index_select(0, sel) for k, v in state.items()}
-            out = self._apply(state, self._tensor(x))
+            out = self._apply(state, torch.from_numpy(x).to(self.device))
             return out.float().cpu().numpy()
