@@ -5,8 +5,8 @@ every network: normalisation, inputs, batches, the validation split, the
 learning-rate schedule, early stopping, divergence detection, seeding, files and
 prediction. A network plugin supplies only ``factory(config, shape)`` (a torch
 module or a JAX module) and the backend's :class:`~nlosfw.model.engine.Engine`
-runs its steps; :func:`nlosfw.plugins.register_networks` turns a registered network
-into a subclass of this class named ``<network>_<engine>``.
+runs its steps; the ``register_networks`` hook (:mod:`nlosfw.plugins.networks`) turns a
+registered network into a subclass of this class named ``<network>_<engine>``.
 """
 
 from __future__ import annotations

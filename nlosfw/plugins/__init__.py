@@ -4,6 +4,8 @@ Entry points in the ``nlosfw`` group name plugin modules; their hook
 implementations register factories by name into one registry per kind. Loading
 the registries imports the plugin modules only: factories (and with them
 torch, JAX, mitsuba or embreex) are imported when a plugin is instantiated.
+Networks registered through ``register_networks`` become field models
+``<name>_<engine>`` (:mod:`nlosfw.plugins.networks`).
 """
 
 from nlosfw.plugins.hookspecs import hookimpl, hookspec
