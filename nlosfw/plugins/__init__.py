@@ -14,6 +14,7 @@ from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_
 from nlosfw.plugins.networks import (
     ENGINES,
     NetworkEngine,
+    NetworkOptions,
     NetworkRegistrar,
     NetworkSpec,
     network_model,
@@ -29,6 +30,7 @@ __all__ = [
     "INTERFACES",
     "LazyFactory",
     "NetworkEngine",
+    "NetworkOptions",
     "NetworkRegistrar",
     "NetworkSpec",
     "PluginHost",

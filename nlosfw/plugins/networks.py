@@ -25,7 +25,12 @@ from nlosfw.common.errors import PluginError
 from nlosfw.model.neural_config import NeuralFieldConfig, Preset
 from nlosfw.model.thesis_networks import THESIS_NETWORKS, THESIS_TEST_CONFIG, presets_of
 from nlosfw.model.trainer import NeuralFieldModel
-from nlosfw.plugins.registry import LazyFactory, Registrar, import_object
+from nlosfw.plugins.registry import (
+    LazyFactory,
+    Registrar,
+    import_object,
+    registration_options,
+)
 
 
 class NetworkEngine(str, Enum):
@@ -100,6 +105,28 @@ def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
     })
 
 
+@dataclass(frozen=True)
+class NetworkOptions:
+    """The keyword options of ``register(name, **options)`` in a ``register_networks`` hook."""
+
+    engine: str
+    """``torch`` or ``jax``: the field model is named ``<name>_<engine>``."""
+    factory: str | Callable[..., Any]
+    """Builds the network: ``"module:function"`` (imported on first use) or a callable."""
+    config: str | type
+    """Its options, a dataclass deriving from NeuralFieldConfig (or ``"module:Class"`` in a
+    module that imports neither torch nor JAX: the CLI reads it to list the options)."""
+    description: str = ""
+    requires: Mapping[str, str] | None = None
+    """Further importable modules the network needs -> their pip requirements."""
+    test_config: Mapping[str, Any] | None = None
+    """Small, fast options for the conformance kit."""
+    expected_failures: Mapping[str, str] | None = None
+    """Conformance check name -> why it is expected to fail."""
+    presets: Mapping[str, Preset] | None = None
+    """Published configurations, whose parameter counts the kit checks."""
+
+
 @dataclass
 class NetworkRegistrar:
     """The ``register`` callable handed to ``register_networks`` hooks of one plugin module;
@@ -107,40 +134,22 @@ class NetworkRegistrar:
 
     models: Registrar
 
-    def __call__(
-        self,
-        name: str,
-        *,
-        engine: str,
-        factory: str | Callable[..., Any],
-        config: str | type,
-        description: str = "",
-        requires: Mapping[str, str] | None = None,
-        test_config: Mapping[str, Any] | None = None,
-        expected_failures: Mapping[str, str] | None = None,
-        presets: Mapping[str, Preset] | None = None,
-    ) -> None:
-        """Register network ``name`` for ``engine`` (``torch`` or ``jax``) as the field model
-        ``<name>_<engine>``.
-
-        ``factory`` builds the network (``"module:function"``, imported on first use);
-        ``config`` is its options dataclass deriving from NeuralFieldConfig (a class, or
-        ``"module:Class"`` in a module that imports neither torch nor JAX: the CLI reads it
-        to list the options). ``requires`` maps further importable modules to their pip
-        requirements; ``test_config`` holds small, fast options for the conformance kit;
-        ``presets`` published configurations whose parameter counts the kit checks.
-        """
+    def __call__(self, name: str, **options: Any) -> None:
+        """Register network ``name`` as the field model ``<name>_<engine>`` (see
+        :class:`NetworkOptions`)."""
+        who = f"{self.models.distribution}: network {name!r}"
+        opts = registration_options(NetworkOptions, options, who)
         try:
-            chosen = NetworkEngine(engine)
+            engine = NetworkEngine(opts.engine)
         except ValueError:
             valid = ", ".join(e.value for e in NetworkEngine)
-            raise PluginError(f"{self.models.distribution}: network {name!r} names engine "
-                              f"{engine!r}; valid: {valid}") from None
-        network = NetworkSpec(name, chosen, factory, config, description, dict(presets or {}))
-        self.models(network.model_name, network, config=config,
-                    requires={**ENGINES[chosen][1], **dict(requires or {})},
-                    description=description, test_config=test_config,
-                    expected_failures=expected_failures)
+            raise PluginError(f"{who} names engine {opts.engine!r}; valid: {valid}") from None
+        network = NetworkSpec(name, engine, opts.factory, opts.config, opts.description,
+                              dict(opts.presets or {}))
+        self.models(network.model_name, network, config=opts.config,
+                    requires={**ENGINES[engine][1], **dict(opts.requires or {})},
+                    description=opts.description, test_config=opts.test_config,
+                    expected_failures=opts.expected_failures)
 
 
 def register_thesis_networks(register: Callable[..., None], engine: str, factory: str) -> None:

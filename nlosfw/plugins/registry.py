@@ -11,12 +11,14 @@ import importlib
 import importlib.util
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, TypeVar
 
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import PluginError
 from nlosfw.plugins.kinds import PluginKind
+
+T = TypeVar("T")
 
 
 def import_object(path: str) -> Any:
@@ -170,6 +172,35 @@ class Registry:
         return (PluginKind(kind), name) in self._specs
 
 
+def registration_options(cls: type[T], options: Mapping[str, Any], who: str) -> T:
+    """The options dataclass ``cls`` of one ``register(...)`` call; a one-line
+    :class:`PluginError` names an unknown or a missing option and the valid ones."""
+    valid = [f.name for f in fields(cls)]  # type: ignore[arg-type]
+    unknown = sorted(set(options) - set(valid))
+    required = [f.name for f in fields(cls) if f.default is MISSING]  # type: ignore[arg-type]
+    missing = [n for n in required if n not in options]
+    if unknown or missing:
+        problem = (f"unknown option {unknown[0]!r}" if unknown
+                   else f"no {missing[0]!r} (required: {', '.join(required)})")
+        raise PluginError(f"{who} is registered with {problem}; valid: {', '.join(valid)}")
+    return cls(**options)
+
+
+@dataclass(frozen=True)
+class RegistrationOptions:
+    """The keyword options of ``register(name, factory, **options)`` (see :class:`PluginSpec`).
+
+    ``requires`` lists importable modules the factory needs, or maps each to the pip
+    requirement that provides it (``{"torch": "torch==2.13.0"}``).
+    """
+
+    config: str | type | None = None
+    requires: Sequence[str] | Mapping[str, str] = ()
+    description: str = ""
+    test_config: Mapping[str, Any] | None = None
+    expected_failures: Mapping[str, str] | None = None
+
+
 @dataclass
 class Registrar:
     """The ``register`` callable handed to ``register_*`` hooks of one plugin module."""
@@ -180,34 +211,23 @@ class Registrar:
     accept: Callable[[PluginSpec], bool]
     registry: Registry
 
-    def __call__(
-        self,
-        name: str,
-        factory: str | Callable[..., Any] | LazyFactory,
-        *,
-        config: str | type | None = None,
-        requires: Sequence[str] | Mapping[str, str] = (),
-        description: str = "",
-        test_config: Mapping[str, Any] | None = None,
-        expected_failures: Mapping[str, str] | None = None,
-    ) -> None:
-        """Register plugin ``name`` of this hook's kind.
-
-        ``requires`` lists importable modules the factory needs, or maps each
-        to the pip requirement that provides it (``{"torch": "torch==2.13.0"}``).
-        """
+    def __call__(self, name: str, factory: str | Callable[..., Any] | LazyFactory,
+                 **options: Any) -> None:
+        """Register plugin ``name`` of this hook's kind, with :class:`RegistrationOptions`."""
         if not name or not name.replace("_", "").replace("-", "").isalnum():
             raise PluginError(f"{self.distribution}: invalid {self.kind.value} plugin name "
                               f"{name!r}; use letters, digits, '_' and '-'")
-        if isinstance(requires, Mapping):
-            reqs = tuple((str(m), str(r)) for m, r in requires.items())
+        opts = registration_options(RegistrationOptions, options,
+                                    f"{self.distribution}: {self.kind.value} plugin {name!r}")
+        if isinstance(opts.requires, Mapping):
+            reqs = tuple((str(m), str(r)) for m, r in opts.requires.items())
         else:
-            reqs = tuple((str(m), str(m)) for m in requires)
+            reqs = tuple((str(m), str(m)) for m in opts.requires)
         spec = PluginSpec(
             kind=self.kind, name=name, factory=factory, distribution=self.distribution,
-            entry_point=self.entry_point, config=config, requires=reqs,
-            description=description, test_config=dict(test_config or {}),
-            expected_failures=dict(expected_failures or {}),
+            entry_point=self.entry_point, config=opts.config, requires=reqs,
+            description=opts.description, test_config=dict(opts.test_config or {}),
+            expected_failures=dict(opts.expected_failures or {}),
         )
         if self.accept(spec):
             self.registry.add(spec)

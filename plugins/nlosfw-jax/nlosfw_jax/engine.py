@@ -94,8 +94,10 @@ def _loss(params: Any, rest: Any, x: jax.Array, y: jax.Array, single: bool) -> j
 
 
 @eqx.filter_jit
-def _step(params: Any, rest: Any, opt_state: Any, x: jax.Array, y: jax.Array,
-          idx: jax.Array | None, lr: jax.Array, single: bool) -> tuple[Any, Any, jax.Array]:
+def _step(params: Any, rest: Any, opt_state: Any, batch: tuple[Any, Any, Any], lr: jax.Array,
+          single: bool) -> tuple[Any, Any, jax.Array]:
+    """One Adam step on ``batch`` = (inputs, targets, row indices or None for all rows)."""
+    x, y, idx = batch
     if idx is not None:
         x, y = jnp.take(x, idx, axis=0), jnp.take(y, idx, axis=-2)
     loss, grads = jax.value_and_grad(_loss)(params, rest, x, y, single)
@@ -167,7 +169,7 @@ class JaxEngine(Engine):
     def step(self, idx: np.ndarray | None, lr: float) -> Any:
         index = None if idx is None else jax.device_put(idx.astype(np.int32), self.device)
         self.params, self.opt_state, loss = _step(
-            self.params, self.rest, self.opt_state, self.x, self.y, index,
+            self.params, self.rest, self.opt_state, (self.x, self.y, index),
             jnp.asarray(lr, dtype=jnp.float32), bool(self.n_networks))
         return loss
 

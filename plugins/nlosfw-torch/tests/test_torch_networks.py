@@ -125,19 +125,36 @@ def test_registration_names_a_valid_engine():
     assert [e.value for e in NetworkEngine] == ["torch", "jax"]
 
 
+@pytest.mark.parametrize(("options", "problem"), [
+    ({"engine": "torch", "factory": "x:y", "config": NeuralFieldConfig, "colour": "red"},
+     "unknown option 'colour'"),
+    ({"engine": "torch", "config": NeuralFieldConfig}, "no 'factory' (required: engine, "
+                                                       "factory, config)"),
+])
+def test_a_wrong_registration_option_is_a_one_line_error(options, problem):
+    @hookimpl
+    def register_networks(register):
+        register("odd", **options)
+
+    module = types.ModuleType("odd_networks")
+    module.register_networks = register_networks
+    with pytest.raises(PluginError) as err:
+        load_plugins(env={}, extra=[("odd-dist", "odd", module)])
+    assert str(err.value).startswith(f"odd-dist: network 'odd' is registered with {problem}")
+    assert "\n" not in str(err.value)
+
+
 def test_blocked_networks_are_not_registered():
     host = load_plugins(env={"NLOSFW_PLUGINS": "-siren_torch"})
     assert "siren_torch" not in host.registry.names("model")
     assert "pe_torch" in host.registry.names("model")
 
 
-def _write_version_1_file(path, model, config, norm, arch, params, trained=None):
+def _write_version_1_file(path, model, config, norm, arch, params):
     """A file as nlosfw wrote it before networks were pluggable (format version 1)."""
     header = {"format": "nlosfw-field-model", "version": 1, "model": model,
               "config": config, "architecture": arch.to_dict(),
               "normalisation": norm.to_dict(), "backend": "torch", "family": arch.family}
-    if trained is not None:
-        header["train_frequencies"] = trained
     arrays = {f"a_p{i}": p for i, p in enumerate(params)}
     with open(path, "wb") as fh:
         np.savez(fh, header=np.array(json.dumps(header)), **arrays)
