@@ -67,6 +67,10 @@ class Engine(ABC):
         or else from its initial state."""
         self.build = build
         self.n_networks = build.n_networks
+        self.x: Any = None
+        self.y: Any = None
+        self.val_x: Any = None
+        self.val_y: Any = None
         template = self.make_network(0)
         own = self.network_state(template)
         trainable = self.trainable(template)
@@ -98,9 +102,8 @@ class Engine(ABC):
 
     # ------------------------------------------------------------------ backend: training
     @abstractmethod
-    def set_data(self, x: np.ndarray, y: np.ndarray, val_x: np.ndarray | None,
-                 val_y: np.ndarray | None) -> None:
-        """Move training (and validation) arrays to the device."""
+    def to_device(self, a: np.ndarray) -> Any:
+        """``a`` as an array of the backend on the device (floating point as float32)."""
 
     @abstractmethod
     def step(self, idx: np.ndarray | None, lr: float) -> Any:
@@ -114,9 +117,6 @@ class Engine(ABC):
     def squared_error(self, start: int, stop: int) -> tuple[float, int]:
         """(Sum of squared errors, number of values) on validation rows ``start:stop``."""
 
-    @abstractmethod
-    def n_validation(self) -> int:
-        """Rows of validation data (0: none)."""
 
     @abstractmethod
     def snapshot(self) -> Any:
@@ -136,6 +136,17 @@ class Engine(ABC):
         (len(networks), n, 2) of the single-mode networks ``networks`` (all when None)."""
 
     # ------------------------------------------------------------------ shared
+    def set_data(self, x: np.ndarray, y: np.ndarray, val_x: np.ndarray | None,
+                 val_y: np.ndarray | None) -> None:
+        """Move training (and validation) arrays to the device."""
+        self.x, self.y = self.to_device(x), self.to_device(y)
+        self.val_x = None if val_x is None else self.to_device(val_x)
+        self.val_y = None if val_y is None else self.to_device(val_y)
+
+    def n_validation(self) -> int:
+        """Rows of validation data (0: none)."""
+        return 0 if self.val_x is None else int(self.val_x.shape[0])
+
     def val_loss(self) -> float:
         """Mean squared error on the validation data."""
         total, count = 0.0, 0

@@ -123,10 +123,6 @@ class JaxEngine(Engine):
     def __init__(self, build: NetworkBuild, state: Mapping[str, np.ndarray] | None = None
                  ) -> None:
         self.device = resolve_device(build.config.device)
-        self.x: Any = None
-        self.y: Any = None
-        self.val_x: Any = None
-        self.val_y: Any = None
         super().__init__(build, state)
 
     # ------------------------------------------------------------------ building
@@ -146,25 +142,18 @@ class JaxEngine(Engine):
 
     def place(self, network: Any, state: Mapping[str, np.ndarray]) -> None:
         leaves, treedef = jax.tree_util.tree_flatten_with_path(network)
-        placed = [self._put(state[_name(path)]) if eqx.is_array(leaf) else leaf
+        placed = [self.to_device(state[_name(path)]) if eqx.is_array(leaf) else leaf
                   for path, leaf in leaves]
         model = jax.tree_util.tree_unflatten(treedef, placed)
         self.params, self.rest = eqx.partition(model, _trainable_spec(model), is_leaf=_is_fixed)
         self.opt_state = _ADAM.init(self.params)
 
-    def _put(self, a: np.ndarray | None) -> Any:
-        if a is None:
-            return None
+    # ------------------------------------------------------------------ training
+    def to_device(self, a: np.ndarray) -> Any:
         a = np.asarray(a)
         if np.issubdtype(a.dtype, np.floating):
             a = a.astype(np.float32)
         return jax.device_put(np.ascontiguousarray(a), self.device)
-
-    # ------------------------------------------------------------------ training
-    def set_data(self, x: np.ndarray, y: np.ndarray, val_x: np.ndarray | None,
-                 val_y: np.ndarray | None) -> None:
-        self.x, self.y = self._put(x), self._put(y)
-        self.val_x, self.val_y = self._put(val_x), self._put(val_y)
 
     def step(self, idx: np.ndarray | None, lr: float) -> Any:
         index = None if idx is None else jax.device_put(idx.astype(np.int32), self.device)
@@ -175,9 +164,6 @@ class JaxEngine(Engine):
 
     def mean_loss(self, handles: list[Any]) -> float:
         return float(np.mean(np.asarray(jax.device_get(handles), dtype=np.float64)))
-
-    def n_validation(self) -> int:
-        return 0 if self.val_x is None else int(self.val_x.shape[0])
 
     def squared_error(self, start: int, stop: int) -> tuple[float, int]:
         y = self.val_y[..., start:stop, :]
@@ -203,5 +189,5 @@ class JaxEngine(Engine):
             params, rest = (jax.tree.map(
                 lambda a: jnp.take(a, sel, axis=0) if eqx.is_array(a) else a, t)
                 for t in (params, rest))
-        out = _forward(params, rest, self._put(x), bool(self.n_networks))
+        out = _forward(params, rest, self.to_device(x), bool(self.n_networks))
         return np.asarray(out, dtype=np.float32)

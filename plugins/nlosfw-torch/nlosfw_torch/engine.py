@@ -51,10 +51,6 @@ class TorchEngine(Engine):
                  ) -> None:
         self.threads = build.config.threads
         self.device = resolve_device(build.config.device)
-        self.x: Any = None
-        self.y: Any = None
-        self.val_x: Any = None
-        self.val_y: Any = None
         super().__init__(build, state)
 
     # ------------------------------------------------------------------ building
@@ -111,16 +107,9 @@ class TorchEngine(Engine):
         finally:
             torch.set_num_threads(before)
 
-    def _tensor(self, a: np.ndarray | None) -> torch.Tensor | None:
-        if a is None:
-            return None
-        return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).to(self.device)
-
     # ------------------------------------------------------------------ training
-    def set_data(self, x: np.ndarray, y: np.ndarray, val_x: np.ndarray | None,
-                 val_y: np.ndarray | None) -> None:
-        self.x, self.y = self._tensor(x), self._tensor(y)
-        self.val_x, self.val_y = self._tensor(val_x), self._tensor(val_y)
+    def to_device(self, a: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).to(self.device)
 
     def step(self, idx: np.ndarray | None, lr: float) -> Any:
         x, y = self.x, self.y
@@ -138,9 +127,6 @@ class TorchEngine(Engine):
 
     def mean_loss(self, handles: list[Any]) -> float:
         return float(torch.stack(handles).mean().item())
-
-    def n_validation(self) -> int:
-        return 0 if self.val_x is None else int(self.val_x.shape[0])
 
     def squared_error(self, start: int, stop: int) -> tuple[float, int]:
         x, y = self.val_x[start:stop], self.val_y[..., start:stop, :]
@@ -167,5 +153,5 @@ class TorchEngine(Engine):
             if networks is not None:
                 sel = torch.from_numpy(networks).to(self.device)
                 state = {k: v.index_select(0, sel) for k, v in state.items()}
-            out = self._apply(state, torch.from_numpy(x).to(self.device))
+            out = self._apply(state, self.to_device(x))
             return out.float().cpu().numpy()
