@@ -9,14 +9,17 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, fields
-from typing import Any
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, TypeVar
 
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import PluginError
 from nlosfw.plugins.capabilities import Capability, parse_capabilities
 from nlosfw.plugins.kinds import PluginKind
+
+T = TypeVar("T")
 
 
 def import_object(path: str) -> Any:
@@ -31,14 +34,23 @@ def import_object(path: str) -> Any:
     return obj
 
 
+class LazyFactory(ABC):
+    """A factory made on first use (e.g. a field model bound to a registered network)."""
+
+    @abstractmethod
+    def load(self) -> Any:
+        """The factory (imports what it needs)."""
+
+
 @dataclass(frozen=True)
 class PluginSpec:
     """One registered plugin: what it is, where it comes from, how to build it."""
 
     kind: PluginKind
     name: str
-    factory: str | Callable[..., Any]
-    """The implementation class, or ``"module:Class"`` imported on first use."""
+    factory: str | Callable[..., Any] | LazyFactory
+    """The implementation class, ``"module:Class"`` imported on first use, or a
+    :class:`LazyFactory` that makes it on first use."""
     distribution: str
     """The installed distribution that registered it (``nlosfw``, ``nlosfw-torch``, ...)."""
     entry_point: str = ""
@@ -100,13 +112,15 @@ class PluginSpec:
 
     def load(self) -> Any:
         """The factory, imported on first use; a one-line error says what to install."""
-        if not isinstance(self.factory, str):
+        if not isinstance(self.factory, (str, LazyFactory)):
             return self.factory
         command = self.install_command()
         if command:
             modules = ", ".join(m for m, _ in self.missing_requirements())
             raise PluginError(f"{self.kind.value} plugin '{self.name}' needs {modules}, which is "
                               f"not installed; run: {command}")
+        if isinstance(self.factory, LazyFactory):
+            return self.factory.load()
         try:
             return import_object(self.factory)
         except ImportError as err:
@@ -182,6 +196,20 @@ class Registry:
         return (PluginKind(kind), name) in self._specs
 
 
+def registration_options(cls: type[T], options: Mapping[str, Any], who: str) -> T:
+    """The options dataclass ``cls`` of one ``register(...)`` call; a one-line
+    :class:`PluginError` names an unknown or a missing option and the valid ones."""
+    valid = [f.name for f in fields(cls)]  # type: ignore[arg-type]
+    unknown = sorted(set(options) - set(valid))
+    required = [f.name for f in fields(cls) if f.default is MISSING]  # type: ignore[arg-type]
+    missing = [n for n in required if n not in options]
+    if unknown or missing:
+        problem = (f"unknown option {unknown[0]!r}" if unknown
+                   else f"no {missing[0]!r} (required: {', '.join(required)})")
+        raise PluginError(f"{who} is registered with {problem}; valid: {', '.join(valid)}")
+    return cls(**options)
+
+
 @dataclass(frozen=True)
 class RegistrationOptions:
     """The keyword options of ``register(name, factory, **options)`` (see :class:`PluginSpec`).
@@ -212,18 +240,14 @@ class Registrar:
     accept: Callable[[PluginSpec], bool]
     registry: Registry
 
-    def __call__(self, name: str, factory: str | Callable[..., Any], **options: Any) -> None:
+    def __call__(self, name: str, factory: str | Callable[..., Any] | LazyFactory,
+                 **options: Any) -> None:
         """Register plugin ``name`` of this hook's kind, with :class:`RegistrationOptions`."""
         if not name or not name.replace("_", "").replace("-", "").isalnum():
             raise PluginError(f"{self.distribution}: invalid {self.kind.value} plugin name "
                               f"{name!r}; use letters, digits, '_' and '-'")
-        valid = [f.name for f in fields(RegistrationOptions)]
-        unknown = sorted(set(options) - set(valid))
-        if unknown:
-            raise PluginError(f"{self.distribution}: {self.kind.value} plugin {name!r} is "
-                              f"registered with unknown option {unknown[0]!r}; valid: "
-                              f"{', '.join(valid)}")
-        opts = RegistrationOptions(**options)
+        opts = registration_options(RegistrationOptions, options,
+                                    f"{self.distribution}: {self.kind.value} plugin {name!r}")
         if isinstance(opts.requires, Mapping):
             reqs = tuple((str(m), str(r)) for m, r in opts.requires.items())
         else:

@@ -26,7 +26,7 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import NlosfwError
 from nlosfw.model.interface import FieldModelConfig
-from nlosfw.model.networks import write_model_file
+from nlosfw.model.model_files import write_model_file
 from nlosfw.model.protocol import error_metrics, split_field
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import PluginSpec
