@@ -92,15 +92,15 @@ def raw_embree_throughput(scene: Any, threads: int, n_samples: int,
                           per_call: int = 1 << 18) -> dict[str, float]:
     """Occlusion rays/s of embreex alone on the simulation's own sensor-leg queries."""
     from nlosfw_embree.tracer import OcclusionTracer
-    from nlosfw_embree.transport import laser_side
+    from nlosfw_embree.transport import Binning, SurfaceSamples, laser_side
 
     from nlosfw.simulate.geometry import scene_mesh, sobol_engine, surface_points
 
     mesh = scene_mesh(scene)
     tracer = OcclusionTracer(mesh)
     p, n, rho = surface_points(mesh, sobol_engine(np.random.default_rng(7)).random(n_samples))
-    lit, _ = laser_side(p, n, rho, scene.laser_spot_xyz(), tracer, delta_t=scene.time.bin_width,
-                        t_start=0.0, fixed_path=0.0, ray_offset=1e-4)
+    binning = Binning(scene.time.bins, scene.time.bin_width, t_start=0.0, ray_offset=1e-4)
+    lit, _ = laser_side(SurfaceSamples(p, n, rho), scene.laser_spot_xyz(), tracer, binning)
     sensors = scene.wall.grid_xyz().reshape(-1, 3).astype(np.float32)
     origins = np.repeat(lit.origin[None], sensors.shape[0], axis=0).reshape(-1, 3)
     dirs = (sensors[:, None, :] - lit.position[None]).reshape(-1, 3).astype(np.float32)

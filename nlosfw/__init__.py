@@ -27,13 +27,13 @@ from nlosfw.common import (
 )
 from nlosfw.image import Imager, ImagerConfig, Reconstruction
 from nlosfw.model import FieldModel, FieldModelConfig, FitReport, TrainingStep
-from nlosfw.plugins import PluginKind, hookimpl
+from nlosfw.plugins import Capability, PluginKind, hookimpl
 from nlosfw.simulate import Scene, Simulator, SimulatorConfig
 from nlosfw.transform import PhasorField, PhasorTransform, PhasorTransformConfig
 
 __all__ = [
-    "Capture", "CaptureGeometry", "CaptureKind", "ConfigError", "DataError", "FieldModel",
-    "FieldModelConfig", "FitError", "FitReport", "GridFormat", "HFormat", "Imager",
+    "Capability", "Capture", "CaptureGeometry", "CaptureKind", "ConfigError", "DataError",
+    "FieldModel", "FieldModelConfig", "FitError", "FitReport", "GridFormat", "HFormat", "Imager",
     "ImagerConfig", "NlosfwError", "PhasorField", "PhasorTransform", "PhasorTransformConfig",
     "PluginError", "PluginKind", "Reconstruction", "Scene", "Simulator", "SimulatorConfig",
     "TrainingStep", "VolumeFormat", "__version__", "hookimpl", "require",

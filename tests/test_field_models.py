@@ -8,24 +8,22 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import ConfigError, DataError, FitError
-from nlosfw.model.networks import (
+from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.neural_config import NeuralFieldConfig
+from nlosfw.model.normalisation import FieldNormalisation, estimate_delay
+from nlosfw.model.thesis_networks import (
     PRESETS,
-    FieldNormalisation,
-    NeuralFieldConfig,
     SirenFieldConfig,
     count_parameters,
     default_octaves,
-    estimate_delay,
     forward_numpy,
     init_parameters,
-    learning_rate,
     network_inputs,
     positional_encoding,
     preset_config,
-    read_model_file,
     resolve_architecture,
-    write_model_file,
 )
+from nlosfw.model.trainer import learning_rate
 from nlosfw.testing import fixtures
 
 THESIS_COUNTS = {"thesis_tanh_single": 942, "thesis_pe_single": 914, "thesis_pe_multi": 3938,
@@ -172,8 +170,6 @@ def test_model_files(tmp_path):
 
 def test_estimate_delay_is_periodic_across_the_wrap_boundary():
     """A transient at path d gives a delay equal to d modulo the period 1/df (any d)."""
-    from nlosfw.model.networks import estimate_delay
-
     f = np.linspace(4.0, 8.0, 41)                      # df = 0.1: period 10 m
     period = 10.0
     for d in (1.0, 4.9, 5.1, 6.5, 9.7):                # around and beyond +period/2

@@ -57,6 +57,14 @@ def test_duplicate_names_an_error_naming_both_distributions():
     assert "dist-one" in message and "dist-two" in message
 
 
+def test_an_unknown_registration_option_is_a_one_line_error():
+    with pytest.raises(PluginError) as info:
+        load_plugins(env={}, extra=[("dist-y", "y", plugin_module("yew", colour="red"))])
+    assert str(info.value) == (
+        "dist-y: simulator plugin 'yew' is registered with unknown option 'colour'; valid: "
+        "config, requires, description, test_config, expected_failures, capabilities")
+
+
 def test_unknown_name_lists_valid_names():
     host = load_plugins(env={}, extra=[("dist-x", "x", plugin_module("zeta"))])
     with pytest.raises(PluginError) as info:

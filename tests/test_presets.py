@@ -9,7 +9,12 @@ from pathlib import Path
 import pytest
 
 from nlosfw.common import yaml_safe
-from nlosfw.model.networks import FAMILY_CONFIGS, PRESETS, count_parameters, resolve_architecture
+from nlosfw.model.thesis_networks import (
+    FAMILY_CONFIGS,
+    PRESETS,
+    count_parameters,
+    resolve_architecture,
+)
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

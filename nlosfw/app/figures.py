@@ -10,13 +10,16 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from nlosfw.app.metrics import ImageScores, ReconstructionMetrics
+from nlosfw.app.results import RunResults
 from nlosfw.app.run_dir import RunContext
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.scores import normalise
@@ -26,33 +29,32 @@ _SOURCE_TITLES = {"true": "true field", "raw": "raw (training grid)", "model": "
                   "interp": "interp baseline"}
 
 
-def write_figures(ctx: RunContext, fields: dict[str, PhasorField],
-                  recons: dict[str, Reconstruction], fitted: dict[str, Any], dpi: int,
-                  truth_depth: np.ndarray | None = None,
-                  frequencies: dict[str, int] | None = None,
-                  single_frequency: dict[int, dict[str, Reconstruction]] | None = None) -> None:
+def write_figures(ctx: RunContext, results: RunResults, scores: ReconstructionMetrics,
+                  dpi: int) -> None:
     """Write every figure of a run into ``figures/``.
 
-    ``truth_depth`` is the scene's ground-truth depth map (X, Y) as stored by the
-    simulators in ``scene_info`` (-1 where nothing is hit), shown for reference;
-    ``frequencies`` maps a label to a frequency index to show alone, and
-    ``single_frequency`` holds the reconstructions from those frequencies.
+    The fields at each single frequency the reconstructions show, the
+    reconstructions (whole band and single frequencies, labelled with their
+    ``scores``, beside the scene's ground-truth depth when the capture has one)
+    and the loss curves.
     """
-    for label, index in (frequencies or {}).items():
-        ctx.write(f"figures/fields_f{index}.png",
-                  _saver(lambda fig_index=index, lab=label: _field_figure(fields, fig_index, lab),
-                         dpi), kind="figure")
-    metrics = ctx.metrics.get("reconstruction") or {}
+    fields = results.fields.by_source()
+    recons = results.reconstructions
+    truth_depth = results.capture.truth_depth
+    for single in recons.single_frequency:
+        ctx.write(f"figures/fields_f{single.index}.png",
+                  _saver(partial(_field_figure, fields, single.index, single.split), dpi),
+                  kind="figure")
     ctx.write("figures/reconstructions.png",
-              _saver(lambda: _recon_figure(recons, metrics.get("sources") or {}, truth_depth,
+              _saver(lambda: _recon_figure(recons.by_source, scores.sources, truth_depth,
                                            "all frequencies"), dpi), kind="figure")
-    for index, singles in (single_frequency or {}).items():
-        entry = metrics["single_frequency"][str(index)]
-        title = f"f = {entry['frequency']:.3f} cycles/m only ({entry['split']} frequency)"
-        ctx.write(f"figures/reconstructions_f{index}.png",
-                  _saver(lambda r=singles, e=entry, t=title: _recon_figure(
-                      r, e["sources"], truth_depth, t), dpi), kind="figure")
-    histories = {s: r.history for s, r in fitted["reports"].items() if r.history}
+    for single in recons.single_frequency:
+        entry = scores.single_frequency[str(single.index)]
+        title = f"f = {entry.frequency:.3f} cycles/m only ({entry.split} frequency)"
+        ctx.write(f"figures/reconstructions_f{single.index}.png",
+                  _saver(partial(_recon_figure, single.by_source, entry.sources, truth_depth,
+                                 title), dpi), kind="figure")
+    histories = {m.source: m.report.history for m in results.fit.models if m.report.history}
     if histories:
         ctx.write("figures/loss.png", _saver(lambda: _loss_figure(histories), dpi), kind="figure")
 
@@ -71,7 +73,7 @@ def _extent(field: PhasorField) -> list[float]:
             w[0, 0, 1] - sp[0] / 2, w[-1, 0, 1] + sp[0] / 2]
 
 
-def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any:
+def _field_figure(fields: Mapping[str, PhasorField], index: int, label: str) -> Any:
     true = fields["true"]
     sources = list(fields)
     amp_max = float(np.abs(true.values[index]).max()) or 1.0
@@ -109,7 +111,7 @@ def _field_figure(fields: dict[str, PhasorField], index: int, label: str) -> Any
     return fig
 
 
-def _recon_figure(recons: dict[str, Reconstruction], scores: dict[str, Any],
+def _recon_figure(recons: Mapping[str, Reconstruction], scores: Mapping[str, ImageScores],
                   truth_depth: np.ndarray | None, title: str) -> Any:
     sources = list(recons)
     reference = normalise(recons["true"].max_intensity_image())
@@ -122,7 +124,7 @@ def _recon_figure(recons: dict[str, Reconstruction], scores: dict[str, Any],
     ext = [vox[0, 0, 0, 0], vox[0, 0, -1, 0], vox[0, 0, 0, 1], vox[0, -1, 0, 1]]
     depths = recons["true"].depths
     for col, source in enumerate(sources):
-        ssim = (scores.get(source) or {}).get("ssim")
+        ssim = None if source not in scores else scores[source].ssim
         label = "" if ssim is None or source == "true" else f"  (SSIM {ssim:.3f})"
         axes[0, col].imshow(images[source], origin="lower", extent=ext, cmap="hot", vmin=0,
                             vmax=1)
@@ -178,8 +180,8 @@ def _loss_figure(histories: dict[str, list[dict[str, float]]]) -> Any:
         steps = [h.get("step", i) for i, h in enumerate(history)]
         ax.plot(steps, [h.get("loss", np.nan) for h in history], label=f"{source} train")
         if any(h.get("val_loss") is not None for h in history):
-            ax.plot(steps, [h.get("val_loss") if h.get("val_loss") is not None else np.nan
-                            for h in history], "--", label=f"{source} validation")
+            val = [np.nan if (v := h.get("val_loss")) is None else v for h in history]
+            ax.plot(steps, val, "--", label=f"{source} validation")
     ax.set_yscale("log")
     ax.set_xlabel("step")
     ax.set_ylabel("loss (normalised MSE)")

@@ -3,7 +3,9 @@
 Four fields are imaged side by side: the true full-resolution field, the raw
 subsampled field the model trains on, the model's prediction and the ``interp``
 baseline's, all on the same voxels; every reconstruction is compared with the
-one from the true field.
+one from the true field. The stages hand each other the typed results of
+:mod:`nlosfw.app.results` and record their numbers in the run's
+:class:`~nlosfw.app.metrics.RunMetrics`.
 """
 
 from __future__ import annotations
@@ -12,13 +14,35 @@ import json
 import logging
 import shutil
 import time
+from collections.abc import Callable
+from dataclasses import replace
+from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, cast
 
 import numpy as np
 
 from nlosfw.app.cache import Cache, cache_key, file_digest
 from nlosfw.app.console import config_tree, progress_bar
+from nlosfw.app.measure import (
+    capture_metrics,
+    denoising_metrics,
+    fit_metrics,
+    reconstruction_metrics,
+    transform_metrics,
+)
+from nlosfw.app.metrics import FieldMetrics, RunInfo, RunMetrics, SplitErrors
+from nlosfw.app.results import (
+    CaptureResult,
+    FitResult,
+    FittedModel,
+    FrequencySplit,
+    ImagedFields,
+    Reconstructions,
+    RunResults,
+    SingleFrequencyImages,
+    TransformResult,
+)
 from nlosfw.app.run_dir import RunContext
 from nlosfw.app.settings import RunSettings, run_settings
 from nlosfw.capture.data import Capture
@@ -29,8 +53,8 @@ from nlosfw.common.errors import ConfigError
 from nlosfw.common.version import __version__
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
 from nlosfw.image.reconstruction_io import write_reconstruction
-from nlosfw.image.scores import image_metrics
-from nlosfw.model.interface import TrainingStep
+from nlosfw.model.interface import FieldModel, FitReport, TrainingStep
+from nlosfw.model.protocol import FieldSplit
 from nlosfw.plugins import PluginHost, load_plugins
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
@@ -47,7 +71,7 @@ def run_pipeline(cfg: Any) -> float | None:
     from omegaconf import OmegaConf
 
     run_dir = Path(HydraConfig.get().runtime.output_dir)
-    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    plain = cast("dict[str, Any]", OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
     return Pipeline(run_dir, plain, load_plugins()).run()
 
 
@@ -62,17 +86,13 @@ class Pipeline:
         self.host = host
         self.run_dir = Path(run_dir)
         self.console = Console(stderr=False)
-        self.ctx = RunContext(self.run_dir, host)
+        self.ctx = RunContext(self.run_dir, host, self._run_info())
         self.cache = Cache(self.settings.cache.dir, self.settings.cache.enabled)
-        self.metrics = self.ctx.metrics
-        self.clean: tuple[Capture, str] | None = None
-        """The noise-free capture and its cache key, when the scene adds noise."""
-        self.clean_field: PhasorField | None = None
-        self.truth_depth: np.ndarray | None = None
-        """Ground-truth depth (X, Y) from the capture's scene_info, when it has one."""
-        self.chosen_frequencies: dict[str, int] = {}
-        """Frequency indices shown one at a time (figures, single-frequency images)."""
-        self.single_frequency_recons: dict[int, dict[str, Reconstruction]] = {}
+
+    @property
+    def metrics(self) -> RunMetrics:
+        """The run's metrics so far (all of them once :meth:`run` has returned)."""
+        return self.ctx.metrics
 
     # ------------------------------------------------------------------ driver
     def run(self) -> float | None:
@@ -80,7 +100,6 @@ class Pipeline:
             return None
         self._set_aside_leftovers()
         self.console.print(config_tree(self.config, title=f"nlosfw run → {self.run_dir}"))
-        self.metrics["run"] = self._run_info()
         self.host.hook.on_run_start(run_dir=str(self.run_dir), config=self.config)
         self.ctx.write_text("config", yaml_safe.dump(self.config))
         try:
@@ -88,11 +107,14 @@ class Pipeline:
         except BaseException:  # any failure, ours or a bug: record it, then re-raise
             self._record_failure()
             raise
-        status = "completed" if self.settings.stop_after is None else "stopped"
+        status: Literal["completed", "stopped"] = (
+            "completed" if self.settings.stop_after is None else "stopped")
         if status == "stopped":
-            self.metrics["run"]["stopped_after"] = self.settings.last_stage
+            run = replace(self.metrics.run, stopped_after=self.settings.last_stage)
+            self.ctx.metrics = replace(self.metrics, run=run)
         self.ctx.finish(status)
-        self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics, status=status)
+        self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics.to_json(),
+                                  status=status)
         from nlosfw.app.summary import summary_table
 
         self.console.print(summary_table(self.metrics))
@@ -103,7 +125,7 @@ class Pipeline:
         """metrics.json with status failed and the on_run_end hook, never masking the error."""
         try:
             self.ctx.finish("failed")
-            self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics,
+            self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics.to_json(),
                                       status="failed")
         except Exception as err:  # the original failure is what the user must see
             log.error("could not record the failed run in %s: %s", self.run_dir, err)
@@ -111,56 +133,49 @@ class Pipeline:
     def _stages(self) -> float | None:
         s = self.settings
         with self.ctx.stage("capture"):
-            capture, capture_key = self.capture()
+            capture = self.capture()
         if not s.runs("transform"):
             return None
         with self.ctx.stage("transform"):
-            field = self.transform(capture, capture_key)
+            transformed = self.transform(capture)
         if not s.runs("fit"):
             return None
         with self.ctx.stage("fit"):
-            fitted = self.fit(field)
+            fitted = self.fit(transformed.field)
         if not s.runs("predict"):
             return None
         with self.ctx.stage("predict"):
-            fields = self.predict(field, fitted)
+            fields = self.predict(transformed, fitted)
         if not s.runs("reconstruct"):
             return None
         with self.ctx.stage("reconstruct"):
-            recons = self.reconstruct(capture, fields)
+            recons = self.reconstruct(capture.capture, fitted.split, fields)
         if s.runs("report"):
             with self.ctx.stage("report"):
-                self.report(fields, recons, fitted)
-        model_metrics = self.metrics["field"].get("model") or self.metrics["field"]["interp"]
-        return model_metrics["splits"]["heldout_pixels"]["nmse_db"]
+                self.report(RunResults(capture=capture, transform=transformed, fit=fitted,
+                                       fields=fields, reconstructions=recons))
+        entry = self.metrics.field_entry("model") or self.metrics.field_entry("interp")
+        assert entry is not None and entry.splits is not None  # both set by fit and predict
+        return entry.splits.heldout_pixels.nmse_db
 
     # ------------------------------------------------------------------ stages
-    def capture(self) -> tuple[Capture, str]:
+    def capture(self) -> CaptureResult:
         """Read ``capture.path`` or simulate the scene (cached); write capture.hdf5."""
         path = self.settings.capture.path
-        info: dict[str, Any] = {}
         if path is not None:
             source = Path(path).expanduser()
-            capture = read_capture(source)
-            key = cache_key({"file": file_digest(source)})
-            info.update(source="file", path=str(source.resolve()))
+            result = CaptureResult(capture=read_capture(source),
+                                   key=cache_key({"file": file_digest(source)}),
+                                   source="file", path=source.resolve())
         else:
-            capture, key, hit = self._simulated_capture()
-            info.update(source="simulated", simulator=self.config["simulator"]["name"],
-                        cache_hit=hit)
+            result = self._simulated_capture()
         self.ctx.write("capture", lambda p: write_capture(
-            p, capture, compression=self.settings.output.compression))
-        truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
-        self.truth_depth = None if truth is None else np.asarray(truth, dtype=float)
-        info.update(shape=list(capture.H.shape), kind=capture.kind.value,
-                    delta_t=capture.delta_t, t_start=capture.t_start,
-                    total=float(np.sum(capture.H, dtype=np.float64)))
-        if "noise" in capture.scene_info:
-            info["noise"] = capture.scene_info["noise"]
-        self.metrics["capture"] = info
-        return capture, key
+            p, result.capture, compression=self.settings.output.compression))
+        self.ctx.metrics = replace(self.metrics, capture=capture_metrics(result))
+        return result
 
-    def transform(self, capture: Capture, capture_key: str) -> PhasorField:
+    def transform(self, capture: CaptureResult) -> TransformResult:
+        """The capture's phasor field (cached), and the noise-free capture's; write it."""
         name, options = self._plugin_options("transform")
         transform = self.host.registry.create("transform", name, options)
 
@@ -173,126 +188,122 @@ class Pipeline:
                 "fields", key, lambda: transform.transform(source),
                 lambda p, f: write_phasor_field(p, f), read_phasor_field)
 
-        field, hit = cached_field(capture, capture_key)
-        if self.clean is not None:
-            self.clean_field = cached_field(*self.clean)[0]
+        field, hit = cached_field(capture.capture, capture.key)
+        clean = None
+        if capture.clean is not None and capture.clean_key is not None:
+            clean = cached_field(capture.clean, capture.clean_key)[0]
         self.ctx.write("phasor_field", lambda p: write_phasor_field(p, field))
-        self.metrics["transform"] = {
-            "name": name, "cache_hit": hit, "n_frequencies": field.n_frequencies,
-            "frequency_band": [float(field.frequencies.min()), float(field.frequencies.max())],
-            "grid": list(field.grid_shape),
-        }
-        return field
+        result = TransformResult(field=field, cache_hit=hit, clean=clean)
+        self.ctx.metrics = replace(self.metrics, transform=transform_metrics(name, result))
+        return result
 
-    def fit(self, field: PhasorField) -> dict[str, Any]:
+    def fit(self, field: PhasorField) -> FitResult:
         """Split the field, fit the selected model and the interp baseline."""
         from nlosfw.model.protocol import split_field
 
         s = self.settings.split
         split = split_field(field, spatial_step=s.spatial_step, spectral=s.spectral,
                             spectral_fraction=s.spectral_fraction)
-        self.chosen_frequencies = chosen_frequencies(
-            split, self.settings.reconstruction.single_frequency_images)
         name, options = self._plugin_options("model")
-        fitted: dict[str, Any] = {"split": split, "models": {}, "reports": {}}
-        self.metrics["field"] = {}
+        self.ctx.metrics = replace(self.metrics, field={})
+        models = []
         for source, (plugin, opts) in self._field_models(name, options).items():
             model = self.host.registry.create("model", plugin, opts)
             report = self._fit_with_progress(source, plugin, model, split.train_field)
-            fitted["models"][source] = model
-            fitted["reports"][source] = report
-            entry = self.metrics["field"][source] = {
-                "plugin": plugin,
-                "n_parameters": int(model.n_parameters),
-                "training_values": split.n_train_values,
-                "fit": {"steps": report.steps, "seconds": round(report.seconds, 3),
-                        "final_loss": report.final_loss, "best_val_loss": report.best_val_loss,
-                        "stopped_early": report.stopped_early},
-            }
-            entry["parameters_per_value"] = entry["n_parameters"] / entry["training_values"]
+            fitted = FittedModel(source=source, plugin=plugin, model=model, report=report)
+            models.append(fitted)
+            self._record_field(source, fit_metrics(fitted, split))
             if source == "model":
                 self.ctx.write("field_model", model.save, kind="field_model")
-        return fitted
+        return FitResult(split=split, models=tuple(models))
 
-    def predict(self, field: PhasorField, fitted: dict[str, Any]) -> dict[str, PhasorField]:
-        """The fields to image: true, raw (training grid, all frequencies), model, interp."""
+    def predict(self, transformed: TransformResult, fitted: FitResult) -> ImagedFields:
+        """The fields to image: true, raw (training grid, all frequencies), every model's."""
         from nlosfw.model.protocol import field_metrics
 
-        split = fitted["split"]
-        step = self.settings.split.spatial_step
-        fields = {"true": field, "raw": field.select(y=slice(None, None, step),
-                                                     x=slice(None, None, step))}
-        for source, model in fitted["models"].items():
+        field, split = transformed.field, fitted.split
+        step = split.spatial_step
+        predicted = {}
+        for fm in fitted.models:
             start = time.perf_counter()
-            predicted = model.predict_field(field.wall_xyz, field.frequencies, field.geometry,
-                                            field.weights, metadata={"source": source})
+            prediction = fm.model.predict_field(field.wall_xyz, field.frequencies,
+                                                field.geometry, field.weights,
+                                                metadata={"source": fm.source})
             seconds = time.perf_counter() - start
-            fields[source] = predicted
-            entry = self.metrics["field"][source]
-            entry["predict_seconds"] = round(seconds, 4)
-            entry["splits"] = field_metrics(field, predicted, split)
-            if self.clean_field is not None:
-                entry["denoising"] = _denoising(self.clean_field, field, predicted)
+            predicted[fm.source] = prediction
+            denoising = (None if transformed.clean is None
+                         else denoising_metrics(transformed.clean, field, prediction))
+            entry = self.metrics.field_entry(fm.source)
+            assert entry is not None  # recorded by fit
+            self._record_field(fm.source, replace(
+                entry, predict_seconds=round(seconds, 4),
+                splits=SplitErrors.of(field_metrics(field, prediction, split)),
+                denoising=denoising))
+        fields = ImagedFields(true=field, raw=field.select(y=slice(None, None, step),
+                                                           x=slice(None, None, step)),
+                              predicted=predicted)
         for source, f in fields.items():
-            self.ctx.write(f"fields/{source}.hdf5", lambda p, f=f: write_phasor_field(p, f),
+            self.ctx.write(f"fields/{source}.hdf5", partial(write_phasor_field, field=f),
                            kind="phasor_field")
         return fields
 
-    def reconstruct(self, capture: Capture,
-                    fields: dict[str, PhasorField]) -> dict[str, Reconstruction]:
+    def reconstruct(self, capture: Capture, split: FieldSplit,
+                    fields: ImagedFields) -> Reconstructions:
+        """Image every field on the same voxels, then each from single frequencies alone."""
         name, options = self._plugin_options("imager")
         imager = self.host.registry.create("imager", name, options)
-        voxels = self._voxels(capture, fields["true"])
-        recons: dict[str, Reconstruction] = {}
-        timings = {}
+        voxels = self._voxels(capture, fields.true)
+        by_source: dict[str, Reconstruction] = {}
+        seconds: dict[str, float] = {}
         for source, field in fields.items():
             start = time.perf_counter()
-            recons[source] = imager.reconstruct(field, voxels)
-            timings[source] = round(time.perf_counter() - start, 4)
+            by_source[source] = imager.reconstruct(field, voxels)
+            seconds[source] = round(time.perf_counter() - start, 4)
             self.ctx.write(f"reconstructions/{source}.hdf5",
-                           lambda p, r=recons[source]: write_reconstruction(p, r),
+                           partial(write_reconstruction, recon=by_source[source]),
                            kind="reconstruction")
-        self.metrics["reconstruction"] = {
-            "imager": name, "reference": "true",
-            "depths": [float(d) for d in voxels[:, 0, 0, 2]],
-            "sources": _scores(recons, timings),
-            "single_frequency": {},
-        }
+        recons = Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds)
+        self.ctx.metrics = replace(self.metrics,
+                                   reconstruction=reconstruction_metrics(name, recons))
         # as in the thesis figures: images from one frequency at a time
-        for label, index in self.chosen_frequencies.items():
-            singles = {source: imager.reconstruct(field.select(frequency_index=[index]),
-                                                  voxels)
-                       for source, field in fields.items()}
-            frequency = float(fields["true"].frequencies[index])
-            self.single_frequency_recons[index] = singles
-            self.metrics["reconstruction"]["single_frequency"][str(index)] = {
-                "frequency": frequency, "split": label, "sources": _scores(singles)}
+        chosen = chosen_frequencies(split, self.settings.reconstruction.single_frequency_images)
+        singles = tuple(
+            SingleFrequencyImages(
+                index=index, frequency=float(fields.true.frequencies[index]), split=label,
+                by_source={source: imager.reconstruct(field.select(frequency_index=[index]),
+                                                      voxels)
+                           for source, field in fields.items()})
+            for label, index in chosen.items())
+        recons = replace(recons, single_frequency=singles)
+        self.ctx.metrics = replace(self.metrics,
+                                   reconstruction=reconstruction_metrics(name, recons))
         return recons
 
-    def report(self, fields: dict[str, PhasorField], recons: dict[str, Reconstruction],
-               fitted: dict[str, Any]) -> None:
+    def report(self, results: RunResults) -> None:
         """The thesis comparison table (for thesis presets) and the figures."""
         if self.settings.thesis:
+            from nlosfw.app.records import RunRecord
             from nlosfw.app.thesis import thesis_comparison
 
-            text = thesis_comparison([{**self.metrics, "run": str(self.run_dir.name),
-                                       "thesis": self.settings.thesis}])
+            record = RunRecord(name=self.run_dir.name, metrics=self.metrics,
+                               thesis=self.settings.thesis)
+            text = thesis_comparison([record])
             if text:
                 self.ctx.write_text("thesis_comparison.md", text, kind="report")
         if self.settings.figures.enabled:
             from nlosfw.app.figures import write_figures
 
-            write_figures(self.ctx, fields, recons, fitted, self.settings.figures.dpi,
-                          truth_depth=self.truth_depth, frequencies=self.chosen_frequencies,
-                          single_frequency=self.single_frequency_recons)
+            scores = self.metrics.reconstruction
+            assert scores is not None  # recorded by reconstruct
+            write_figures(self.ctx, results, scores, self.settings.figures.dpi)
 
     # ------------------------------------------------------------------ helpers
-    def _simulated_capture(self) -> tuple[Capture, str, bool]:
+    def _simulated_capture(self) -> CaptureResult:
         """The scene's capture (cached), rendering the transport once even for noisy scenes.
 
         The noise-free capture is cached under its own key; a noisy scene's capture
         is that one with noise added (cached too), and the noise-free one is kept
-        for the denoising metrics. Returns (capture, its cache key, cache hit).
+        for the denoising metrics.
         """
         import dataclasses
 
@@ -307,13 +318,15 @@ class Pipeline:
             clean, hit = self._cached_capture(clean_key,
                                               lambda: simulator.simulate_clean(clean_scene))
             if scene.noise == NoiseConfig():
-                return clean, clean_key, hit
+                return CaptureResult(capture=clean, key=clean_key, source="simulated",
+                                     simulator=name, cache_hit=hit)
             key = self._capture_key(name, simulator, scene)
             capture, hit = self._cached_capture(key, lambda: simulator.add_noise(clean, scene))
-        self.clean = (clean, clean_key)
-        return capture, key, hit
+        return CaptureResult(capture=capture, key=key, source="simulated", simulator=name,
+                             cache_hit=hit, clean=clean, clean_key=clean_key)
 
-    def _cached_capture(self, key: str, compute: Any) -> tuple[Capture, bool]:
+    def _cached_capture(self, key: str,
+                        compute: Callable[[], Capture]) -> tuple[Capture, bool]:
         return self.cache.get_or_compute(
             "captures", key, compute, lambda p, c: write_capture(p, c, compression=1),
             read_capture)
@@ -347,16 +360,23 @@ class Pipeline:
             raise ConfigError(kind, "no plugin selected")
         return str(name), node
 
-    def _field_models(self, name: str, options: dict[str, Any]) -> dict[str, tuple[str, dict]]:
+    def _field_models(self, name: str,
+                      options: dict[str, Any]) -> dict[str, tuple[str, dict[str, Any]]]:
         """The selected model, the interp baseline (unless it is the model) and ``compare``."""
         models = {"model": (name, options)} if name != "interp" else {}
         models["interp"] = (name, options) if name == "interp" else ("interp", {})
         for label, extra in self.settings.compare.items():
-            extra = dict(extra)
-            models[label] = (str(extra.pop("name")), extra)
+            rest = {k: v for k, v in extra.items() if k != "name"}
+            models[label] = (str(extra["name"]), rest)
         return models
 
-    def _fit_with_progress(self, source: str, plugin: str, model: Any, train: PhasorField) -> Any:
+    def _record_field(self, source: str, entry: FieldMetrics) -> None:
+        """Set (or replace) the metrics of field model ``source``."""
+        self.ctx.metrics = replace(self.metrics, field={**(self.metrics.field or {}),
+                                                        source: entry})
+
+    def _fit_with_progress(self, source: str, plugin: str, model: FieldModel,
+                           train: PhasorField) -> FitReport:
         with progress_bar(self.console) as progress:
             task = progress.add_task(f"fit {plugin}", total=None, info="")
 
@@ -389,15 +409,15 @@ class Pipeline:
         x0, y0 = wall[0, 0, 0] - dx / 2, wall[0, 0, 1] - dy / 2
         return volume_voxels(depths, (x0, x0 + nx * dx), (y0, y0 + ny * dy), (ny, nx))
 
-    def _run_info(self) -> dict[str, Any]:
-        return {
-            "dir": str(self.run_dir),
-            "nlosfw_version": __version__,
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-            "scene": (self.config.get("scene") or {}).get("name"),
-            **{k: (self.config.get(k) or {}).get("name")
-               for k in ("simulator", "transform", "model", "imager")},
-        }
+    def _run_info(self) -> RunInfo:
+        def selected(group: str) -> str | None:
+            name = (self.config.get(group) or {}).get("name")
+            return None if name is None else str(name)
+
+        return RunInfo(dir=str(self.run_dir), nlosfw_version=__version__,
+                       started=time.strftime("%Y-%m-%dT%H:%M:%S%z"), scene=selected("scene"),
+                       simulator=selected("simulator"), transform=selected("transform"),
+                       model=selected("model"), imager=selected("imager"))
 
     def _already_completed(self) -> bool:
         path = self.run_dir / "metrics.json"
@@ -428,39 +448,15 @@ class Pipeline:
         log.warning("moved %d files of an earlier unfinished run to %s", len(leftovers), aside)
 
 
-def chosen_frequencies(split: Any, count: int) -> dict[str, int]:
+def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:
     """Up to ``count`` frequency indices to show alone: a training one near the top of the
     band, then a held-out one (if any), by label."""
     train = np.asarray(split.train_frequencies)
     held = np.asarray(split.heldout_frequencies)
-    chosen = {"training": int(train[int(0.75 * (train.size - 1))])}
+    chosen: dict[FrequencySplit, int] = {"training": int(train[int(0.75 * (train.size - 1))])}
     if held.size:
         chosen["held-out"] = int(held[held.size // 2])
     return dict(list(chosen.items())[:count])
-
-
-def _scores(recons: dict[str, Reconstruction],
-            timings: dict[str, float] | None = None) -> dict[str, dict[str, float]]:
-    """Image metrics of every reconstruction's max-intensity image against the true field's."""
-    reference = recons["true"].max_intensity_image()
-    scores = {}
-    for source, recon in recons.items():
-        scores[source] = image_metrics(reference, recon.max_intensity_image())
-        if timings is not None:
-            scores[source]["seconds"] = timings[source]
-    return scores
-
-
-def _denoising(clean: PhasorField, noisy: PhasorField, predicted: PhasorField) -> dict:
-    """Errors against the noise-free field: of the noisy full field and of a prediction."""
-    norm = float(np.linalg.norm(clean.values))
-
-    def rel(field: PhasorField) -> float:
-        return float(np.linalg.norm(field.values - clean.values)) / norm
-
-    noisy_error, model_error = rel(noisy), rel(predicted)
-    return {"noisy_relative_l2": noisy_error, "relative_l2": model_error,
-            "gain_db": float(20 * np.log10(noisy_error / model_error))}
 
 
 def _depth_span(capture: Capture) -> tuple[float, float]:
@@ -481,7 +477,8 @@ def _depth_span(capture: Capture) -> tuple[float, float]:
         if centre - half > 0:
             return centre - half, centre + half
     profile = capture.H.reshape(capture.n_bins, -1).sum(axis=1)
-    nonzero = np.nonzero(profile > 1e-3 * profile.max())[0] if profile.max() > 0 else []
+    nonzero = (np.flatnonzero(profile > 1e-3 * profile.max()) if profile.max() > 0
+               else np.zeros(0, dtype=np.int64))
     if len(nonzero) == 0:
         return 0.3, 2.0
     legs = float(np.mean(capture.geometry.device_path(capture.sensor_points)))

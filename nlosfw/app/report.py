@@ -12,16 +12,16 @@ from __future__ import annotations
 import argparse
 import csv
 import io
-import json
 import logging
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
 from rich.console import Console
 from rich.table import Table
 
+from nlosfw.app.metrics import ErrorMetrics, FieldMetrics, ImageScores, SplitErrors
+from nlosfw.app.records import RunRecord, find_runs, read_run
 from nlosfw.app.tables import markdown_table
 from nlosfw.app.thesis import thesis_comparison
 from nlosfw.common.errors import ConfigError, DataError
@@ -29,78 +29,61 @@ from nlosfw.common.files import atomic_path, write_text
 
 log = logging.getLogger(__name__)
 
-#: Columns of the report, in order: (column name, path into the run record).
-COLUMNS = (
-    ("run", ("run",)),
-    ("status", ("status",)),
-    ("scene", ("scene",)),
-    ("simulator", ("simulator",)),
-    ("model", ("model",)),
-    ("imager", ("imager",)),
-    ("overrides", ("overrides",)),
-    ("n_parameters", ("field", "model", "n_parameters")),
-    ("parameters_per_value", ("field", "model", "parameters_per_value")),
-    ("fit_seconds", ("field", "model", "fit", "seconds")),
-    ("final_loss", ("field", "model", "fit", "final_loss")),
-    ("model_heldout_pixels_nmse_db", ("field", "model", "splits", "heldout_pixels", "nmse_db")),
-    ("model_heldout_freqs_nmse_db",
-     ("field", "model", "splits", "heldout_frequencies", "nmse_db")),
-    ("model_all_nmse_db", ("field", "model", "splits", "all", "nmse_db")),
-    ("interp_heldout_pixels_nmse_db",
-     ("field", "interp", "splits", "heldout_pixels", "nmse_db")),
-    ("interp_heldout_freqs_nmse_db",
-     ("field", "interp", "splits", "heldout_frequencies", "nmse_db")),
-    ("interp_all_nmse_db", ("field", "interp", "splits", "all", "nmse_db")),
-    ("model_ssim", ("reconstruction", "sources", "model", "ssim")),
-    ("interp_ssim", ("reconstruction", "sources", "interp", "ssim")),
-    ("raw_ssim", ("reconstruction", "sources", "raw", "ssim")),
-    ("model_psnr", ("reconstruction", "sources", "model", "psnr")),
-    ("interp_psnr", ("reconstruction", "sources", "interp", "psnr")),
-    ("total_seconds", ("timings", "total")),
+Column = Callable[[RunRecord], Any]
+
+
+def _field(source: str, get: Callable[[FieldMetrics], Any]) -> Column:
+    """A column from field model ``source``'s metrics (empty where it was not fitted)."""
+    def column(record: RunRecord) -> Any:
+        entry = record.metrics.field_entry(source)
+        return None if entry is None else get(entry)
+
+    return column
+
+
+def _nmse(source: str, split: Callable[[SplitErrors], ErrorMetrics]) -> Column:
+    """The NMSE (dB) of field model ``source`` on one set of the protocol."""
+    def nmse(entry: FieldMetrics) -> float | None:
+        return None if entry.splits is None else split(entry.splits).nmse_db
+
+    return _field(source, nmse)
+
+
+def _image(source: str, get: Callable[[ImageScores], Any]) -> Column:
+    """A column from the reconstruction scores of ``source``."""
+    def column(record: RunRecord) -> Any:
+        scores = record.metrics.image_scores(source)
+        return None if scores is None else get(scores)
+
+    return column
+
+
+#: Columns of the report, in order: (column name, its value in a run's record).
+COLUMNS: tuple[tuple[str, Column], ...] = (
+    ("run", lambda r: r.name),
+    ("status", lambda r: r.metrics.status),
+    ("scene", lambda r: r.metrics.run.scene),
+    ("simulator", lambda r: r.metrics.run.simulator),
+    ("model", lambda r: r.metrics.run.model),
+    ("imager", lambda r: r.metrics.run.imager),
+    ("overrides", lambda r: " ".join(r.overrides)),
+    ("n_parameters", _field("model", lambda e: e.n_parameters)),
+    ("parameters_per_value", _field("model", lambda e: e.parameters_per_value)),
+    ("fit_seconds", _field("model", lambda e: e.fit.seconds)),
+    ("final_loss", _field("model", lambda e: e.fit.final_loss)),
+    ("model_heldout_pixels_nmse_db", _nmse("model", lambda s: s.heldout_pixels)),
+    ("model_heldout_freqs_nmse_db", _nmse("model", lambda s: s.heldout_frequencies)),
+    ("model_all_nmse_db", _nmse("model", lambda s: s.all)),
+    ("interp_heldout_pixels_nmse_db", _nmse("interp", lambda s: s.heldout_pixels)),
+    ("interp_heldout_freqs_nmse_db", _nmse("interp", lambda s: s.heldout_frequencies)),
+    ("interp_all_nmse_db", _nmse("interp", lambda s: s.all)),
+    ("model_ssim", _image("model", lambda s: s.ssim)),
+    ("interp_ssim", _image("interp", lambda s: s.ssim)),
+    ("raw_ssim", _image("raw", lambda s: s.ssim)),
+    ("model_psnr", _image("model", lambda s: s.psnr)),
+    ("interp_psnr", _image("interp", lambda s: s.psnr)),
+    ("total_seconds", lambda r: r.metrics.timings.total),
 )
-
-
-def find_runs(root: Path) -> list[Path]:
-    """Every run directory (one holding metrics.json) under ``root``, sorted."""
-    return sorted({p.parent for p in root.rglob("metrics.json")
-                   if "interrupted-" not in str(p.relative_to(root))})
-
-
-def run_record(run_dir: Path, root: Path) -> dict[str, Any]:
-    """The metrics of one run, flattened with its selected plugins and overrides."""
-    try:
-        metrics = json.loads((run_dir / "metrics.json").read_text())
-    except (OSError, ValueError) as err:
-        raise DataError(f"{run_dir / 'metrics.json'}: unreadable ({err})") from None
-    info = metrics.get("run") or {}
-    overrides_file = run_dir / ".hydra" / "overrides.yaml"
-    overrides = yaml.safe_load(overrides_file.read_text()) if overrides_file.exists() else []
-    return {
-        **metrics,
-        "run": str(run_dir.relative_to(root)) or ".",
-        "scene": info.get("scene"),
-        "simulator": info.get("simulator"),
-        "model": info.get("model"),
-        "imager": info.get("imager"),
-        "overrides": " ".join(overrides or []),
-        "thesis": _thesis_of(run_dir),
-    }
-
-
-def _thesis_of(run_dir: Path) -> dict[str, Any]:
-    config = run_dir / "config.yaml"
-    if not config.exists():
-        return {}
-    return (yaml.safe_load(config.read_text()) or {}).get("thesis") or {}
-
-
-def _get(record: dict[str, Any], path: tuple[str, ...]) -> Any:
-    value: Any = record
-    for key in path:
-        if not isinstance(value, dict):
-            return None
-        value = value.get(key)
-    return value
 
 
 def _fmt(value: Any) -> str:
@@ -111,8 +94,9 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-def report_rows(records: list[dict[str, Any]]) -> list[dict[str, str]]:
-    return [{name: _fmt(_get(r, path)) for name, path in COLUMNS} for r in records]
+def report_rows(records: Sequence[RunRecord]) -> list[dict[str, str]]:
+    """One row of formatted cells per run, by column name."""
+    return [{name: _fmt(value(r)) for name, value in COLUMNS} for r in records]
 
 
 def to_csv(rows: list[dict[str, str]]) -> str:
@@ -128,26 +112,25 @@ def to_markdown(rows: list[dict[str, str]], columns: Sequence[str] | None = None
     return markdown_table(columns, [[row.get(c, "") for c in columns] for row in rows])
 
 
-def comparison_figure(records: list[dict[str, Any]], path: Path) -> None:
+def comparison_figure(records: Sequence[RunRecord], path: Path) -> None:
     """Held-out NMSE (model vs interp) and reconstruction SSIM per run, as a PNG."""
     import numpy as np
     from matplotlib.figure import Figure
 
-    labels = [f"{r['run']}\n{r.get('model') or ''}" for r in records]
+    labels = [f"{r.name}\n{r.metrics.run.model or ''}" for r in records]
     x = np.arange(len(records))
 
-    def series(path: tuple[str, ...]) -> np.ndarray:
-        return np.array([_get(r, path) if _get(r, path) is not None else np.nan
-                         for r in records], dtype=float)
+    def series(column: Column) -> np.ndarray:
+        return np.array([np.nan if (v := column(r)) is None else v for r in records],
+                        dtype=float)
 
     fig = Figure(figsize=(max(8, 1.2 * len(records) + 4), 4.5))
     axes = fig.subplots(1, 2)
     width = 0.38
     for offset, source in ((-width / 2, "model"), (width / 2, "interp")):
-        axes[0].bar(x + offset, series(("field", source, "splits", "heldout_pixels", "nmse_db")),
-                    width, label=source)
-        axes[1].bar(x + offset, series(("reconstruction", "sources", source, "ssim")), width,
+        axes[0].bar(x + offset, series(_nmse(source, lambda s: s.heldout_pixels)), width,
                     label=source)
+        axes[1].bar(x + offset, series(_image(source, lambda s: s.ssim)), width, label=source)
     axes[0].set_ylabel("held-out pixels NMSE (dB, lower is better)")
     axes[1].set_ylabel("reconstruction SSIM vs true field (higher is better)")
     for ax in axes:
@@ -172,7 +155,7 @@ def write_report(root: Path) -> tuple[Path, list[dict[str, str]]]:
     runs = find_runs(root)
     if not runs:
         raise DataError(f"{root}: holds no run (no metrics.json below it)")
-    records = [run_record(r, root) for r in runs]
+    records = [read_run(r, root) for r in runs]
     rows = report_rows(records)
     out = _free_dir(root)
     out.mkdir(parents=True)

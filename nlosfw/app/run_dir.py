@@ -5,7 +5,8 @@ Artefact names (relative to the run directory; see the README):
 ========================  ================================================
 ``config.yaml``           the resolved configuration of the run
 ``run.log``               the log
-``metrics.json``          metrics, nested by stage (schema in the README)
+``metrics.json``          metrics, nested by stage (:mod:`nlosfw.app.metrics`)
+``metrics.schema.json``   the JSON Schema of metrics.json
 ``capture.hdf5``          the transient, in y-tal's HDF5 layout
 ``phasor_field.hdf5``     the full phasor field of the capture
 ``field_model.npz``       the trained field model (its plugin's format)
@@ -17,26 +18,25 @@ Artefact names (relative to the run directory; see the README):
 
 from __future__ import annotations
 
-import json
+import dataclasses
 import logging
-import math
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from nlosfw.app.metrics import RunInfo, RunMetrics, Status, metrics_schema_text
 from nlosfw.common.errors import DataError
 from nlosfw.common.files import atomic_path, write_text
 from nlosfw.plugins import PluginHost
 
 log = logging.getLogger(__name__)
 
-METRICS_SCHEMA_VERSION = 1
-
 ARTEFACTS = {
     "config": "config.yaml",
     "metrics": "metrics.json",
+    "metrics_schema": "metrics.schema.json",
     "capture": "capture.hdf5",
     "phasor_field": "phasor_field.hdf5",
     "field_model": "field_model.npz",
@@ -44,13 +44,16 @@ ARTEFACTS = {
 
 
 class RunContext:
-    """Writes a run's artefacts atomically (never over existing files) and records metrics."""
+    """Writes a run's artefacts atomically (never over existing files) and holds its metrics.
 
-    def __init__(self, run_dir: Path, host: PluginHost) -> None:
+    ``metrics`` is the run's :class:`RunMetrics` so far; stages replace its sections as
+    they finish, and :meth:`finish` writes it.
+    """
+
+    def __init__(self, run_dir: Path, host: PluginHost, info: RunInfo) -> None:
         self.run_dir = Path(run_dir)
         self.host = host
-        self.metrics: dict[str, Any] = {"schema_version": METRICS_SCHEMA_VERSION,
-                                        "status": "running", "timings": {}}
+        self.metrics = RunMetrics(run=info)
         self.started = time.perf_counter()
 
     def path(self, name: str) -> Path:
@@ -72,37 +75,28 @@ class RunContext:
 
     @contextmanager
     def stage(self, name: str) -> Iterator[None]:
-        """Time a pipeline stage into ``metrics['timings'][name]`` and fire ``on_stage_end``."""
+        """Time a pipeline stage into ``metrics.timings.<name>`` and fire ``on_stage_end``."""
         start = time.perf_counter()
         log.info("stage %s: started", name)
         yield
         seconds = time.perf_counter() - start
-        self.metrics["timings"][name] = round(seconds, 4)
+        self._record_time(name, seconds)
         log.info("stage %s: %.2f s", name, seconds)
         self.host.hook.on_stage_end(stage=name, seconds=seconds)
 
-    def finish(self, status: str) -> Path:
-        """Write ``metrics.json`` with the final status and total time."""
-        self.metrics["status"] = status
-        self.metrics["timings"]["total"] = round(time.perf_counter() - self.started, 4)
-        text = json.dumps(_json_safe(self.metrics), indent=2, sort_keys=False) + "\n"
+    def finish(self, status: Status) -> Path:
+        """Write ``metrics.json`` with the final status and total time, and its JSON Schema
+        ``metrics.schema.json`` beside it."""
+        self._record_time("total", time.perf_counter() - self.started)
+        self.metrics = dataclasses.replace(self.metrics, status=status)
         path = self.path("metrics")
         if path.exists():
             raise DataError(f"{path}: already exists; refusing to overwrite it")
+        text = self.metrics.dumps()
+        if not self.path("metrics_schema").exists():  # a failed finish may have written it
+            self.write_text("metrics_schema", metrics_schema_text())
         return self.write_text("metrics", text)
 
-
-def _json_safe(value: Any) -> Any:
-    """NaN and infinities become null (JSON has none); numpy scalars become Python numbers."""
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
-        try:
-            value = value.item()
-        except (TypeError, ValueError):
-            return str(value)
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
+    def _record_time(self, name: str, seconds: float) -> None:
+        timings = dataclasses.replace(self.metrics.timings, **{name: round(seconds, 4)})
+        self.metrics = dataclasses.replace(self.metrics, timings=timings)

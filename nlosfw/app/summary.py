@@ -1,10 +1,13 @@
-"""The summary table printed at the end of a run (from the metrics dict)."""
+"""The summary table printed at the end of a run (from its :class:`RunMetrics`)."""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 from rich.table import Table
+
+from nlosfw.app.metrics import RunMetrics
 
 
 def _fmt(value: Any, digits: int = 3) -> str:
@@ -15,27 +18,29 @@ def _fmt(value: Any, digits: int = 3) -> str:
     return str(value)
 
 
-def summary_table(metrics: dict[str, Any]) -> Table:
+def summary_table(metrics: RunMetrics) -> Table:
     """Field errors per model and split, reconstruction scores per source, stage timings."""
     table = Table(title="nlosfw run summary", title_justify="left", show_lines=False)
     table.add_column("section", style="cyan")
     table.add_column("item", style="bold")
     table.add_column("values")
-    for source, entry in (metrics.get("field") or {}).items():
-        table.add_row("field model", f"{source} ({entry.get('plugin')})",
-                      f"params {entry.get('n_parameters')}, fit {_fmt(entry['fit']['seconds'])} s,"
-                      f" predict {_fmt(entry.get('predict_seconds'))} s")
-        for split, values in (entry.get("splits") or {}).items():
+    for source, entry in (metrics.field or {}).items():
+        table.add_row("field model", f"{source} ({entry.plugin})",
+                      f"params {entry.n_parameters}, fit {_fmt(entry.fit.seconds)} s,"
+                      f" predict {_fmt(entry.predict_seconds)} s")
+        if entry.splits is None:
+            continue
+        for split, values in entry.splits.by_set().items():
             table.add_row("", f"  {split}",
-                          f"NMSE {_fmt(values.get('nmse_db'))} dB, "
-                          f"rel. L2 {_fmt(values.get('relative_l2'))}, "
-                          f"amp. RMSE {_fmt(values.get('amplitude_rmse'))}, "
-                          f"phase err. {_fmt(values.get('phase_error'))} rad")
-    recon = metrics.get("reconstruction") or {}
-    for source, values in (recon.get("sources") or {}).items():
+                          f"NMSE {_fmt(values.nmse_db)} dB, "
+                          f"rel. L2 {_fmt(values.relative_l2)}, "
+                          f"amp. RMSE {_fmt(values.amplitude_rmse)}, "
+                          f"phase err. {_fmt(values.phase_error)} rad")
+    sources = {} if metrics.reconstruction is None else metrics.reconstruction.sources
+    for source, scores in sources.items():
         table.add_row("reconstruction", f"{source} vs true",
-                      f"SSIM {_fmt(values.get('ssim'))}, PSNR {_fmt(values.get('psnr'))} dB, "
-                      f"RMSE {_fmt(values.get('rmse'))}, {_fmt(values.get('seconds'))} s")
-    timings = metrics.get("timings") or {}
+                      f"SSIM {_fmt(scores.ssim)}, PSNR {_fmt(scores.psnr)} dB, "
+                      f"RMSE {_fmt(scores.rmse)}, {_fmt(scores.seconds)} s")
+    timings = {k: v for k, v in dataclasses.asdict(metrics.timings).items() if v is not None}
     table.add_row("timings", "stages (s)", ", ".join(f"{k} {_fmt(v)}" for k, v in timings.items()))
     return table

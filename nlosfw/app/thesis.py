@@ -12,8 +12,10 @@ field-model source they compare with (``model`` or an entry of ``compare``)::
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
+from nlosfw.app.records import RunRecord
 from nlosfw.app.tables import markdown_table
 
 _TABLE_41 = ("experiment", "parameters (ours)", "parameters (thesis)", "data size (ours)",
@@ -31,27 +33,31 @@ def _fmt(value: Any, spec: str = ".4g") -> str:
     return str(value)
 
 
-def thesis_comparison(records: list[dict[str, Any]]) -> str:
+def thesis_comparison(records: Sequence[RunRecord]) -> str:
     """Markdown tables in the thesis's format, ours next to the published values."""
     table41: list[tuple[str, ...]] = []
     table51: list[tuple[str, ...]] = []
     for record in records:
-        rows = (record.get("thesis") or {}).get("rows") or {}
+        rows = record.thesis.get("rows") or {}
         for source, ref in rows.items():
-            ours = (record.get("field") or {}).get(source) or {}
+            ours = record.metrics.field_entry(source)
             if str(ref.get("table")) == "4.1":
-                params, data = ours.get("n_parameters"), ours.get("training_values")
+                params = None if ours is None else ours.n_parameters
+                data = None if ours is None else ours.training_values
                 ratio = 100.0 * params / data if params and data else None
                 table41.append((ref.get("experiment", ""), _fmt(params, "d"),
                                 _fmt(ref.get("parameters"), "d"), _fmt(data, "d"),
                                 _fmt(ref.get("data_size"), "d"), _fmt(ratio, ".2f"),
-                                _fmt(ref.get("ratio_percent"), ".2f"), record["run"]))
+                                _fmt(ref.get("ratio_percent"), ".2f"), record.name))
             elif str(ref.get("table")) == "5.1":
-                fit = ours.get("fit") or {}
-                table51.append((ref.get("experiment", ""), _fmt(fit.get("final_loss")),
-                                _fmt(ref.get("loss")), _fmt(fit.get("seconds"), ".1f"),
+                fit = None if ours is None else ours.fit
+                table51.append((ref.get("experiment", ""),
+                                _fmt(None if fit is None else fit.final_loss),
+                                _fmt(ref.get("loss")),
+                                _fmt(None if fit is None else fit.seconds, ".1f"),
                                 _fmt(ref.get("training_seconds"), ".1f"),
-                                _fmt(fit.get("steps"), "d"), "100000", record["run"]))
+                                _fmt(None if fit is None else fit.steps, "d"), "100000",
+                                record.name))
     out = []
     if table41:
         out.append("### Table 4.1: parameters and compression\n\n"

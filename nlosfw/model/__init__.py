@@ -1,35 +1,28 @@
 """Stage 3, field models: continuous F(x, y, f) -> P fitted to sparse phasor fields,
 and the protocol that scores them.
 
+A neural field model is a network plus the shared trainer (:class:`NeuralFieldModel`):
+a network plugin supplies a factory building a torch or JAX module for a
+:class:`FieldShape` and a config deriving from :class:`NeuralFieldConfig`; the
+backend's :class:`Engine` runs it. The thesis's tanh, PE and SIREN networks are
+described backend-neutrally in :mod:`nlosfw.model.thesis_networks`.
+
 The names in ``__all__`` are the public API of this stage: plugins, examples and docs
 import only these."""
 
 
+from nlosfw.model.engine import PREDICT_CHUNK, Engine, NetworkBuild
 from nlosfw.model.interface import FieldModel, FieldModelConfig, FitReport, TrainingStep
 from nlosfw.model.interp import InterpConfig, InterpFieldModel
-from nlosfw.model.networks import (
-    FAMILY_CONFIGS,
-    PRESETS,
-    Architecture,
-    FieldNormalisation,
+from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.neural_config import (
+    FieldMode,
+    FieldShape,
+    LRSchedule,
     NeuralFieldConfig,
-    PEFieldConfig,
     Preset,
-    SirenFieldConfig,
-    TanhFieldConfig,
-    count_parameters,
-    estimate_delay,
-    forward_numpy,
-    init_parameters,
-    learning_rate,
-    network_inputs,
-    positional_encoding,
-    preset_config,
-    presets_of,
-    read_model_file,
-    resolve_architecture,
-    write_model_file,
 )
+from nlosfw.model.normalisation import FieldNormalisation, estimate_delay
 from nlosfw.model.protocol import (
     FieldSplit,
     error_metrics,
@@ -39,7 +32,31 @@ from nlosfw.model.protocol import (
     parameter_data_ratio,
     split_field,
 )
-from nlosfw.model.trainer import PREDICT_CHUNK, Engine, NeuralFieldModel
+from nlosfw.model.thesis_networks import (
+    FAMILY_CONFIGS,
+    PRESETS,
+    THESIS_NETWORKS,
+    THESIS_TEST_CONFIG,
+    Architecture,
+    FrequencyInput,
+    PEActivation,
+    PEFieldConfig,
+    SirenFieldConfig,
+    TanhFieldConfig,
+    ThesisNetwork,
+    count_parameters,
+    forward_numpy,
+    init_parameters,
+    network_inputs,
+    parameter_names,
+    positional_encoding,
+    preset_config,
+    presets_of,
+    reference_state,
+    resolve_architecture,
+    thesis_architecture,
+)
+from nlosfw.model.trainer import NeuralFieldModel, field_inputs, learning_rate
 
 __all__ = [
     "Architecture",
@@ -48,23 +65,31 @@ __all__ = [
     "error_metrics",
     "estimate_delay",
     "FAMILY_CONFIGS",
+    "field_inputs",
     "field_metrics",
+    "FieldMode",
     "FieldModel",
     "FieldModelConfig",
     "FieldNormalisation",
+    "FieldShape",
     "FieldSplit",
     "FitReport",
     "forward_numpy",
+    "FrequencyInput",
     "heldout_frequency_indices",
     "hull_mask",
     "init_parameters",
     "InterpConfig",
     "InterpFieldModel",
     "learning_rate",
+    "LRSchedule",
     "network_inputs",
+    "NetworkBuild",
     "NeuralFieldConfig",
     "NeuralFieldModel",
     "parameter_data_ratio",
+    "parameter_names",
+    "PEActivation",
     "PEFieldConfig",
     "positional_encoding",
     "PREDICT_CHUNK",
@@ -73,10 +98,15 @@ __all__ = [
     "PRESETS",
     "presets_of",
     "read_model_file",
+    "reference_state",
     "resolve_architecture",
     "SirenFieldConfig",
     "split_field",
     "TanhFieldConfig",
+    "THESIS_NETWORKS",
+    "THESIS_TEST_CONFIG",
+    "thesis_architecture",
+    "ThesisNetwork",
     "TrainingStep",
     "write_model_file",
 ]

@@ -12,6 +12,7 @@ import numpy as np
 
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Configurable, require
+from nlosfw.common.errors import DataError, FitError
 from nlosfw.transform.field import PhasorField
 
 
@@ -90,3 +91,28 @@ class FieldModel(Configurable, ABC):
         values = self.predict(wall_xyz[..., :2], np.asarray(frequencies, dtype=float))
         return PhasorField(values=values, frequencies=frequencies, wall_xyz=wall_xyz,
                            geometry=geometry, weights=weights, metadata=dict(metadata or {}))
+
+
+def check_training_field(field: PhasorField, who: str) -> None:
+    """One-line errors for fields nothing can be fitted to."""
+    if not isinstance(field, PhasorField):
+        raise DataError(f"{who}: fit needs a PhasorField, got {type(field).__name__}")
+    if field.values.size == 0:
+        raise FitError(f"{who}: the field is empty (shape {field.values.shape})")
+    if not np.any(field.values != 0):
+        raise FitError(f"{who}: the field's values are all zero; nothing to fit")
+
+
+def check_query(wall_xy: Any, frequencies: Any, who: str) -> tuple[np.ndarray, np.ndarray]:
+    """Validated (wall points (..., 2) float64, frequencies (F,) float64) for ``predict``."""
+    xy = np.asarray(wall_xy, dtype=np.float64)
+    f = np.atleast_1d(np.asarray(frequencies, dtype=np.float64))
+    if xy.ndim < 1 or xy.shape[-1] != 2:
+        raise DataError(f"{who}: wall_xy must have shape (..., 2), got {xy.shape}")
+    if not np.all(np.isfinite(xy)):
+        raise DataError(f"{who}: wall_xy contains NaN or inf")
+    if f.ndim != 1:
+        raise DataError(f"{who}: frequencies must be one-dimensional, got shape {f.shape}")
+    if not np.all(np.isfinite(f)) or np.any(f <= 0):
+        raise DataError(f"{who}: frequencies must be finite and > 0 (cycles per metre)")
+    return xy, f

@@ -7,7 +7,7 @@ training grid's y, x and frequency axes; real and imaginary parts are
 interpolated together (the spline is linear in the data). Axes with two
 samples fall back to linear interpolation, axes with one sample to a constant.
 By default the field is first demodulated by its common path delay (the same
-normalisation the neural models use, :func:`nlosfw.model.networks.estimate_delay`),
+normalisation the neural models use, :func:`nlosfw.model.normalisation.estimate_delay`),
 so that the comparison isolates what the networks add.
 
 Outside the training hull (``extrapolation``):
@@ -33,14 +33,16 @@ from scipy.interpolate import CubicSpline
 
 from nlosfw.common.config import Choice
 from nlosfw.common.errors import DataError, FitError
-from nlosfw.model.interface import FieldModel, FieldModelConfig, FitReport, TrainingStep
-from nlosfw.model.networks import (
+from nlosfw.model.interface import (
+    FieldModel,
+    FieldModelConfig,
+    FitReport,
+    TrainingStep,
     check_query,
     check_training_field,
-    estimate_delay,
-    read_model_file,
-    write_model_file,
 )
+from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.normalisation import estimate_delay
 from nlosfw.transform.field import PhasorField
 
 #: Frequencies interpolated at once (bounds memory to about F_chunk * points * X values).

@@ -1,12 +1,12 @@
-"""The training loop, prediction and files of neural field models, whatever the backend.
+"""The shared trainer: a neural field model is a network plus this, whatever the backend.
 
-:class:`NeuralFieldModel` implements :class:`~nlosfw.model.FieldModel` once;
-a backend plugin (torch, JAX) subclasses it and supplies an :class:`Engine`
-that holds the parameters and Adam's state on its device and runs steps and
-forward passes. Everything else (normalisation, initial weights, batches, the
-learning-rate schedule, validation, early stopping, divergence detection,
-files) is shared, so both backends train the same network from the same start
-on the same batches.
+:class:`NeuralFieldModel` implements :class:`~nlosfw.model.FieldModel` once for
+every network: normalisation, inputs, batches, the validation split, the
+learning-rate schedule, early stopping, divergence detection, seeding, files and
+prediction. A network plugin supplies only ``factory(config, shape)`` (a torch
+module or a JAX module) and the backend's :class:`~nlosfw.model.engine.Engine`
+runs its steps; the ``register_networks`` hook (:mod:`nlosfw.plugins.networks`) turns a
+registered network into a subclass of this class named ``<network>_<engine>``.
 """
 
 from __future__ import annotations
@@ -14,8 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -23,79 +22,56 @@ import numpy as np
 
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import DataError, FitError
-from nlosfw.model.interface import FieldModel, FitReport, TrainingStep
-from nlosfw.model.networks import (
-    Architecture,
-    FieldNormalisation,
-    NeuralFieldConfig,
-    Preset,
+from nlosfw.model.engine import PREDICT_CHUNK, Engine, NetworkBuild
+from nlosfw.model.interface import (
+    FieldModel,
+    FitReport,
+    TrainingStep,
     check_query,
     check_training_field,
-    count_parameters,
-    init_parameters,
-    learning_rate,
-    network_inputs,
-    params_from_arrays,
-    presets_of,
-    read_model_file,
-    resolve_architecture,
-    write_model_file,
 )
+from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.neural_config import (
+    FieldMode,
+    FieldShape,
+    LRSchedule,
+    NeuralFieldConfig,
+    Preset,
+)
+from nlosfw.model.normalisation import FieldNormalisation
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
-#: Rows per forward pass when predicting or validating (bounds memory).
-PREDICT_CHUNK = 1 << 16
+
+def learning_rate(config: NeuralFieldConfig, step: int) -> float:
+    """Learning rate of (0-based) ``step``: linear warm-up, then the configured decay."""
+    lr, total = config.lr, config.steps
+    if step < config.warmup_steps:
+        return lr * (0.01 + 0.99 * step / config.warmup_steps)
+    span = max(1, total - config.warmup_steps - 1)
+    t = min(1.0, (step - config.warmup_steps) / span)
+    if config.lr_schedule == LRSchedule.cosine:
+        return lr * (config.lr_final + (1 - config.lr_final) * 0.5 * (1 + math.cos(math.pi * t)))
+    if config.lr_schedule == LRSchedule.exponential:
+        return lr * config.lr_final ** t
+    return lr
 
 
-class Engine(ABC):
-    """Backend half of a neural field: parameters and optimiser state on one device.
 
-    Data layout. Multi mode: inputs ``x`` (N, in_dim), targets ``y`` (N, 2).
-    Single mode (``n_networks`` = K > 0): inputs ``x`` (P, in_dim) shared by the K
-    networks, targets ``y`` (K, P, 2); parameters carry a leading axis K. Batch
-    indices always index the N (or P) axis. The loss is the mean squared error
-    over every element of the batch (and every network).
+def field_inputs(xy: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
+    """Network inputs (float32) from normalised coordinates (P, 2) and frequencies (F,).
+
+    Single mode (``f`` None): (P, 2) = x, y. Multi mode: (F * P, 3) = x, y, f,
+    frequency-major (row ``k * P + p`` is point p at frequency k).
     """
-
-    def __init__(self, arch: Architecture, params: list[np.ndarray], n_networks: int,
-                 device: str, threads: int) -> None:
-        self.arch = arch
-        self.n_networks = n_networks
-
-    @abstractmethod
-    def set_data(self, x: np.ndarray, y: np.ndarray, val_x: np.ndarray | None,
-                 val_y: np.ndarray | None) -> None:
-        """Move training (and validation) arrays to the device."""
-
-    @abstractmethod
-    def step(self, idx: np.ndarray | None, lr: float) -> Any:
-        """One Adam step on the batch ``idx`` (None: all data); returns a loss handle."""
-
-    @abstractmethod
-    def mean_loss(self, handles: list[Any]) -> float:
-        """Mean of the losses behind ``handles`` (synchronises with the device)."""
-
-    @abstractmethod
-    def val_loss(self) -> float:
-        """Mean squared error on the validation data."""
-
-    @abstractmethod
-    def snapshot(self) -> Any:
-        """A copy of the current parameters that :meth:`restore` can bring back."""
-
-    @abstractmethod
-    def restore(self, snapshot: Any) -> None:
-        """Bring back parameters saved by :meth:`snapshot`."""
-
-    @abstractmethod
-    def parameters(self) -> list[np.ndarray]:
-        """The current parameters as float32 numpy arrays [W0, b0, W1, b1, ...]."""
-
-    @abstractmethod
-    def forward(self, x: np.ndarray, networks: np.ndarray | None = None) -> np.ndarray:
-        """Outputs (N, 2) of the network, or (len(networks), N, 2) of some single-mode networks."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    if f is None:
+        return xy.astype(np.float32)
+    f = np.asarray(f, dtype=np.float64).reshape(-1, 1)
+    n_f, n_p = f.shape[0], xy.shape[0]
+    return np.concatenate([np.tile(xy, (n_f, 1)), np.repeat(f, n_p, axis=0)],
+                          axis=1).astype(np.float32)
 
 
 class _IndexStream:
@@ -121,17 +97,23 @@ class _IndexStream:
 class NeuralFieldModel(FieldModel):
     """A neural field F(x, y, f) -> P (multi mode) or one F_f(x, y) per frequency (single).
 
-    Subclasses set :attr:`family` (``tanh``, ``pe``, ``siren``), :attr:`backend`, the
-    matching ``config_class`` and implement :meth:`make_engine`.
+    A subclass names its network and engine (:func:`nlosfw.plugins.network_model` makes
+    one from a registered network): ``family`` (the network's name), ``backend``
+    (``torch``, ``jax``), ``engine_class``, ``network_factory`` and ``config_class``.
     """
 
     config_class: ClassVar[type] = NeuralFieldConfig
     family: ClassVar[str] = ""
+    """The network's registered name (``siren``, ``example_fourier``, ...)."""
     backend: ClassVar[str] = ""
+    """The engine that runs it (``torch``, ``jax``)."""
+    engine_class: ClassVar[type[Engine]]
+    network_factory: ClassVar[Callable[..., Any]]
+    network_presets: ClassVar[Mapping[str, Preset]] = {}
 
     def __init__(self, config: Any = None) -> None:
         super().__init__(config)
-        self._arch: Architecture | None = None
+        self._shape: FieldShape | None = None
         self._norm: FieldNormalisation | None = None
         self._engine: Engine | None = None
         self._train_frequencies: np.ndarray | None = None
@@ -145,13 +127,14 @@ class NeuralFieldModel(FieldModel):
 
     @classmethod
     def presets(cls) -> dict[str, Preset]:
-        """The thesis presets of this family (see :data:`nlosfw.model.networks.PRESETS`)."""
-        return presets_of(cls.family)
+        """Published configurations of this network (e.g. the thesis's), by name."""
+        return dict(cls.network_presets)
 
-    @abstractmethod
-    def make_engine(self, arch: Architecture, params: list[np.ndarray],
-                    n_networks: int) -> Engine:
-        """The backend engine for ``arch`` starting from ``params``."""
+    def _make_engine(self, shape: FieldShape, n_networks: int,
+                     state: Mapping[str, np.ndarray] | None = None, who: str = "") -> Engine:
+        factory = type(self).network_factory        # a plain function, not a method
+        build = NetworkBuild(factory, self.config, shape, n_networks, who or self.model_name())
+        return self.engine_class(build, state)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -161,7 +144,7 @@ class NeuralFieldModel(FieldModel):
     @property
     def n_networks(self) -> int:
         """Networks trained: 1 in multi mode, one per training frequency in single mode."""
-        if self.config.mode == "multi":
+        if self.config.mode == FieldMode.multi:
             return 1
         if self._train_frequencies is None:
             raise FitError(f"{self.model_name()}: the number of single-frequency networks is "
@@ -169,36 +152,31 @@ class NeuralFieldModel(FieldModel):
         return int(self._train_frequencies.size)
 
     @property
-    def architecture(self) -> Architecture:
-        """The resolved network (after fit or load; before, when the config alone fixes it)."""
-        if self._arch is not None:
-            return self._arch
-        auto_pe = self.family == "pe" and (
-            self.config.octaves == 0 or (self.config.mode == "multi"
-                                         and self.config.frequency_input == "encoded"
-                                         and self.config.frequency_octaves == 0))
-        if auto_pe:
-            raise FitError(f"{self.model_name()}: the positional encoding's octaves follow the "
-                           "training grid; the architecture is known after fit or load")
-        return resolve_architecture(self.family, self.config, (1, 1), 1)
-
-    @property
     def parameters_per_network(self) -> int:
-        return self.architecture.parameters_per_network
+        """Trainable parameters of one network (before fit: when the config alone fixes it)."""
+        if self._engine is not None:
+            return self._engine.parameters_per_network
+        try:
+            engine = self._make_engine(FieldShape(self.config.mode), 0)
+        except FitError as err:
+            raise FitError(f"{self.model_name()}: the network's size follows the training "
+                           f"data; it is known after fit or load ({err})") from None
+        return engine.parameters_per_network
 
     @property
     def n_parameters(self) -> int:
         """Trainable parameters of all networks (single mode: per network times networks)."""
-        return count_parameters(self.architecture, self.n_networks)
+        n_networks = self.n_networks
+        return self.parameters_per_network * n_networks
 
     def weights(self) -> list[np.ndarray]:
-        """The trained parameters as numpy arrays [W0, b0, W1, b1, ...] (W: fan_in x fan_out)."""
+        """The trained parameters as numpy arrays, in the network's order."""
         return self._fitted()[0].parameters()
 
     # ------------------------------------------------------------------ training
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Callable[[TrainingStep], None] | None = None) -> FitReport:
-        """Train on ``field`` with Adam; see :class:`~nlosfw.model.networks.NeuralFieldConfig`.
+        """Train on ``field`` with Adam; see :class:`~nlosfw.model.NeuralFieldConfig`.
 
         ``validation`` (optional) replaces the random held-out fraction of training
         samples for early stopping. ``on_step`` receives a :class:`TrainingStep` every
@@ -208,19 +186,21 @@ class NeuralFieldModel(FieldModel):
         who = self.model_name()
         check_training_field(field, who)
         cfg: NeuralFieldConfig = self.config
-        single = cfg.mode == "single"
+        single = cfg.mode == FieldMode.single
         norm = FieldNormalisation.fit(field, cfg.margin, cfg.demodulate)
-        arch = resolve_architecture(self.family, cfg, field.grid_shape, field.n_frequencies)
+        shape = FieldShape(cfg.mode, field.grid_shape, field.n_frequencies)
         rng = np.random.default_rng([cfg.seed, 0x6261746368])  # "batch" stream
-        x, y = self._samples(arch, norm, field)
+        x, y = self._samples(norm, field)
         n = x.shape[0]
+        val_x: np.ndarray | None
+        val_y: np.ndarray | None
         if validation is not None:
             check_training_field(validation, f"{who} validation")
             if single and (validation.frequencies.shape != field.frequencies.shape or not
                            np.allclose(validation.frequencies, field.frequencies)):
                 raise DataError(f"{who}: in single mode the validation field must have the "
                                 "training frequencies")
-            val_x, val_y = self._samples(arch, norm, validation)
+            val_x, val_y = self._samples(norm, validation)
             train_idx = np.arange(n)
         elif cfg.validation_fraction > 0 and n >= 20:
             perm = rng.permutation(n)
@@ -234,34 +214,34 @@ class NeuralFieldModel(FieldModel):
         tx = x[train_idx]
         ty = y[:, train_idx] if single else y[train_idx]
         n_networks = field.n_frequencies if single else 0
-        n_params, n_values = count_parameters(arch, n_networks), 2 * field.values.size
+        engine = self._make_engine(shape, n_networks)
+        n_params, n_values = engine.parameters_per_network * max(1, n_networks), \
+            2 * field.values.size
         if n_params > 0.5 * n_values:
             log.warning("%s: %d parameters for %d training values (%.0f%%): more than half "
                         "tends to over-fit and upsample badly (thesis sec. 4.2); consider "
                         "smaller hidden layers", who, n_params, n_values,
                         100 * n_params / n_values)
-        params = init_parameters(arch, n_networks, cfg.seed)
-        engine = self.make_engine(arch, params, n_networks)
         engine.set_data(tx, ty, val_x, val_y)
-        self._arch, self._norm, self._engine = arch, norm, engine
+        self._shape, self._norm, self._engine = shape, norm, engine
         self._train_frequencies = field.frequencies.copy() if single else None
         try:
             self.report = self._train(engine, tx.shape[0], val_x is not None, rng, on_step)
         except BaseException:
             # a failed (diverged, interrupted) fit leaves no half-trained model behind
-            self._arch = self._norm = self._engine = self._train_frequencies = None
+            self._shape = self._norm = self._engine = self._train_frequencies = None
             raise
         return self.report
 
-    def _samples(self, arch: Architecture, norm: FieldNormalisation, field: PhasorField
+    def _samples(self, norm: FieldNormalisation, field: PhasorField
                  ) -> tuple[np.ndarray, np.ndarray]:
         """Network inputs and normalised targets of every sample of ``field``."""
         xy = norm.coords(field.wall_xyz[..., :2].reshape(-1, 2))
         n_f, n_p = field.n_frequencies, xy.shape[0]
         y = norm.targets(field.values.reshape(n_f, n_p), field.frequencies)    # (F, P, 2)
-        if self.config.mode == "single":
-            return network_inputs(arch, xy), y
-        return network_inputs(arch, xy, norm.freqs(field.frequencies)), y.reshape(-1, 2)
+        if self.config.mode == FieldMode.single:
+            return field_inputs(xy), y
+        return field_inputs(xy, norm.freqs(field.frequencies)), y.reshape(-1, 2)
 
     def _train(self, engine: Engine, n_train: int, has_val: bool, rng: np.random.Generator,
                on_step: Callable[[TrainingStep], None] | None) -> FitReport:
@@ -336,26 +316,27 @@ class NeuralFieldModel(FieldModel):
         requested frequency is then put back (see ``demodulate``).
         """
         xy, f = check_query(wall_xy, frequencies, self.model_name())
-        engine, norm, arch = self._fitted()
+        engine, norm, _ = self._fitted()
         shape = xy.shape[:-1]
         pts = norm.coords(xy.reshape(-1, 2))
         n_p = pts.shape[0]
-        if self.config.mode == "single":
-            out = self._predict_single(engine, arch, norm, pts, f)
+        if self.config.mode == FieldMode.single:
+            out = self._predict_single(engine, norm, pts, f)
         else:
             out = np.empty((f.size, n_p), dtype=np.complex64)
             fn = norm.freqs(f)
             per_chunk = max(1, PREDICT_CHUNK * 4 // max(n_p, 1))
             for k in range(0, f.size, per_chunk):
                 sl = slice(k, k + per_chunk)
-                y = engine.forward(network_inputs(arch, pts, fn[sl]))
+                y = engine.forward(field_inputs(pts, fn[sl]))
                 out[sl] = norm.values(y.reshape(-1, n_p, 2), f[sl])
         return out.reshape((f.size, *shape))
 
-    def _predict_single(self, engine: Engine, arch: Architecture, norm: FieldNormalisation,
-                        pts: np.ndarray, f: np.ndarray) -> np.ndarray:
+    def _predict_single(self, engine: Engine, norm: FieldNormalisation, pts: np.ndarray,
+                        f: np.ndarray) -> np.ndarray:
         trained = self._train_frequencies
-        assert trained is not None
+        if trained is None:
+            raise FitError(f"{self.model_name()}: single-mode model without its frequencies")
         order = np.argsort(trained)
         ft = trained[order]
         pos = np.clip(np.searchsorted(ft, f), 1, max(1, ft.size - 1))
@@ -366,8 +347,7 @@ class NeuralFieldModel(FieldModel):
         w = np.where(ft[hi] > ft[lo], w, 0.0)
         i0, i1 = order[lo], order[hi]
         needed = np.unique(np.concatenate([i0, i1]))
-        x = network_inputs(arch, pts)
-        values = norm.values(engine.forward(x, needed), trained[needed])  # (len(needed), P)
+        values = norm.values(engine.forward(field_inputs(pts), needed), trained[needed])
         where = {int(k): j for j, k in enumerate(needed)}
         v0 = values[[where[int(k)] for k in i0]]
         v1 = values[[where[int(k)] for k in i1]]
@@ -376,50 +356,74 @@ class NeuralFieldModel(FieldModel):
         c1 = np.exp(2j * np.pi * (trained[i1] - f) * norm.delay)[:, None]
         return ((1 - w)[:, None] * v0 * c0 + w[:, None] * v1 * c1).astype(np.complex64)
 
-    def _fitted(self) -> tuple[Engine, FieldNormalisation, Architecture]:
-        if self._engine is None or self._norm is None or self._arch is None:
+    def _fitted(self) -> tuple[Engine, FieldNormalisation, FieldShape]:
+        if self._engine is None or self._norm is None or self._shape is None:
             raise FitError(f"{self.model_name()}: call fit() or load() before predict() or "
                            "save()")
-        return self._engine, self._norm, self._arch
+        return self._engine, self._norm, self._shape
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | Path) -> None:
-        """Write weights, config, architecture and normalisation to one ``.npz`` file."""
-        engine, norm, arch = self._fitted()
-        params = engine.parameters()
-        extra: dict[str, Any] = {"architecture": arch.to_dict(), "normalisation": norm.to_dict(),
+        """Write the network's state, config, data shape and normalisation to one ``.npz``."""
+        engine, norm, shape = self._fitted()
+        extra: dict[str, Any] = {"field_shape": shape.to_dict(),
+                                 "normalisation": norm.to_dict(),
                                  "backend": self.backend, "family": self.family}
         if self._train_frequencies is not None:
             extra["train_frequencies"] = [float(v) for v in self._train_frequencies]
-        write_model_file(path, self.model_name(), self.config,
-                         {f"p{i}": p for i, p in enumerate(params)}, extra)
+        write_model_file(path, self.model_name(), self.config, engine.state(), extra)
 
     @classmethod
     def load(cls, path: str | Path, *, allow_other_backend: bool = False) -> NeuralFieldModel:
         """Read a file written by :meth:`save` of this model.
 
-        With ``allow_other_backend`` a file of the same family written by another
-        backend (e.g. ``siren_jax`` into ``siren_torch``) is accepted as well: the
-        weight layout is shared.
+        With ``allow_other_backend`` a file of the same network written by another
+        backend (e.g. ``siren_jax`` into ``siren_torch``) is accepted as well: networks
+        registered for both backends name their arrays alike.
         """
         names: tuple[str, ...] = (cls.model_name(),)
         if allow_other_backend:
             names += tuple(f"{cls.family}_{b}" for b in ("torch", "jax") if b != cls.backend)
         header, arrays = read_model_file(path, names)
         try:
-            config = config_from_mapping(cls.config_class, header["config"], "model")
-            arch = Architecture.from_dict(header["architecture"])
+            config: NeuralFieldConfig = config_from_mapping(cls.config_class, header["config"],
+                                                            "model")
             norm = FieldNormalisation.from_dict(header["normalisation"])
             trained = header.get("train_frequencies")
+            if "field_shape" in header:
+                shape = FieldShape.from_dict(header["field_shape"])
+            else:
+                shape, arrays = _version_1_network(header, arrays, config)
         except Exception as err:
             raise DataError(f"model file {path}: invalid header ({type(err).__name__}: "
                             f"{err})") from None
-        n_networks = len(trained) if config.mode == "single" and trained else 0
-        if config.mode == "single" and not n_networks:
+        single = config.mode == FieldMode.single
+        n_networks = len(trained) if single and trained else 0
+        if single and not n_networks:
             raise DataError(f"model file {path}: single-mode model without its frequencies")
-        params = params_from_arrays(path, arch, n_networks, arrays)
         model = cls(config)
-        model._arch, model._norm = arch, norm
+        try:
+            engine = model._make_engine(shape, n_networks, arrays, f"model file {path}")
+        except FitError as err:
+            raise DataError(str(err)) from None
+        model._shape, model._norm, model._engine = shape, norm, engine
         model._train_frequencies = np.asarray(trained, dtype=float) if n_networks else None
-        model._engine = model.make_engine(arch, params, n_networks)
         return model
+
+
+def _version_1_network(header: Mapping[str, Any], arrays: Mapping[str, np.ndarray],
+                       config: NeuralFieldConfig) -> tuple[FieldShape, dict[str, np.ndarray]]:
+    """The data shape and named state of a file written before networks were pluggable.
+
+    Those files (the thesis networks only) stored the resolved architecture and the
+    arrays [W0, b0, W1, b1, ...] as ``p0``, ``p1``, ...; a grid of 2^L points per side
+    (and 2^L_f frequencies) resolves the same octaves again.
+    """
+    arch = header["architecture"]
+    octaves, f_octaves = int(arch.get("octaves", 0)), int(arch.get("frequency_octaves", 0))
+    shape = FieldShape(config.mode, (2 ** octaves, 2 ** octaves) if octaves else None,
+                       2 ** f_octaves if f_octaves else None)
+    n_arrays = len([k for k in arrays if k.startswith("p")])
+    state = {f"layers.{i // 2}.{'bias' if i % 2 else 'weight'}": arrays[f"p{i}"]
+             for i in range(n_arrays)}
+    return shape, state

@@ -4,17 +4,42 @@ Entry points in the ``nlosfw`` group name plugin modules; their hook
 implementations register factories by name into one registry per kind. Loading
 the registries imports the plugin modules only: factories (and with them
 torch, JAX, mitsuba or embreex) are imported when a plugin is instantiated.
+Plugins declare what they can do from their kind's :data:`CAPABILITIES` vocabulary.
+Networks registered through ``register_networks`` become field models
+``<name>_<engine>`` (:mod:`nlosfw.plugins.networks`).
 """
 
+from nlosfw.plugins.capabilities import DEFAULTS as DEFAULT_CAPABILITIES
+from nlosfw.plugins.capabilities import VOCABULARY as CAPABILITIES
+from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.hookspecs import hookimpl, hookspec
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_plugins
-from nlosfw.plugins.registry import PluginSpec, Registry, import_object
+from nlosfw.plugins.networks import (
+    ENGINES,
+    NetworkEngine,
+    NetworkOptions,
+    NetworkRegistrar,
+    NetworkSpec,
+    network_model,
+    register_thesis_networks,
+    thesis_network_model,
+)
+from nlosfw.plugins.registry import LazyFactory, PluginSpec, Registry, import_object
 
 __all__ = [
+    "CAPABILITIES",
+    "DEFAULT_CAPABILITIES",
+    "Capability",
+    "ENGINES",
     "ENTRY_POINT_GROUP",
     "ENV_VAR",
     "INTERFACES",
+    "LazyFactory",
+    "NetworkEngine",
+    "NetworkOptions",
+    "NetworkRegistrar",
+    "NetworkSpec",
     "PluginHost",
     "PluginKind",
     "PluginSpec",
@@ -23,4 +48,7 @@ __all__ = [
     "hookspec",
     "import_object",
     "load_plugins",
+    "network_model",
+    "register_thesis_networks",
+    "thesis_network_model",
 ]

@@ -3,12 +3,15 @@
 This module is the core distribution's ``nlosfw`` entry point: the built-ins
 register through exactly the same hooks as third-party plugins. Factories and
 config classes are named by import path so nothing is imported until used.
+Capabilities (what the conformance kit checks) are listed in
+:mod:`nlosfw.plugins.capabilities`.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from nlosfw.plugins.capabilities import Capability as C
 from nlosfw.plugins.hookspecs import hookimpl
 
 
@@ -20,8 +23,8 @@ def register_simulators(register: Any) -> None:
         config="nlosfw.simulate.analytic:AnalyticConfig",
         description="Exact three-bounce transients of points and patches (no visibility)",
         test_config={"patch_size": 0.05},
-        expected_failures={"check_occlusion": "no visibility: the analytic simulator ignores "
-                           "shadowing (by design; use a ray tracer such as embree)"},
+        # no occlusion (nothing shadows anything) and no mesh files: see its module docstring
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.DEVICE_LEGS],
     )
 
 
@@ -33,6 +36,7 @@ def register_phasor_transforms(register: Any) -> None:
         config="nlosfw.transform.fft:FFTTransformConfig",
         description="Temporal Fourier transform at any set of frequencies",
         test_config={"n_frequencies": 16},
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.ANY_FREQUENCIES],
     )
     register(
         "wavelet",
@@ -40,6 +44,7 @@ def register_phasor_transforms(register: Any) -> None:
         config="nlosfw.transform.wavelet:WaveletTransformConfig",
         description="Liu's Gaussian-enveloped virtual illumination (spectral bins and weights)",
         test_config={"n_cycles": 4.0},
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.SPECTRAL_WEIGHTS, C.GAUSSIAN_WAVELET],
     )
 
 
@@ -50,6 +55,7 @@ def register_field_models(register: Any) -> None:
         "nlosfw.model.interp:InterpFieldModel",
         config="nlosfw.model.interp:InterpConfig",
         description="Cubic interpolation of the complex field in x, y and frequency (baseline)",
+        capabilities=[C.MULTI_FREQUENCY, C.SINGLE_FREQUENCY, C.SAVE_LOAD],
     )
 
 
@@ -61,6 +67,7 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.rsd:RSDImagerConfig",
         description="Direct Rayleigh-Sommerfeld sum over any voxel set",
         test_config={"chunk_mb": 1.0},
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.POINT_VOXELS],
     )
     register(
         "fft",
@@ -68,4 +75,5 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.fft:FFTImagerConfig",
         description="Fast RSD: per-plane FFT convolution (Liu 2020)",
         test_config={"workers": 2},
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS],
     )

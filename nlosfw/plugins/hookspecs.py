@@ -36,6 +36,16 @@ def register_field_models(register: Any) -> None:
 
 
 @hookspec
+def register_networks(register: Any) -> None:
+    """Register networks for the shared neural trainer (see :mod:`nlosfw.plugins.networks`).
+
+    ``register(name, engine="torch" | "jax", factory="module:function",
+    config="module:Config", description=..., test_config=..., requires=..., presets=...)``;
+    each becomes the field-model plugin ``<name>_<engine>``.
+    """
+
+
+@hookspec
 def register_imagers(register: Any) -> None:
     """Register :class:`~nlosfw.image.Imager` plugins."""
 

@@ -14,6 +14,7 @@ import pluggy
 
 from nlosfw.plugins import hookspecs
 from nlosfw.plugins.kinds import PluginKind
+from nlosfw.plugins.networks import NetworkRegistrar
 from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
 
 log = logging.getLogger(__name__)
@@ -32,6 +33,7 @@ _HOOK_OF_KIND = {
     PluginKind.FIELD_MODEL: "register_field_models",
     PluginKind.IMAGER: "register_imagers",
 }
+_NETWORK_HOOK = "register_networks"
 
 
 @dataclass(frozen=True)
@@ -113,9 +115,13 @@ def load_plugins(env: Mapping[str, str] | None = None,
         origins[key] = (dist, name)
 
     registry = Registry()
-    for kind, hook_name in _HOOK_OF_KIND.items():
+    # networks register field models (``<name>_<engine>``), after the kinds' own hooks
+    hooks = [*_HOOK_OF_KIND.items(), (PluginKind.FIELD_MODEL, _NETWORK_HOOK)]
+    for kind, hook_name in hooks:
         for key, (dist, ep_name) in origins.items():
             others = [p for k, p in manager.list_name_plugin() if k != key]
             caller = manager.subset_hook_caller(hook_name, remove_plugins=others)
-            caller(register=Registrar(kind, dist, ep_name, rules.accepts, registry))
+            register = Registrar(kind, dist, ep_name, rules.accepts, registry)
+            caller(register=NetworkRegistrar(register) if hook_name == _NETWORK_HOOK
+                   else register)
     return PluginHost(manager=manager, registry=registry, broken=broken)

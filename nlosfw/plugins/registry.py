@@ -9,13 +9,17 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, TypeVar
 
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import PluginError
+from nlosfw.plugins.capabilities import Capability, parse_capabilities
 from nlosfw.plugins.kinds import PluginKind
+
+T = TypeVar("T")
 
 
 def import_object(path: str) -> Any:
@@ -30,14 +34,23 @@ def import_object(path: str) -> Any:
     return obj
 
 
+class LazyFactory(ABC):
+    """A factory made on first use (e.g. a field model bound to a registered network)."""
+
+    @abstractmethod
+    def load(self) -> Any:
+        """The factory (imports what it needs)."""
+
+
 @dataclass(frozen=True)
 class PluginSpec:
     """One registered plugin: what it is, where it comes from, how to build it."""
 
     kind: PluginKind
     name: str
-    factory: str | Callable[..., Any]
-    """The implementation class, or ``"module:Class"`` imported on first use."""
+    factory: str | Callable[..., Any] | LazyFactory
+    """The implementation class, ``"module:Class"`` imported on first use, or a
+    :class:`LazyFactory` that makes it on first use."""
     distribution: str
     """The installed distribution that registered it (``nlosfw``, ``nlosfw-torch``, ...)."""
     entry_point: str = ""
@@ -49,11 +62,34 @@ class PluginSpec:
     test_config: Mapping[str, Any] = field(default_factory=dict)
     """Small, fast settings used by the conformance checks."""
     expected_failures: Mapping[str, str] = field(default_factory=dict)
-    """Conformance check name -> reason it is expected to fail for this plugin."""
+    """Conformance check (``check_x`` or ``check_x[variant]``) -> the known bug that makes
+    it fail; it runs as a strict xfail. Not for what the plugin cannot do: declare
+    ``capabilities`` instead."""
+    declared_capabilities: tuple[Capability, ...] | None = None
+    """What the plugin declared it can do (``None``: declared nothing, see :attr:`capabilities`)."""
+
+    def __post_init__(self) -> None:
+        if self.declared_capabilities is not None:
+            found = parse_capabilities(self.kind, self.label, self.declared_capabilities)
+            object.__setattr__(self, "declared_capabilities",
+                               tuple(sorted(found, key=lambda c: c.value)))
+        else:
+            parse_capabilities(self.kind, self.label, None)
 
     @property
     def qualified_name(self) -> str:
         return f"{self.kind.value}:{self.name}"
+
+    @property
+    def label(self) -> str:
+        """``<distribution>: <kind> plugin '<name>'``, for messages."""
+        return f"{self.distribution}: {self.kind.value} plugin '{self.name}'"
+
+    @property
+    def capabilities(self) -> frozenset[Capability]:
+        """The declared capabilities, or the kind's defaults when it declared none
+        (:data:`nlosfw.plugins.capabilities.DEFAULTS`)."""
+        return parse_capabilities(self.kind, self.label, self.declared_capabilities)
 
     def missing_requirements(self) -> list[tuple[str, str]]:
         """Required modules that cannot be found (checked without importing them)."""
@@ -76,13 +112,15 @@ class PluginSpec:
 
     def load(self) -> Any:
         """The factory, imported on first use; a one-line error says what to install."""
-        if not isinstance(self.factory, str):
+        if not isinstance(self.factory, (str, LazyFactory)):
             return self.factory
         command = self.install_command()
         if command:
             modules = ", ".join(m for m, _ in self.missing_requirements())
             raise PluginError(f"{self.kind.value} plugin '{self.name}' needs {modules}, which is "
                               f"not installed; run: {command}")
+        if isinstance(self.factory, LazyFactory):
+            return self.factory.load()
         try:
             return import_object(self.factory)
         except ImportError as err:
@@ -158,6 +196,40 @@ class Registry:
         return (PluginKind(kind), name) in self._specs
 
 
+def registration_options(cls: type[T], options: Mapping[str, Any], who: str) -> T:
+    """The options dataclass ``cls`` of one ``register(...)`` call; a one-line
+    :class:`PluginError` names an unknown or a missing option and the valid ones."""
+    valid = [f.name for f in fields(cls)]  # type: ignore[arg-type]
+    unknown = sorted(set(options) - set(valid))
+    required = [f.name for f in fields(cls) if f.default is MISSING]  # type: ignore[arg-type]
+    missing = [n for n in required if n not in options]
+    if unknown or missing:
+        problem = (f"unknown option {unknown[0]!r}" if unknown
+                   else f"no {missing[0]!r} (required: {', '.join(required)})")
+        raise PluginError(f"{who} is registered with {problem}; valid: {', '.join(valid)}")
+    return cls(**options)
+
+
+@dataclass(frozen=True)
+class RegistrationOptions:
+    """The keyword options of ``register(name, factory, **options)`` (see :class:`PluginSpec`).
+
+    ``requires`` lists importable modules the factory needs, or maps each to the pip
+    requirement that provides it (``{"torch": "torch==2.13.0"}``).
+    """
+
+    config: str | type | None = None
+    requires: Sequence[str] | Mapping[str, str] = ()
+    description: str = ""
+    test_config: Mapping[str, Any] | None = None
+    expected_failures: Mapping[str, str] | None = None
+    capabilities: Iterable[str | Capability] | None = None
+    """What the plugin can do, from its kind's vocabulary
+    (:data:`nlosfw.plugins.capabilities.VOCABULARY`; a name outside it is a one-line
+    :class:`PluginError`); ``None`` takes the kind's defaults. The conformance kit picks
+    its checks from them."""
+
+
 @dataclass
 class Registrar:
     """The ``register`` callable handed to ``register_*`` hooks of one plugin module."""
@@ -168,37 +240,36 @@ class Registrar:
     accept: Callable[[PluginSpec], bool]
     registry: Registry
 
-    def __call__(
-        self,
-        name: str,
-        factory: str | Callable[..., Any],
-        *,
-        config: str | type | None = None,
-        requires: Sequence[str] | Mapping[str, str] = (),
-        description: str = "",
-        test_config: Mapping[str, Any] | None = None,
-        expected_failures: Mapping[str, str] | None = None,
-    ) -> None:
-        """Register plugin ``name`` of this hook's kind.
-
-        ``requires`` lists importable modules the factory needs, or maps each
-        to the pip requirement that provides it (``{"torch": "torch==2.13.0"}``).
-        """
+    def __call__(self, name: str, factory: str | Callable[..., Any] | LazyFactory,
+                 **options: Any) -> None:
+        """Register plugin ``name`` of this hook's kind, with :class:`RegistrationOptions`."""
         if not name or not name.replace("_", "").replace("-", "").isalnum():
             raise PluginError(f"{self.distribution}: invalid {self.kind.value} plugin name "
                               f"{name!r}; use letters, digits, '_' and '-'")
-        if isinstance(requires, Mapping):
-            reqs = tuple((str(m), str(r)) for m, r in requires.items())
+        opts = registration_options(RegistrationOptions, options,
+                                    f"{self.distribution}: {self.kind.value} plugin {name!r}")
+        if isinstance(opts.requires, Mapping):
+            reqs = tuple((str(m), str(r)) for m, r in opts.requires.items())
         else:
-            reqs = tuple((str(m), str(m)) for m in requires)
+            reqs = tuple((str(m), str(m)) for m in opts.requires)
         spec = PluginSpec(
             kind=self.kind, name=name, factory=factory, distribution=self.distribution,
-            entry_point=self.entry_point, config=config, requires=reqs,
-            description=description, test_config=dict(test_config or {}),
-            expected_failures=dict(expected_failures or {}),
+            entry_point=self.entry_point, config=opts.config, requires=reqs,
+            description=opts.description, test_config=dict(opts.test_config or {}),
+            expected_failures=dict(opts.expected_failures or {}),
+            declared_capabilities=(None if opts.capabilities is None
+                                   else _as_tuple(opts.capabilities)),
         )
         if self.accept(spec):
             self.registry.add(spec)
+
+
+def _as_tuple(capabilities: Any) -> Any:
+    """A tuple of the declared names; a single string or enum member is left for
+    :func:`parse_capabilities` to refuse."""
+    if isinstance(capabilities, (str, Capability)) or not isinstance(capabilities, Iterable):
+        return capabilities
+    return tuple(capabilities)
 
 
 def _quote(requirement: str) -> str:

@@ -1,8 +1,10 @@
 """Conformance checks that apply to every plugin, whatever its kind.
 
-A check is a function ``check_*(spec)`` taking a
+A check is a function ``check_*(spec, **variant_options)`` taking a
 :class:`~nlosfw.plugins.registry.PluginSpec`; it raises ``AssertionError``
 (with a message saying what was expected) when the plugin does not conform.
+What it needs from the plugin is declared with
+:func:`~nlosfw.testing.selection.requires`.
 """
 
 from __future__ import annotations
@@ -25,25 +27,45 @@ from nlosfw.common.schema import schema_class
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures
+from nlosfw.testing.selection import FREQUENCY_MODES, GEOMETRIES, VOXEL_LAYOUTS, combine, requires
 
 #: Modules that registering or listing plugins must never import.
 HEAVY_MODULES = ("torch", "jax", "jaxlib", "mitsuba", "drjit", "embreex", "mitransient")
 
 
-def exercise(spec: PluginSpec, options: dict[str, Any] | None = None) -> np.ndarray:
-    """Run the plugin once on the tiny fixture of its kind and return its main output array."""
+#: The variant :func:`exercise` runs a plugin in, per kind (the first one it declares).
+EXERCISE_VARIANTS = {
+    PluginKind.SIMULATOR.value: GEOMETRIES,
+    PluginKind.PHASOR_TRANSFORM.value: GEOMETRIES,
+    PluginKind.FIELD_MODEL.value: FREQUENCY_MODES,
+    PluginKind.IMAGER.value: combine(VOXEL_LAYOUTS, GEOMETRIES),
+}
+
+
+def exercise(spec: PluginSpec, options: dict[str, Any] | None = None, *,
+             confocal: bool = False, single: bool = False, plane: bool = True) -> np.ndarray:
+    """Run the plugin once on the tiny fixture of its kind and return its main output array.
+
+    ``confocal``: capture geometry (simulators, transforms, imagers); ``single``: fit one
+    frequency (field models); ``plane``: voxels as planes, else as a list (imagers).
+    """
     options = dict(spec.test_config if options is None else options)
     plugin = spec.create(options)
     if spec.kind is PluginKind.SIMULATOR:
-        return plugin.simulate(fixtures.tiny_scene()).H
+        return plugin.simulate(fixtures.tiny_scene(confocal=confocal)).H
     if spec.kind is PluginKind.PHASOR_TRANSFORM:
-        return plugin.transform(fixtures.tiny_capture()).values
+        return plugin.transform(fixtures.tiny_capture(confocal=confocal)).values
     if spec.kind is PluginKind.FIELD_MODEL:
         field = fixtures.smooth_field(n=8)
+        if single:
+            field = field.select([5])
         plugin.fit(field)
-        return plugin.predict(fixtures.wall_grid(12)[..., :2], field.frequencies[::3])
+        return plugin.predict(fixtures.wall_grid(12)[..., :2],
+                              field.frequencies if single else field.frequencies[::3])
     if spec.kind is PluginKind.IMAGER:
-        return plugin.reconstruct(fixtures.point_phasor_field(), fixtures.tiny_voxels()).intensity
+        voxels = fixtures.tiny_voxels()
+        field = fixtures.point_phasor_field(confocal=confocal)
+        return plugin.reconstruct(field, voxels if plane else voxels.reshape(-1, 3)).intensity
     raise AssertionError(f"unknown plugin kind {spec.kind}")
 
 
@@ -117,10 +139,12 @@ def check_bad_config_rejected(spec: PluginSpec) -> None:
                 raise AssertionError(f"{spec.qualified_name}: {f.name}='not-a-number' accepted")
 
 
-def check_deterministic(spec: PluginSpec) -> None:
+@requires(any_of=EXERCISE_VARIANTS)
+def check_deterministic(spec: PluginSpec, confocal: bool = False, single: bool = False,
+                        plane: bool = True) -> None:
     """Two instances with the same config (and seed) produce identical output."""
-    first = exercise(spec)
-    second = exercise(spec)
+    first = exercise(spec, confocal=confocal, single=single, plane=plane)
+    second = exercise(spec, confocal=confocal, single=single, plane=plane)
     assert first.shape == second.shape
     assert np.all(np.isfinite(first)), f"{spec.qualified_name}: output has NaN or inf"
     np.testing.assert_array_equal(first, second, err_msg=(

@@ -8,6 +8,10 @@ against the plugin's own output.
 Fit tolerances are chosen per model family (``family`` attribute of the model
 class, or its registered name); a third-party model may declare a class
 attribute ``conformance_tolerance`` (capped at :data:`MAX_TOLERANCE`).
+
+Checks run in the frequency modes the model declares: ``multi_frequency`` (fitted
+on many frequencies, asked for others) and ``single_frequency`` (fitted on one);
+``save_load`` and ``neural`` add their own checks.
 """
 
 from __future__ import annotations
@@ -22,10 +26,12 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import NlosfwError
 from nlosfw.model.interface import FieldModelConfig
-from nlosfw.model.networks import write_model_file
+from nlosfw.model.model_files import write_model_file
 from nlosfw.model.protocol import error_metrics, split_field
+from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures
+from nlosfw.testing.selection import FREQUENCY_MODES, requires
 from nlosfw.transform.field import PhasorField
 
 #: Relative L2 error (on every sample of the fixture field, held-out frequencies
@@ -39,9 +45,11 @@ DEFAULT_TOLERANCE = 0.2
 MAX_TOLERANCE = 0.3
 
 
-def fit_fixture() -> PhasorField:
-    """The smooth field the fit check learns: 12 x 12 wall points, 10 frequencies."""
-    return fixtures.smooth_field(n=12, frequencies=np.linspace(2.0, 4.0, 10), seed=1)
+def fit_fixture(single: bool = False) -> PhasorField:
+    """The smooth field the fit check learns: 12 x 12 wall points, 10 frequencies
+    (``single``: only the fifth, 2.89 cycles/m)."""
+    field = fixtures.smooth_field(n=12, frequencies=np.linspace(2.0, 4.0, 10), seed=1)
+    return field.select([4]) if single else field
 
 
 def _family(spec: PluginSpec) -> str:
@@ -77,20 +85,23 @@ def _one_line_error(spec: PluginSpec, action: str, call: Any) -> str:
     raise AssertionError(f"{spec.qualified_name}: {action}: no error was raised")
 
 
-def check_fits_smooth_field(spec: PluginSpec) -> None:
+@requires(each=FREQUENCY_MODES)
+def check_fits_smooth_field(spec: PluginSpec, single: bool) -> None:
     """Learns a sum of plane waves over (x, y, f) to the family's tolerance.
 
-    Trained on 9 of the 10 frequencies (every pixel); scored on all 10 (the held-out
-    frequency lies inside the band) against the closed-form field. Training from a
-    random initialisation is itself random, so the score is the median over three
-    seeds: one unlucky initialisation neither passes nor fails a model.
+    Multi-frequency: trained on 9 of the 10 frequencies (every pixel); scored on all
+    10 (the held-out frequency lies inside the band). Single-frequency: trained and
+    scored on one frequency (every pixel). Scored against the closed-form field.
+    Training from a random initialisation is itself random, so the score is the
+    median over three seeds: one unlucky initialisation neither passes nor fails a model.
     """
-    field = fit_fixture()
-    split = split_field(field, spatial_step=1, spectral="interleaved", spectral_fraction=0.1)
+    field = fit_fixture(single)
+    train = field if single else split_field(field, spatial_step=1, spectral="interleaved",
+                                             spectral_fraction=0.1).train_field
     errors = []
     for seed in FIT_SEEDS:
         model = spec.create({**spec.test_config, "seed": seed})
-        model.fit(split.train_field)
+        model.fit(train)
         pred = model.predict(field.wall_xyz[..., :2], field.frequencies)
         assert pred.shape == field.values.shape, (
             f"{spec.qualified_name}: predict returned {pred.shape}, expected "
@@ -98,25 +109,29 @@ def check_fits_smooth_field(spec: PluginSpec) -> None:
         errors.append(error_metrics(field.values, pred)["relative_l2"])
     err = float(np.median(errors))
     tol = _tolerance(spec)
+    what = "one-frequency" if single else "plane-wave"
     assert err <= tol, (f"{spec.qualified_name}: median relative L2 error {err:.4f} (seeds "
-                        f"{FIT_SEEDS}: {np.round(errors, 4).tolist()}) on a smooth plane-wave "
+                        f"{FIT_SEEDS}: {np.round(errors, 4).tolist()}) on a smooth {what} "
                         f"field exceeds {tol} (with its test_config)")
 
 
-def check_predicts_unseen_points(spec: PluginSpec) -> None:
-    """Finite complex values of shape (F, ...) at unseen points and frequencies.
+@requires(each=FREQUENCY_MODES)
+def check_predicts_unseen_points(spec: PluginSpec, single: bool) -> None:
+    """Finite complex values of shape (F, ...) at unseen points (multi-frequency: and
+    unseen frequencies, two outside the band).
 
     Also: a prediction at the training samples matches the closed-form field at
     least roughly (relative error < 0.5), so a model cannot ignore its inputs.
     """
-    field = fit_fixture()
+    field = fit_fixture(single)
     model = _fitted(spec, field)
     rng = np.random.default_rng(3)
     pts = rng.uniform(-0.55, 0.55, (7, 5, 2))          # inside and just outside the hull
-    freqs = np.array([1.9, 2.33, 3.1, 4.2])            # unseen, two outside the band
+    freqs = field.frequencies if single else np.array([1.9, 2.33, 3.1, 4.2])
     out = model.predict(pts, freqs)
-    assert out.shape == (4, 7, 5), f"{spec.qualified_name}: predict gave shape {out.shape}, " \
-                                   "expected (4, 7, 5) for points (7, 5, 2) and 4 frequencies"
+    assert out.shape == (freqs.size, 7, 5), (
+        f"{spec.qualified_name}: predict gave shape {out.shape}, expected "
+        f"{(freqs.size, 7, 5)} for points (7, 5, 2) and {freqs.size} frequencies")
     assert np.iscomplexobj(out), f"{spec.qualified_name}: predict must return complex values"
     assert np.all(np.isfinite(out)), f"{spec.qualified_name}: predict returned NaN or inf"
     flat = model.predict(pts.reshape(-1, 2), freqs[:1])
@@ -126,12 +141,14 @@ def check_predicts_unseen_points(spec: PluginSpec) -> None:
     assert err < 0.5, f"{spec.qualified_name}: error {err:.3f} on its own training samples"
 
 
-def check_save_load_round_trip(spec: PluginSpec) -> None:
+@requires(Capability.SAVE_LOAD, any_of=FREQUENCY_MODES)
+def check_save_load_round_trip(spec: PluginSpec, single: bool) -> None:
     """save -> load -> predict gives identical output; foreign and corrupt files are refused."""
     factory = spec.load()
-    model = _fitted(spec)
+    field = fit_fixture(single)
+    model = _fitted(spec, field)
     pts = fixtures.wall_grid(9)[..., :2]
-    freqs = np.array([2.1, 3.05, 3.9])
+    freqs = field.frequencies if single else np.array([2.1, 3.05, 3.9])
     before = model.predict(pts, freqs)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "model.bin"
@@ -152,12 +169,13 @@ def check_save_load_round_trip(spec: PluginSpec) -> None:
                         lambda: factory.load(Path(tmp) / "missing.npz"))
 
 
-def check_bad_input_rejected(spec: PluginSpec) -> None:
+@requires(any_of=FREQUENCY_MODES)
+def check_bad_input_rejected(spec: PluginSpec, single: bool) -> None:
     """One-line errors: predict before fit, empty or all-zero fields, bad frequencies."""
     fresh = spec.create(dict(spec.test_config))
     pts = fixtures.wall_grid(4)[..., :2]
     _one_line_error(spec, "predict before fit", lambda: fresh.predict(pts, np.array([2.0])))
-    field = fit_fixture()
+    field = fit_fixture(single)
     zero = field.replace(values=np.zeros_like(field.values))
     _one_line_error(spec, "fitting an all-zero field",
                     lambda: spec.create(dict(spec.test_config)).fit(zero))
@@ -175,7 +193,8 @@ def check_bad_input_rejected(spec: PluginSpec) -> None:
                     lambda: model.predict(np.full((3, 2), np.nan), np.array([2.0])))
 
 
-def check_parameter_count(spec: PluginSpec) -> None:
+@requires(any_of=FREQUENCY_MODES)
+def check_parameter_count(spec: PluginSpec, single: bool) -> None:
     """n_parameters is a positive integer; each preset has its thesis count in its saved file.
 
     Models may declare ``presets()`` -> {name: preset with ``options`` and ``parameters``}.
@@ -184,14 +203,14 @@ def check_parameter_count(spec: PluginSpec) -> None:
     must equal the declared count.
     """
     factory = spec.load()
-    model = _fitted(spec)
+    model = _fitted(spec, fit_fixture(single))
     n = model.n_parameters
     assert isinstance(n, (int, np.integer)) and n > 0, (
         f"{spec.qualified_name}: n_parameters must be a positive integer, got {n!r}")
     presets = getattr(factory, "presets", None)
     if presets is None:
         return
-    one = fit_fixture().select([4])
+    one = fit_fixture(single=True)
     for name, preset in presets().items():
         options = {**dict(preset.options), "steps": 2, "eval_every": 1, "device": "cpu"}
         m = spec.create(options)
@@ -207,10 +226,25 @@ def check_parameter_count(spec: PluginSpec) -> None:
                 f"{preset.parameters}")
 
 
+@requires(Capability.NEURAL, any_of=FREQUENCY_MODES)
+def check_seed_changes_fit(spec: PluginSpec, single: bool) -> None:
+    """A neural model starts from a random initialisation drawn from its seed: seeds 0 and
+    1 fit different models (predictions differ by more than 1e-4 relative)."""
+    field = fit_fixture(single)
+    pts = fixtures.wall_grid(9)[..., :2]
+    first, second = (_fitted(spec, field, seed=seed).predict(pts, field.frequencies)
+                     for seed in (0, 1))
+    change = float(np.max(np.abs(first - second)) / max(np.max(np.abs(first)), 1e-300))
+    assert change > 1e-4, (
+        f"{spec.qualified_name}: seeds 0 and 1 fit the same model (largest change "
+        f"{change:.3g} relative); the seed must reach the initialisation")
+
+
 MODEL_CHECKS = (
     check_fits_smooth_field,
     check_predicts_unseen_points,
     check_save_load_round_trip,
     check_bad_input_rejected,
     check_parameter_count,
+    check_seed_changes_fit,
 )

@@ -4,6 +4,10 @@ Every expected number comes from :mod:`nlosfw.simulate.physics` evaluated on a d
 grid of points over the hidden patch (an independent quadrature), never from
 the simulator under test. Scenes are tiny (a 1 m wall, 8 x 8 sensors, a few
 hundred bins) and simulators run with their registered ``test_config``.
+
+Each check runs once per capture geometry the simulator declares (``single_spot``,
+``confocal``), with and without device legs where it declares ``device_legs``;
+``occlusion`` and ``mesh_files`` add their own checks.
 """
 
 from __future__ import annotations
@@ -17,10 +21,12 @@ import numpy as np
 from nlosfw.capture.enums import GridFormat, HFormat
 from nlosfw.capture.geometry import device_legs
 from nlosfw.common.errors import ConfigError
+from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.simulate.physics import bin_index, three_bounce
 from nlosfw.simulate.scene import Scene, scene_from_config
 from nlosfw.testing import fixtures
+from nlosfw.testing.selection import DEVICE_LEGS, GEOMETRIES, combine, requires
 
 #: Energy and energy-ratio tolerance (relative).
 ENERGY_RTOL = 0.05
@@ -57,113 +63,115 @@ def _profiles(H: np.ndarray) -> np.ndarray:
     return np.moveaxis(np.asarray(H, dtype=float), 0, -1).reshape(-1, H.shape[0])
 
 
-def check_capture_layout(spec: PluginSpec) -> None:
+@requires(each=combine(GEOMETRIES, DEVICE_LEGS))
+def check_capture_layout(spec: PluginSpec, confocal: bool, legs: bool) -> None:
     """Layout, dtype, units and metadata are those of the scene, and survive HDF5."""
     from nlosfw.capture.hdf5 import read_capture, write_capture
 
-    for confocal, legs in ((False, False), (True, True)):
-        scene = fixtures.tiny_scene(confocal=confocal, device_legs=legs, bins=400)
-        capture = _simulate(spec, scene)
-        where = f"{spec.qualified_name} (confocal={confocal}, device_legs={legs})"
-        nx, ny = scene.wall.resolution
-        assert capture.H.dtype == np.float32, f"{where}: H must be float32, got {capture.H.dtype}"
-        assert capture.H.shape == (scene.time.bins, nx, ny), (
-            f"{where}: H shape {capture.H.shape}, expected (bins, X, Y) = "
-            f"{(scene.time.bins, nx, ny)}")
-        assert capture.H_format is HFormat.T_Sx_Sy
-        assert capture.sensor_grid_format is GridFormat.X_Y_3
-        np.testing.assert_allclose(capture.sensor_grid_xyz, scene.wall.grid_xyz(), atol=1e-12,
-                                   err_msg=f"{where}: sensor grid differs from the scene's")
-        assert capture.delta_t == scene.time.bin_width and capture.t_start == scene.time.start, (
-            f"{where}: time axis ({capture.t_start}, {capture.delta_t}) is not the scene's "
-            f"({scene.time.start}, {scene.time.bin_width}) metres")
-        assert capture.t_accounts_first_and_last_bounces == legs
-        assert capture.is_confocal == confocal, f"{where}: capture kind is {capture.kind}"
-        assert np.all(capture.H >= 0) and capture.H.sum() > 0, f"{where}: H must be >= 0, not 0"
-        for key in ("scene", "simulator", "ground_truth", "noise"):
-            assert key in capture.scene_info, f"{where}: scene_info lacks '{key}'"
-        depth = np.asarray(capture.scene_info["ground_truth"]["depth"])
-        assert depth.shape == (nx, ny), f"{where}: ground-truth depth shape {depth.shape}"
-        with tempfile.TemporaryDirectory() as tmp:
-            path = write_capture(Path(tmp) / "capture.hdf5", capture)
-            again = read_capture(path)
-        np.testing.assert_array_equal(again.H, capture.H, err_msg=f"{where}: H changed in HDF5")
-        assert again.delta_t == capture.delta_t and again.t_start == capture.t_start
-        assert again.is_confocal == confocal
-        assert again.scene_info["ground_truth"]["depth"] == capture.scene_info["ground_truth"][
-            "depth"], f"{where}: ground truth changed in HDF5"
+    scene = fixtures.tiny_scene(confocal=confocal, device_legs=legs, bins=400)
+    capture = _simulate(spec, scene)
+    where = f"{spec.qualified_name} (confocal={confocal}, device_legs={legs})"
+    nx, ny = scene.wall.resolution
+    assert capture.H.dtype == np.float32, f"{where}: H must be float32, got {capture.H.dtype}"
+    assert capture.H.shape == (scene.time.bins, nx, ny), (
+        f"{where}: H shape {capture.H.shape}, expected (bins, X, Y) = "
+        f"{(scene.time.bins, nx, ny)}")
+    assert capture.H_format is HFormat.T_Sx_Sy
+    assert capture.sensor_grid_format is GridFormat.X_Y_3
+    np.testing.assert_allclose(capture.sensor_grid_xyz, scene.wall.grid_xyz(), atol=1e-12,
+                               err_msg=f"{where}: sensor grid differs from the scene's")
+    assert capture.delta_t == scene.time.bin_width and capture.t_start == scene.time.start, (
+        f"{where}: time axis ({capture.t_start}, {capture.delta_t}) is not the scene's "
+        f"({scene.time.start}, {scene.time.bin_width}) metres")
+    assert capture.t_accounts_first_and_last_bounces == legs
+    assert capture.is_confocal == confocal, f"{where}: capture kind is {capture.kind}"
+    assert np.all(capture.H >= 0) and capture.H.sum() > 0, f"{where}: H must be >= 0, not 0"
+    for key in ("scene", "simulator", "ground_truth", "noise"):
+        assert key in capture.scene_info, f"{where}: scene_info lacks '{key}'"
+    depth = np.asarray(capture.scene_info["ground_truth"]["depth"])
+    assert depth.shape == (nx, ny), f"{where}: ground-truth depth shape {depth.shape}"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = write_capture(Path(tmp) / "capture.hdf5", capture)
+        again = read_capture(path)
+    np.testing.assert_array_equal(again.H, capture.H, err_msg=f"{where}: H changed in HDF5")
+    assert again.delta_t == capture.delta_t and again.t_start == capture.t_start
+    assert again.is_confocal == confocal
+    assert again.scene_info["ground_truth"]["depth"] == capture.scene_info["ground_truth"][
+        "depth"], f"{where}: ground truth changed in HDF5"
 
 
-def check_onset_matches_path_length(spec: PluginSpec) -> None:
+@requires(each=combine(GEOMETRIES, DEVICE_LEGS))
+def check_onset_matches_path_length(spec: PluginSpec, confocal: bool, legs: bool) -> None:
     """A 1 cm patch: every sensor's profile starts at the analytic shortest path (+-1 bin).
 
-    Checked for single-spot and confocal captures, with and without device legs
-    (and then a window that does not start at 0).
+    With device legs, the time window does not start at 0.
     """
-    for confocal in (False, True):
-        for legs in (False, True):
-            start = 0.8 if legs else 0.0
-            config = fixtures.tiny_scene_config(confocal=confocal, device_legs=legs,
-                                                bins=320, patch=0.01)
-            config["time"]["start"] = start
-            scene = scene_from_config(config)
-            H = _profiles(_simulate(spec, scene).H)
-            path, _ = _patch_quadrature(scene)
-            expected = bin_index(path.min(axis=0), start, scene.time.bin_width)
-            peak = H.max(axis=1)
-            assert np.all(peak > 0), (f"{spec.qualified_name}: sensors without signal "
-                                      f"(confocal={confocal}, device_legs={legs})")
-            onset = np.argmax(H / peak[:, None] >= 0.01, axis=1)
-            off = np.abs(onset - expected)
-            assert off.max() <= 1, (
-                f"{spec.qualified_name} (confocal={confocal}, device_legs={legs}): onset bins "
-                f"differ from the analytic path length by up to {off.max()} bins "
-                f"(sensor {int(off.argmax())}: {onset[off.argmax()]} vs {expected[off.argmax()]})")
+    start = 0.8 if legs else 0.0
+    config = fixtures.tiny_scene_config(confocal=confocal, device_legs=legs,
+                                        bins=320, patch=0.01)
+    config["time"]["start"] = start
+    scene = scene_from_config(config)
+    H = _profiles(_simulate(spec, scene).H)
+    path, _ = _patch_quadrature(scene)
+    expected = bin_index(path.min(axis=0), start, scene.time.bin_width)
+    peak = H.max(axis=1)
+    assert np.all(peak > 0), (f"{spec.qualified_name}: sensors without signal "
+                              f"(confocal={confocal}, device_legs={legs})")
+    onset = np.argmax(H / peak[:, None] >= 0.01, axis=1)
+    off = np.abs(onset - expected)
+    assert off.max() <= 1, (
+        f"{spec.qualified_name} (confocal={confocal}, device_legs={legs}): onset bins "
+        f"differ from the analytic path length by up to {off.max()} bins "
+        f"(sensor {int(off.argmax())}: {onset[off.argmax()]} vs {expected[off.argmax()]})")
 
 
-def check_absolute_energy(spec: PluginSpec) -> None:
+@requires(each=GEOMETRIES)
+def check_absolute_energy(spec: PluginSpec, confocal: bool) -> None:
     """Total and per-sensor energy of a 4 cm patch match nlosfw.simulate.physics within 5%.
 
     The patch is off-centre, so a transposed sensor grid or a missing cosine
     changes the per-sensor totals.
     """
-    for confocal in (False, True):
-        scene = fixtures.tiny_scene(confocal=confocal, bins=400)
-        H = _profiles(_simulate(spec, scene).H)
-        _, weight = _patch_quadrature(scene)
-        expected = weight.sum(axis=0)
-        got = H.sum(axis=1)
-        total = got.sum() / expected.sum()
-        assert abs(total - 1) < ENERGY_RTOL, (
-            f"{spec.qualified_name} (confocal={confocal}): total energy is {total:.4f} x the "
-            "analytic value; every simulator must follow the radiometric convention of "
-            "nlosfw.simulate.physics")
-        ratio = got / expected
-        worst = int(np.argmax(np.abs(ratio - 1)))
-        assert np.all(np.abs(ratio - 1) < ENERGY_RTOL), (
-            f"{spec.qualified_name} (confocal={confocal}): sensor {worst} has {ratio[worst]:.4f}"
-            " x the analytic energy (a transposed grid or a wrong cosine?)")
+    scene = fixtures.tiny_scene(confocal=confocal, bins=400)
+    H = _profiles(_simulate(spec, scene).H)
+    _, weight = _patch_quadrature(scene)
+    expected = weight.sum(axis=0)
+    got = H.sum(axis=1)
+    total = got.sum() / expected.sum()
+    assert abs(total - 1) < ENERGY_RTOL, (
+        f"{spec.qualified_name} (confocal={confocal}): total energy is {total:.4f} x the "
+        "analytic value; every simulator must follow the radiometric convention of "
+        "nlosfw.simulate.physics")
+    ratio = got / expected
+    worst = int(np.argmax(np.abs(ratio - 1)))
+    assert np.all(np.abs(ratio - 1) < ENERGY_RTOL), (
+        f"{spec.qualified_name} (confocal={confocal}): sensor {worst} has {ratio[worst]:.4f}"
+        " x the analytic energy (a transposed grid or a wrong cosine?)")
 
 
-def check_energy_falloff(spec: PluginSpec) -> None:
+@requires(each=GEOMETRIES)
+def check_energy_falloff(spec: PluginSpec, confocal: bool) -> None:
     """Moving a 4 cm patch from 1 m to 2 m changes the energy by the analytic ratio (5%)."""
     totals, expected = [], []
     for depth in (1.0, 2.0):
-        scene = fixtures.tiny_scene(target=(0.0, 0.0, depth), bins=600)
+        scene = fixtures.tiny_scene(target=(0.0, 0.0, depth), bins=600, confocal=confocal)
         totals.append(float(_simulate(spec, scene).H.sum(dtype=np.float64)))
         expected.append(float(_patch_quadrature(scene)[1].sum()))
     got, want = totals[1] / totals[0], expected[1] / expected[0]
     assert abs(got / want - 1) < ENERGY_RTOL, (
-        f"{spec.qualified_name}: energy ratio 2 m / 1 m is {got:.5f}, physics says {want:.5f}")
+        f"{spec.qualified_name} (confocal={confocal}): energy ratio 2 m / 1 m is {got:.5f}, "
+        f"physics says {want:.5f}")
 
 
-def check_occlusion(spec: PluginSpec) -> None:
+@requires(Capability.OCCLUSION, each=GEOMETRIES)
+def check_occlusion(spec: PluginSpec, confocal: bool) -> None:
     """A patch hidden behind a plate (from the laser spot and every sensor) adds no light.
 
     The patch's paths are longer than any of the plate's, so the bins they would
     fill must stay empty.
     """
-    config = fixtures.tiny_scene_config(bins=400, target=(0.0, 0.0, 1.5), patch=0.04)
+    config = fixtures.tiny_scene_config(bins=400, target=(0.0, 0.0, 1.5), patch=0.04,
+                                        confocal=confocal)
     config["geometry"].append({"type": "rectangle", "position": [0.0, 0.0, 0.3],
                                "size": [0.9, 0.9]})
     scene = scene_from_config(config)
@@ -173,15 +181,46 @@ def check_occlusion(spec: PluginSpec) -> None:
     hidden = H[:, first:].sum()
     assert H.sum() > 0, f"{spec.qualified_name}: the plate itself must be visible"
     assert hidden <= 1e-6 * H.sum(), (
-        f"{spec.qualified_name}: {hidden / H.sum():.3g} of the energy arrives from a patch "
-        "that the plate hides from the laser and every sensor (no visibility test?)")
+        f"{spec.qualified_name} (confocal={confocal}): {hidden / H.sum():.3g} of the energy "
+        "arrives from a patch that the plate hides from the laser and every sensor (no "
+        "visibility test?)")
 
 
-def check_bad_scene_rejected(spec: PluginSpec) -> None:
+@requires(Capability.MESH_FILES, any_of=GEOMETRIES)
+def check_mesh_file_matches_patch(spec: PluginSpec, confocal: bool) -> None:
+    """A mesh file (OBJ, two triangles) of the 4 cm patch has the patch's analytic energy,
+    in total and per sensor, within 5%."""
+    h = 0.02
+    obj = (f"v {-h} {-h} 0\nv {-h} {h} 0\nv {h} {h} 0\nv {h} {-h} 0\n"
+           "f 1 2 3\nf 1 3 4\n")
+    config = fixtures.tiny_scene_config(confocal=confocal, bins=400, patch=2 * h)
+    patch = scene_from_config(config)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "patch.obj"
+        path.write_text(obj)
+        config["geometry"] = [{"type": "mesh", "path": str(path),
+                               "position": list(fixtures.TINY_TARGET)}]
+        H = _profiles(_simulate(spec, scene_from_config(config)).H)
+    expected = _patch_quadrature(patch)[1].sum(axis=0)
+    got = H.sum(axis=1)
+    total = got.sum() / expected.sum()
+    assert abs(total - 1) < ENERGY_RTOL, (
+        f"{spec.qualified_name} (confocal={confocal}): a mesh file of the patch gives "
+        f"{total:.4f} x the patch's analytic energy")
+    ratio = got / expected
+    worst = int(np.argmax(np.abs(ratio - 1)))
+    assert np.all(np.abs(ratio - 1) < ENERGY_RTOL), (
+        f"{spec.qualified_name} (confocal={confocal}): with the mesh file, sensor {worst} has "
+        f"{ratio[worst]:.4f} x the patch's analytic energy")
+
+
+@requires(any_of=GEOMETRIES)
+def check_bad_scene_rejected(spec: PluginSpec, confocal: bool) -> None:
     """Geometry behind the wall or a time window without paths: a one-line ConfigError."""
     cases = {
-        "scene.geometry[0]": fixtures.tiny_scene_config(target=(0.0, 0.0, -0.2)),
-        "scene.time": {**fixtures.tiny_scene_config(),
+        "scene.geometry[0]": fixtures.tiny_scene_config(target=(0.0, 0.0, -0.2),
+                                                        confocal=confocal),
+        "scene.time": {**fixtures.tiny_scene_config(confocal=confocal),
                        "time": {"bins": 64, "bin_width": 0.01, "start": 10.0}},
     }
     simulator = spec.create(dict(spec.test_config))
@@ -203,5 +242,6 @@ SIMULATOR_CHECKS = (
     check_absolute_energy,
     check_energy_falloff,
     check_occlusion,
+    check_mesh_file_matches_patch,
     check_bad_scene_rejected,
 )

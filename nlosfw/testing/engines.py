@@ -1,46 +1,59 @@
-"""Checks for backend engines of the neural field models (torch, JAX, or a new backend).
+"""Checks for the engines that run networks (torch, JAX, or a new backend).
 
-A backend implements :class:`nlosfw.model.trainer.Engine`; these helpers compare it
-with the plain numpy forward pass of :mod:`nlosfw.model.networks`, so every backend
-computes the same network from the same weights.
+An engine must run the thesis networks exactly as the independent numpy reference
+of :mod:`nlosfw.model.thesis_networks` does: from the same initial weights
+(:func:`~nlosfw.model.thesis_networks.init_parameters`), through the same input
+encoding (:func:`~nlosfw.model.thesis_networks.network_inputs`) and forward pass
+(:func:`~nlosfw.model.thesis_networks.forward_numpy`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from nlosfw.model.networks import (
+from nlosfw.model.engine import NetworkBuild
+from nlosfw.model.neural_config import FieldShape
+from nlosfw.model.thesis_networks import (
     FAMILY_CONFIGS,
     forward_numpy,
     init_parameters,
-    resolve_architecture,
+    network_inputs,
+    thesis_architecture,
 )
+from nlosfw.model.trainer import field_inputs
 
 #: (family, mode) pairs every engine must evaluate like the numpy reference.
 ENGINE_CASES = [(family, mode) for family in ("tanh", "pe", "siren")
                 for mode in ("multi", "single")]
 
 
-def assert_engine_matches_numpy(make_engine: Callable[..., Any], family: str, mode: str,
-                                rtol: float = 2e-5, atol: float = 2e-5) -> None:
-    """``make_engine(arch, params, n_networks)`` evaluates like :func:`forward_numpy`.
+def assert_engine_matches_numpy(model_class: Any, mode: str, rtol: float = 2e-5,
+                                atol: float = 2e-5) -> None:
+    """A thesis network's field-model class (e.g. ``SirenTorch``) evaluates like
+    :func:`forward_numpy` on the weights of :func:`init_parameters`.
 
-    Small networks (16, 12 hidden units; PE with 3 octaves), 33 random inputs in
-    (-1, 1); in single mode also a subset of the networks selected by index.
+    Small networks (16, 12 hidden units; PE with 3 octaves) built by the class's engine
+    and factory; 11 random points in (-1, 1) at 3 random frequencies (multi mode); in
+    single mode 5 networks, and also a subset of them selected by index.
     """
-    options = {"mode": mode, "hidden": (16, 12)}
+    family = model_class.family
+    options: dict[str, Any] = {"mode": mode, "hidden": (16, 12), "seed": 4, "device": "cpu"}
     if family == "pe":
         options["octaves"] = 3
     config = FAMILY_CONFIGS[family](**options)
-    arch = resolve_architecture(family, config, (8, 8), 5)
+    shape = FieldShape(config.mode, (8, 8), 5)
+    arch = thesis_architecture(config, shape)
     n_net = 5 if mode == "single" else 0
-    params = init_parameters(arch, n_net, seed=4)
-    engine = make_engine(arch, params, n_net)
-    x = np.random.default_rng(0).uniform(-1, 1, (33, arch.in_dim)).astype(np.float32)
-    expected = forward_numpy(arch, params, x)
+    engine = model_class.engine_class(NetworkBuild(model_class.network_factory, config, shape,
+                                                   n_net))
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(-1, 1, (11, 2))
+    f = rng.uniform(-1, 1, 3) if mode == "multi" else None
+    expected = forward_numpy(arch, init_parameters(arch, n_net, seed=4),
+                             network_inputs(arch, xy, f))
+    x = field_inputs(xy, f)
     np.testing.assert_allclose(engine.forward(x), expected, rtol=rtol, atol=atol)
     if mode == "single":
         np.testing.assert_allclose(engine.forward(x, np.array([3, 1])), expected[[3, 1]],

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -59,17 +60,29 @@ def to_field_layout(values: np.ndarray, capture: Capture) -> np.ndarray:
     return values.reshape(n_f, 1, -1)
 
 
-def transform_capture(capture: Capture, frequencies: np.ndarray, *, transform: str,
-                      method: str, remove_device_legs: bool,
-                      weights: np.ndarray | None = None,
-                      metadata: Mapping[str, Any] | None = None) -> PhasorField:
+@dataclass(frozen=True, eq=False)
+class FieldOptions:
+    """How :func:`transform_capture` makes a field: the transform's name (recorded in the
+    field's metadata), its DFT method, whether to remove the device legs, and the field's
+    spectral weights and extra metadata."""
+
+    transform: str
+    method: str
+    remove_device_legs: bool
+    weights: np.ndarray | None = None
+    metadata: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+
+
+def transform_capture(capture: Capture, frequencies: np.ndarray,
+                      options: FieldOptions) -> PhasorField:
     """The phasor field of ``capture`` at ``frequencies`` (already validated).
 
     P_f(x_s) = sum_t H(x_s, t) exp(-2 pi i f t_c) delta_t, t_c the bin centres.
-    If the time axis includes the device legs and ``remove_device_legs`` is
+    If the time axis includes the device legs and ``options.remove_device_legs`` is
     true, each sensor's field is multiplied by exp(+2 pi i f device_path(x_s)),
     and the field's geometry says the legs are gone.
     """
+    method, remove_device_legs = options.method, options.remove_device_legs
     start = time.perf_counter()
     f = np.asarray(frequencies, dtype=np.float64)
     try:
@@ -87,7 +100,7 @@ def transform_capture(capture: Capture, frequencies: np.ndarray, *, transform: s
     values = to_field_layout(flat, capture)
     del flat
     info: dict[str, Any] = {
-        "transform": transform,
+        "transform": options.transform,
         "method": used,
         "capture_kind": capture.kind.value,
         "n_bins": capture.n_bins,
@@ -96,7 +109,7 @@ def transform_capture(capture: Capture, frequencies: np.ndarray, *, transform: s
         "device_legs_in_capture": bool(capture.t_accounts_first_and_last_bounces),
         "device_legs_removed": removed,
     }
-    info.update(dict(metadata or {}))
+    info.update(options.metadata)
     info["seconds"] = round(time.perf_counter() - start, 6)
     return PhasorField(values=values, frequencies=f, wall_xyz=wall_points(capture),
-                       geometry=geometry, weights=weights, metadata=info)
+                       geometry=geometry, weights=options.weights, metadata=info)

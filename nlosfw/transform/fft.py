@@ -20,7 +20,7 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError
-from nlosfw.transform.common import check_capture, transform_capture
+from nlosfw.transform.common import FieldOptions, check_capture, transform_capture
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.frequencies import (
     check_frequency_values,
@@ -102,5 +102,6 @@ class FFTTransform(PhasorTransform):
         """The phasor field of ``capture`` (layout [frequency, y, x], no weights)."""
         check_capture(capture, "fft")
         freqs = self.frequencies_for(capture)
-        return transform_capture(capture, freqs, transform="fft", method=self.config.method,
-                                 remove_device_legs=self.config.remove_device_legs)
+        return transform_capture(capture, freqs, FieldOptions(
+            transform="fft", method=self.config.method,
+            remove_device_legs=self.config.remove_device_legs))

@@ -35,7 +35,7 @@ import scipy.fft
 from nlosfw.capture.data import Capture
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError
-from nlosfw.transform.common import check_capture, transform_capture
+from nlosfw.transform.common import FieldOptions, check_capture, transform_capture
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.frequencies import validate_frequencies, wall_spacing
 from nlosfw.transform.interface import PhasorTransform, PhasorTransformConfig
@@ -167,6 +167,7 @@ class WaveletTransform(PhasorTransform):
         """The phasor field at the wavelet's bins, with its spectral weights."""
         check_capture(capture, "wavelet")
         freqs, weights, info = self.frequencies_for(capture)
-        return transform_capture(capture, freqs, transform="wavelet", method=self.config.method,
-                                 remove_device_legs=self.config.remove_device_legs,
-                                 weights=weights, metadata={"wavelet": info})
+        return transform_capture(capture, freqs, FieldOptions(
+            transform="wavelet", method=self.config.method,
+            remove_device_legs=self.config.remove_device_legs, weights=weights,
+            metadata={"wavelet": info}))

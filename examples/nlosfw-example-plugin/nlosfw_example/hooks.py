@@ -13,4 +13,6 @@ def register_field_models(register: Any) -> None:
         config="nlosfw_example.nearest:NearestConfig",
         requires={"scipy": "scipy"},
         description="Nearest wall sample, linear in frequency (example third-party plugin)",
+        # what the conformance kit checks (nlosfw.plugins.CAPABILITIES["model"])
+        capabilities=["multi_frequency", "single_frequency", "save_load"],
     )

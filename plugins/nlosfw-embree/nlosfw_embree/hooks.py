@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from nlosfw.plugins import Capability as C
 from nlosfw.plugins import hookimpl
 
 
@@ -19,4 +20,5 @@ def register_simulators(register: Any) -> None:
         requires={"embreex": "embreex"},
         description="Three-bounce transport with Embree occlusion rays (shadows, any mesh)",
         test_config={"samples": 8192},
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.DEVICE_LEGS, C.OCCLUSION, C.MESH_FILES],
     )

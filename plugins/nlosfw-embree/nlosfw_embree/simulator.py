@@ -24,6 +24,7 @@ import time
 import warnings
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,12 +43,50 @@ from nlosfw.simulate import (
 )
 from nlosfw_embree.config import EmbreeConfig
 from nlosfw_embree.tracer import OcclusionTracer
-from nlosfw_embree.transport import SingleSpotRows, confocal_rows, laser_side
+from nlosfw_embree.transport import (
+    Binning,
+    SingleSpotRows,
+    SurfaceSamples,
+    WallRows,
+    confocal_rows,
+    laser_side,
+)
 
 log = logging.getLogger(__name__)
 
 #: Surface samples drawn and held in memory at once (about 100 bytes each).
 _CHUNK = 1 << 20
+
+
+@dataclass(frozen=True, eq=False)
+class _Job:
+    """One render: the scene, its wall rows, how paths are binned, the tracer, the threads."""
+
+    scene: Scene
+    wall: WallRows
+    binning: Binning
+    tracer: OcclusionTracer
+    threads: int
+    fixed_leg: float = 0.0
+    """The laser device leg added to every single-spot path (when the legs are counted)."""
+
+    @property
+    def hist_shape(self) -> tuple[int, int]:
+        """(X, Y * (bins + 2)): per sensor, the bins plus a too-early and a too-late slot."""
+        return self.wall.xs.shape[0], self.wall.ys.shape[0] * (self.binning.bins + 2)
+
+
+@dataclass(frozen=True, eq=False)
+class _Tally:
+    """Histograms and ray statistics of part of a render; parts add up."""
+
+    hist: np.ndarray
+    rays: int = 0
+    unobstructed: int = 0
+
+    def __add__(self, other: _Tally) -> _Tally:
+        return _Tally(self.hist + other.hist, self.rays + other.rays,
+                      self.unobstructed + other.unobstructed)
 
 
 class EmbreeSimulator(Simulator):
@@ -59,15 +98,16 @@ class EmbreeSimulator(Simulator):
         cfg = self.config
         start = time.perf_counter()
         scene, mesh, points = geometry.scene, geometry.mesh, geometry.points
-        tracer = OcclusionTracer(mesh)
         grid = scene.wall.grid_xyz()
         nx, ny = grid.shape[:2]
-        xs, ys = grid[:, 0, 0], grid[0, :, 1]
         bins = scene.time.bins
-        threads = cfg.threads or available_cores()
-        hist = np.zeros((nx, ny * (bins + 2)))
-        stats = {"rays": 0, "unobstructed": 0}
         legs = _device_legs(scene, grid)
+        job = _Job(scene=scene,
+                   wall=WallRows(grid[:, 0, 0], grid[0, :, 1], None if legs is None else legs[0]),
+                   binning=Binning(bins, scene.time.bin_width, scene.time.start, cfg.ray_offset),
+                   tracer=OcclusionTracer(mesh), threads=cfg.threads or available_cores(),
+                   fixed_leg=0.0 if legs is None else legs[1])
+        tally = _Tally(np.zeros(job.hist_shape))
 
         if mesh.n_faces:
             rng = np.random.default_rng([cfg.seed, 0x656D62])  # "emb" stream
@@ -77,17 +117,15 @@ class EmbreeSimulator(Simulator):
                 n = min(_CHUNK, cfg.samples - first)
                 uv = _draw(sobol, n) if sobol is not None else rng.random((n, 2))
                 p, normals, albedo = surface_points(mesh, uv)
-                area_albedo = albedo * area / cfg.samples
+                surface = SurfaceSamples(p, normals, albedo * area / cfg.samples)
                 if scene.is_confocal:
-                    self._confocal(scene, xs, ys, p, normals, area_albedo, tracer, legs, hist,
-                                   threads, stats)
+                    tally = tally + self._confocal(job, surface)
                 else:
-                    self._single_spot(scene, xs, ys, p, normals, area_albedo, tracer, legs,
-                                      hist, threads, stats)
+                    tally = tally + self._single_spot(job, surface)
         if points.positions.shape[0]:
-            self._points(scene, grid, points, tracer, legs, hist, stats)
+            tally = tally + self._points(job, grid, points)
 
-        H = hist.reshape(nx, ny, bins + 2)[:, :, 1:-1]
+        H = tally.hist.reshape(nx, ny, bins + 2)[:, :, 1:-1]
         capture = scene_capture(scene, np.moveaxis(H, -1, 0))
         seconds = time.perf_counter() - start
         info = dict(capture.scene_info)
@@ -95,109 +133,98 @@ class EmbreeSimulator(Simulator):
             "simulator": "embree",
             "samples": int(cfg.samples) if mesh.n_faces else 0,
             "sampler": str(cfg.sampler),
-            "threads": int(threads),
-            "rays": int(stats["rays"]),
-            "unobstructed_fraction": (stats["unobstructed"] / stats["rays"]
-                                      if stats["rays"] else 1.0),
+            "threads": int(job.threads),
+            "rays": int(tally.rays),
+            "unobstructed_fraction": (tally.unobstructed / tally.rays
+                                      if tally.rays else 1.0),
             "seconds": seconds,
-            "rays_per_second": stats["rays"] / seconds if seconds > 0 else 0.0,
+            "rays_per_second": tally.rays / seconds if seconds > 0 else 0.0,
         }
         return capture.replace(scene_info=info)
 
     # ------------------------------------------------------------------ surfaces
-    def _single_spot(self, scene: Scene, xs: np.ndarray, ys: np.ndarray, p: np.ndarray,
-                     normals: np.ndarray, area_albedo: np.ndarray, tracer: OcclusionTracer,
-                     legs: tuple[np.ndarray, float] | None, hist: np.ndarray, threads: int,
-                     stats: dict) -> None:
+    def _single_spot(self, job: _Job, surface: SurfaceSamples) -> _Tally:
         cfg = self.config
-        t = scene.time
-        lit, traced = laser_side(p, normals, area_albedo, scene.laser_spot_xyz(), tracer,
-                                 delta_t=t.bin_width, t_start=t.start,
-                                 fixed_path=legs[1] if legs else 0.0,
-                                 ray_offset=cfg.ray_offset)
-        stats["rays"] += traced
-        stats["unobstructed"] += lit.n
+        lit, traced = laser_side(surface, job.scene.laser_spot_xyz(), job.tracer, job.binning,
+                                 fixed_path=job.fixed_leg)
+        hist = np.zeros(job.hist_shape)
         if lit.n == 0:
-            return
+            return _Tally(hist, traced, 0)
         batch = min(cfg.batch, lit.n)
         real = lit.n
         lit = lit.padded(batch)
-        rows = [list(range(k, len(xs), threads)) for k in range(min(threads, len(xs)))]
+        n_rows = job.wall.xs.shape[0]
+        rows = [list(range(k, n_rows, job.threads)) for k in range(min(job.threads, n_rows))]
 
         def work(my_rows: list[int]) -> tuple[int, int]:
-            kernel = SingleSpotRows(xs, ys, batch, t.bins, t.bin_width, tracer,
-                                    legs[0] if legs else None)
+            # each thread adds into its own rows of this call's histogram
+            kernel = SingleSpotRows(job.wall, batch, job.binning, job.tracer)
             for b0 in range(0, lit.n, batch):
                 kernel.load(lit.batch(b0, batch))
                 for ix in my_rows:
-                    kernel.row(ix, hist[ix], n_real=min(batch, real - b0))
+                    hist[ix] += kernel.row(ix, n_real=min(batch, real - b0))
             return kernel.traced, kernel.free
 
         results = _run(work, rows)
-        stats["rays"] += sum(r[0] for r in results)
-        stats["unobstructed"] += sum(r[1] for r in results)
+        return _Tally(hist, traced + sum(r[0] for r in results),
+                      real + sum(r[1] for r in results))
 
-    def _confocal(self, scene: Scene, xs: np.ndarray, ys: np.ndarray, p: np.ndarray,
-                  normals: np.ndarray, area_albedo: np.ndarray, tracer: OcclusionTracer,
-                  legs: tuple[np.ndarray, float] | None, hist: np.ndarray, threads: int,
-                  stats: dict) -> None:
-        cfg = self.config
-        t = scene.time
-        keep = (area_albedo > 0) & (p[:, 2] > 0)
-        p, normals, area_albedo = p[keep], normals[keep], area_albedo[keep]
-        batch = max(16, min(cfg.batch, (1 << 18) // max(1, len(ys))))
-        rows = [list(range(k, len(xs), threads)) for k in range(min(threads, len(xs)))]
+    def _confocal(self, job: _Job, surface: SurfaceSamples) -> _Tally:
+        keep = (surface.area_albedo > 0) & (surface.position[:, 2] > 0)
+        surface = surface.select(keep)
+        n_cols, n_rows = job.wall.ys.shape[0], job.wall.xs.shape[0]
+        batch = max(16, min(self.config.batch, (1 << 18) // max(1, n_cols)))
+        rows = [list(range(k, n_rows, job.threads)) for k in range(min(job.threads, n_rows))]
+        hist = np.zeros(job.hist_shape)
 
         def work(my_rows: list[int]) -> tuple[int, int]:
+            # each thread adds into its own rows of this call's histogram
             traced = free = 0
-            for b0 in range(0, p.shape[0], batch):
-                sl = slice(b0, b0 + batch)
+            for b0 in range(0, surface.n, batch):
+                part = surface.select(slice(b0, b0 + batch))
                 for ix in my_rows:
-                    a, b = confocal_rows(xs, ys, ix, p[sl], normals[sl], area_albedo[sl],
-                                         tracer, bins=t.bins, delta_t=t.bin_width,
-                                         t_start=t.start, legs=legs[0] if legs else None,
-                                         ray_offset=cfg.ray_offset, out=hist[ix])
+                    counts, a, b = confocal_rows(job.wall, ix, part, job.tracer, job.binning)
+                    hist[ix] += counts
                     traced, free = traced + a, free + b
             return traced, free
 
         results = _run(work, rows)
-        stats["rays"] += sum(r[0] for r in results)
-        stats["unobstructed"] += sum(r[1] for r in results)
+        return _Tally(hist, sum(r[0] for r in results), sum(r[1] for r in results))
 
     # ------------------------------------------------------------------ points
-    def _points(self, scene: Scene, grid: np.ndarray, points: PointScatterers,
-                tracer: OcclusionTracer, legs: tuple[np.ndarray, float] | None,
-                hist: np.ndarray, stats: dict) -> None:
+    def _points(self, job: _Job, grid: np.ndarray, points: PointScatterers) -> _Tally:
         """Closed-form paths of point scatterers, times the visibility of both legs."""
-        t = scene.time
+        scene, t = job.scene, job.scene.time
         sensors = grid.reshape(-1, 3)
         n_s = sensors.shape[0]
         laser = sensors if scene.is_confocal else scene.laser_spot_xyz()
         path, weight = three_bounce(laser, points.positions, None, points.albedo, sensors)
-        if legs is not None:
-            path = path + legs[0].reshape(-1)[None, :] + legs[1]
-        visible = self._visible(sensors, points.positions, tracer, stats)        # (P, S)
+        if job.wall.legs is not None:
+            path = path + job.wall.legs.reshape(-1)[None, :] + job.fixed_leg
+        visible, rays, free = self._visible(sensors, points.positions, job.tracer)   # (P, S)
         if not scene.is_confocal:
-            visible &= self._visible(scene.laser_spot_xyz()[None], points.positions,
-                                     tracer, stats)
+            laser_visible, more, more_free = self._visible(scene.laser_spot_xyz()[None],
+                                                           points.positions, job.tracer)
+            visible &= laser_visible
+            rays, free = rays + more, free + more_free
         slot = np.clip(np.floor((path - t.start) / t.bin_width) + 1, 0, t.bins + 1)
         flat = (slot.astype(np.int64) + (np.arange(n_s) * (t.bins + 2))[None, :])
         weight = np.where(visible, weight, 0.0)
-        hist.reshape(-1)[:] += np.bincount(flat.reshape(-1), weights=weight.reshape(-1),
-                                           minlength=hist.size)
+        counts = np.bincount(flat.reshape(-1), weights=weight.reshape(-1),
+                             minlength=int(np.prod(job.hist_shape)))
+        return _Tally(counts.reshape(job.hist_shape), rays, free)
 
-    def _visible(self, wall_points: np.ndarray, targets: np.ndarray, tracer: OcclusionTracer,
-                 stats: dict) -> np.ndarray:
-        """(P, W) whether each target is visible from each wall point (rays stop short)."""
+    def _visible(self, wall_points: np.ndarray, targets: np.ndarray,
+                 tracer: OcclusionTracer) -> tuple[np.ndarray, int, int]:
+        """(P, W) whether each target is visible from each wall point (rays stop short),
+        the rays traced and the rays unobstructed."""
         d = targets[:, None, :] - wall_points[None, :, :]
         r = np.linalg.norm(d, axis=-1)
         occ = tracer.occluded(
             np.broadcast_to(wall_points[None], d.shape).reshape(-1, 3).astype(np.float32),
             d.reshape(-1, 3).astype(np.float32),
             (1.0 - self.config.ray_offset / r).reshape(-1).astype(np.float32))
-        stats["rays"] += occ.shape[0]
-        stats["unobstructed"] += int(np.count_nonzero(occ))
-        return (occ != 0).reshape(r.shape)
+        return (occ != 0).reshape(r.shape), int(occ.shape[0]), int(np.count_nonzero(occ))
 
 
 def _device_legs(scene: Scene, grid: np.ndarray) -> tuple[np.ndarray, float] | None:

@@ -69,14 +69,54 @@ class LitSamples:
                           pad(self.offset))
 
 
-def laser_side(points: np.ndarray, normals: np.ndarray, area_albedo: np.ndarray,
-               laser: np.ndarray, tracer: OcclusionTracer, *, delta_t: float, t_start: float,
-               fixed_path: float, ray_offset: float) -> tuple[LitSamples, int]:
+@dataclass(frozen=True, eq=False)
+class SurfaceSamples:
+    """Hidden-surface samples: positions p (n, 3), unit normals (n, 3), and albedo times the
+    area each stands for (n,)."""
+
+    position: np.ndarray
+    normal: np.ndarray
+    area_albedo: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.position.shape[0])
+
+    def select(self, index: slice | np.ndarray) -> SurfaceSamples:
+        """The samples at ``index`` (a slice gives views, a mask copies)."""
+        return SurfaceSamples(self.position[index], self.normal[index], self.area_albedo[index])
+
+
+@dataclass(frozen=True)
+class Binning:
+    """How paths are binned and traced: ``bins`` of ``delta_t`` metres from ``t_start``;
+    rays leave (or stop) ``ray_offset`` metres off a surface."""
+
+    bins: int
+    delta_t: float
+    t_start: float
+    ray_offset: float
+
+
+@dataclass(frozen=True, eq=False)
+class WallRows:
+    """The wall grid by rows: x of each row (X,), y of each column (Y,), and each sensor's
+    device leg (X, Y) in metres, or None when the time axis does not count the legs."""
+
+    xs: np.ndarray
+    ys: np.ndarray
+    legs: np.ndarray | None = None
+
+
+def laser_side(surface: SurfaceSamples, laser: np.ndarray, tracer: OcclusionTracer,
+               binning: Binning, fixed_path: float = 0.0) -> tuple[LitSamples, int]:
     """The laser leg x_l -> p of every sample, keeping those the laser reaches.
 
     ``fixed_path`` is added to every path (the laser device leg when counted).
     Returns the lit samples and the number of occlusion rays traced.
     """
+    points, normals, area_albedo = surface.position, surface.normal, surface.area_albedo
+    delta_t, t_start, ray_offset = binning.delta_t, binning.t_start, binning.ray_offset
     d = laser[None, :] - points                          # p -> x_l
     r_l = np.linalg.norm(d, axis=1)
     cos_l = points[:, 2] / r_l                            # at the wall (normal +z)
@@ -108,10 +148,11 @@ class SingleSpotRows:
     for each grid row this thread accumulates.
     """
 
-    def __init__(self, xs: np.ndarray, ys: np.ndarray, batch: int, bins: int, delta_t: float,
-                 tracer: OcclusionTracer, legs: np.ndarray | None) -> None:
-        self.xs = np.asarray(xs, np.float32)
-        self.ys = np.asarray(ys, np.float32)
+    def __init__(self, wall: WallRows, batch: int, binning: Binning,
+                 tracer: OcclusionTracer) -> None:
+        self.xs = np.asarray(wall.xs, np.float32)
+        self.ys = np.asarray(wall.ys, np.float32)
+        bins, delta_t, legs = binning.bins, binning.delta_t, wall.legs
         self.bins, self.batch = bins, batch
         self.tracer = tracer
         self.inv_dt2 = np.float32(1.0 / delta_t**2)
@@ -145,13 +186,15 @@ class SingleSpotRows:
         self.dirs[..., 2] = -pz[None, :]
         self._batch = s
 
-    def row(self, ix: int, out: np.ndarray, n_real: int | None = None) -> None:
-        """Add row ``ix``'s paths to ``out`` (its histogram, Y * (bins + 2) slots).
+    def row(self, ix: int, n_real: int | None = None) -> np.ndarray:
+        """Row ``ix``'s paths: its histogram (Y * (bins + 2) slots) from this batch.
 
         ``n_real``: how many leading samples of the batch are real (the rest is
         zero-gain padding, traced but not counted in the ray statistics).
         """
         s = self._batch
+        if s is None:
+            raise RuntimeError("SingleSpotRows.row: load() a batch first")
         px, pz = s.position[:, 0], s.position[:, 2]
         ax = self.xs[ix] - px                                           # (x_s - p)_x
         # signed n.(x_s - p) times the sample gain: > 0 when x_s sees the lit side
@@ -174,37 +217,41 @@ class SingleSpotRows:
                                    self.far)
         flat = idx.reshape(-1)
         np.bitwise_and(flat, occ, out=flat)                             # occluded -> slot 0
-        out += np.bincount(flat, weights=self.weight.reshape(-1), minlength=out.shape[0])
+        counts = np.bincount(flat, weights=self.weight.reshape(-1),
+                             minlength=self.ys.shape[0] * (self.bins + 2))
         n_real = self.batch if n_real is None else n_real
         self.traced += n_real * occ.shape[0] // self.batch
         self.free += int(np.count_nonzero(occ.reshape(-1, self.batch)[:, :n_real]))
+        return counts
 
 
-def confocal_rows(xs: np.ndarray, ys: np.ndarray, ix: int, points: np.ndarray,
-                  normals: np.ndarray, area_albedo: np.ndarray, tracer: OcclusionTracer, *,
-                  bins: int, delta_t: float, t_start: float, legs: np.ndarray | None,
-                  ray_offset: float, out: np.ndarray) -> tuple[int, int]:
+def confocal_rows(wall: WallRows, ix: int, surface: SurfaceSamples, tracer: OcclusionTracer,
+                  binning: Binning) -> tuple[np.ndarray, int, int]:
     """Confocal paths x_s -> p -> x_s of grid row ``ix`` for a batch of samples.
 
     One occlusion ray per pair, from the sensor towards the sample, stopping
     ``ray_offset`` short of it, serves both legs. Weight
-    rho dA cos_s^2 cos_p^2 / (pi^3 r^4). Returns (rays traced, rays unobstructed).
+    rho dA cos_s^2 cos_p^2 / (pi^3 r^4). Returns the row's histogram
+    (Y * (bins + 2) slots), the rays traced and the rays unobstructed.
     """
+    xs, ys, points, normals = wall.xs, wall.ys, surface.position, surface.normal
+    bins = binning.bins
     ny, n = ys.shape[0], points.shape[0]
     sensors = np.stack([np.full(ny, xs[ix]), ys, np.zeros(ny)], axis=-1)    # (Y, 3)
     d = points[None, :, :] - sensors[:, None, :]                            # x_s -> p
     r2 = np.einsum("ijk,ijk->ij", d, d)
     r = np.sqrt(r2)
     cos_p = np.einsum("ijk,jk->ij", d, normals) / r
-    weight = (area_albedo * _INV_PI3)[None, :] * (points[None, :, 2] * cos_p) ** 2 / r2**3
-    path = 2 * r - t_start
-    if legs is not None:
-        path += legs[ix][:, None]
-    slot = np.clip(np.floor(path / delta_t) + 1, 0, bins + 1).astype(np.int64)
+    weight = ((surface.area_albedo * _INV_PI3)[None, :] * (points[None, :, 2] * cos_p) ** 2
+              / r2**3)
+    path = 2 * r - binning.t_start
+    if wall.legs is not None:
+        path += wall.legs[ix][:, None]
+    slot = np.clip(np.floor(path / binning.delta_t) + 1, 0, bins + 1).astype(np.int64)
     occ = tracer.occluded(np.repeat(sensors, n, axis=0).astype(np.float32),
                           d.reshape(-1, 3).astype(np.float32),
-                          (1.0 - ray_offset / r).reshape(-1).astype(np.float32))
+                          (1.0 - binning.ray_offset / r).reshape(-1).astype(np.float32))
     flat = (slot + (np.arange(ny) * (bins + 2))[:, None]).reshape(-1)
     flat[occ == 0] = 0
-    out += np.bincount(flat, weights=weight.reshape(-1), minlength=out.shape[0])
-    return int(occ.shape[0]), int(np.count_nonzero(occ))
+    counts = np.bincount(flat, weights=weight.reshape(-1), minlength=ny * (bins + 2))
+    return counts, int(occ.shape[0]), int(np.count_nonzero(occ))

@@ -1,4 +1,6 @@
-"""JAX field models for nlosfw: ``tanh_jax``, ``pe_jax`` and ``siren_jax``.
+"""JAX engine of nlosfw's neural fields (equinox modules, optax's Adam), and the thesis
+networks ``tanh_jax``, ``pe_jax`` and ``siren_jax``.
 
-Importing this package does not import jax; :mod:`nlosfw_jax.models` does.
+Importing this package does not import jax; :mod:`nlosfw_jax.engine`,
+:mod:`nlosfw_jax.networks` and :mod:`nlosfw_jax.models` do.
 """

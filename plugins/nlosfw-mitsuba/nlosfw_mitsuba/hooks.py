@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from nlosfw.plugins import Capability as C
 from nlosfw.plugins import hookimpl
 
 
@@ -19,4 +20,5 @@ def register_simulators(register: Any) -> None:
         requires={"mitsuba": "mitsuba", "mitransient": "mitransient"},
         description="Mitsuba 3 + mitransient path tracing (transient_nlos_path, LLVM)",
         test_config={"spp": 1024},
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.DEVICE_LEGS, C.OCCLUSION, C.MESH_FILES],
     )

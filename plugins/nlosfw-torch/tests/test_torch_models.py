@@ -9,7 +9,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from nlosfw_torch.models import PETorch, SirenTorch, TanhTorch, TorchEngine  # noqa: E402
+from nlosfw_torch.models import PETorch, SirenTorch, TanhTorch  # noqa: E402
 
 from nlosfw.common import ConfigError, DataError, FitError  # noqa: E402
 from nlosfw.model import (  # noqa: E402
@@ -36,8 +36,7 @@ def _point_field(n: int = 24, n_f: int = 12):
 
 @pytest.mark.parametrize(("family", "mode"), ENGINE_CASES)
 def test_forward_matches_numpy_reference(family, mode):
-    assert_engine_matches_numpy(
-        lambda arch, params, n_net: TorchEngine(arch, params, n_net, "cpu", 0), family, mode)
+    assert_engine_matches_numpy(MODELS[family], mode)
 
 
 def test_fit_learns_and_reports_progress():

@@ -1,0 +1,1 @@
+"""Example third-party nlosfw network: a Fourier-feature MLP (``model=example_fourier_torch``)."""

@@ -1,0 +1,93 @@
+"""The metrics of each stage's results (the sections of :class:`~nlosfw.app.metrics.RunMetrics`)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from nlosfw.app.metrics import (
+    CaptureMetrics,
+    DenoisingMetrics,
+    FieldMetrics,
+    FitMetrics,
+    ImageScores,
+    ReconstructionMetrics,
+    SingleFrequencyMetrics,
+    TransformMetrics,
+)
+from nlosfw.app.results import CaptureResult, FittedModel, Reconstructions, TransformResult
+from nlosfw.image.reconstruction import Reconstruction
+from nlosfw.image.scores import image_metrics
+from nlosfw.model.protocol import FieldSplit
+from nlosfw.transform.field import PhasorField
+
+
+def capture_metrics(result: CaptureResult) -> CaptureMetrics:
+    """Where the capture came from, its shape, timing and total signal."""
+    capture = result.capture
+    return CaptureMetrics(
+        source=result.source,
+        path=None if result.path is None else str(result.path),
+        simulator=result.simulator, cache_hit=result.cache_hit,
+        shape=tuple(int(n) for n in capture.H.shape), kind=capture.kind,
+        delta_t=float(capture.delta_t), t_start=float(capture.t_start),
+        total=float(np.sum(capture.H, dtype=np.float64)),
+        noise=capture.scene_info.get("noise"))
+
+
+def transform_metrics(name: str, result: TransformResult) -> TransformMetrics:
+    """The transform plugin, whether its field came from the cache, its band and grid."""
+    field = result.field
+    ny, nx = field.grid_shape
+    return TransformMetrics(
+        name=name, cache_hit=result.cache_hit, n_frequencies=field.n_frequencies,
+        frequency_band=(float(field.frequencies.min()), float(field.frequencies.max())),
+        grid=(int(ny), int(nx)))
+
+
+def fit_metrics(fitted: FittedModel, split: FieldSplit) -> FieldMetrics:
+    """A fitted model's size against its training data, and how its fit went."""
+    n_parameters, values = int(fitted.model.n_parameters), split.n_train_values
+    return FieldMetrics(plugin=fitted.plugin, n_parameters=n_parameters, training_values=values,
+                        parameters_per_value=n_parameters / values,
+                        fit=FitMetrics.of(fitted.report))
+
+
+def denoising_metrics(clean: PhasorField, noisy: PhasorField,
+                      predicted: PhasorField) -> DenoisingMetrics:
+    """Errors against the noise-free field: of the noisy full field and of a prediction."""
+    norm = float(np.linalg.norm(clean.values))
+
+    def rel(field: PhasorField) -> float:
+        return float(np.linalg.norm(field.values - clean.values)) / norm
+
+    noisy_error, model_error = rel(noisy), rel(predicted)
+    return DenoisingMetrics(noisy_relative_l2=noisy_error, relative_l2=model_error,
+                            gain_db=float(20 * np.log10(noisy_error / model_error)))
+
+
+def image_scores(recons: Mapping[str, Reconstruction],
+                 seconds: Mapping[str, float] | None = None) -> dict[str, ImageScores]:
+    """Every reconstruction's max-intensity image scored against the ``true`` one."""
+    reference = recons["true"].max_intensity_image()
+    scores = {}
+    for source, recon in recons.items():
+        values = image_metrics(reference, recon.max_intensity_image())
+        scores[source] = ImageScores(rmse=values["rmse"], psnr=values["psnr"],
+                                     ssim=values["ssim"],
+                                     seconds=None if seconds is None else seconds[source])
+    return scores
+
+
+def reconstruction_metrics(imager: str, recons: Reconstructions) -> ReconstructionMetrics:
+    """Scores of every reconstruction, whole band and single frequencies."""
+    return ReconstructionMetrics(
+        imager=imager, reference="true",
+        depths=tuple(float(d) for d in recons.voxels[:, 0, 0, 2]),
+        sources=image_scores(recons.by_source, recons.seconds),
+        single_frequency={
+            str(single.index): SingleFrequencyMetrics(frequency=single.frequency,
+                                                      split=single.split,
+                                                      sources=image_scores(single.by_source))
+            for single in recons.single_frequency})

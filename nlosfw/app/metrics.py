@@ -1,0 +1,262 @@
+"""The one definition of ``metrics.json``: typed sections, JSON in and out, its JSON Schema.
+
+The pipeline builds a :class:`RunMetrics`; the summary, the sweep report, the thesis
+comparison and the figures read one back with :meth:`RunMetrics.read`. The JSON Schema
+written beside every ``metrics.json`` (``metrics.schema.json``) and the outline in the
+README are generated from these classes (:mod:`nlosfw.common.typed_json`).
+
+Every change to the layout (a key added, removed, renamed or retyped) is made here and
+bumps :data:`SCHEMA_VERSION`; ``tests/test_metrics_schema.py`` fails until it is bumped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final, Literal
+
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.common.errors import DataError
+from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
+from nlosfw.model.interface import FitReport
+
+SchemaVersion = Literal[1]
+#: Version of the metrics.json layout; bump it (both lines) with every change to it.
+SCHEMA_VERSION: Final[SchemaVersion] = 1
+
+Status = Literal["running", "completed", "stopped", "failed"]
+"""``running`` only while the run is in progress: metrics.json is written when it ends."""
+
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunInfo:
+    """What ran: the run directory, the nlosfw version, the start and the plugins selected."""
+
+    dir: str
+    nlosfw_version: str
+    started: str = documented("local start time, ISO 8601 (%Y-%m-%dT%H:%M:%S%z)")
+    scene: str | None
+    simulator: str | None
+    transform: str | None
+    model: str | None
+    imager: str | None
+    stopped_after: str | None = optional("the last stage that ran, when stop_after ended the "
+                                         "run early")
+
+
+@dataclass(frozen=True, kw_only=True)
+class CaptureMetrics:
+    """The capture: where it came from and its shape, timing and total signal."""
+
+    source: Literal["simulated", "file"]
+    path: str | None = optional("the file read (source: file)")
+    simulator: str | None = optional("the simulator plugin (source: simulated)")
+    cache_hit: bool | None = optional("whether the simulated capture came from the cache")
+    shape: tuple[int, ...] = documented("shape of the transient H (time first)")
+    kind: CaptureKind
+    delta_t: float = documented("bin width (m of optical path)")
+    t_start: float = documented("path length of the first bin (m)")
+    total: float = documented("sum of H")
+    noise: Any = optional("the noise the capture carries, as its scene_info records it")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TransformMetrics:
+    """The phasor field of the capture."""
+
+    name: str
+    cache_hit: bool
+    n_frequencies: int
+    frequency_band: tuple[float, float] = documented("lowest and highest frequency (cycles/m)")
+    grid: tuple[int, int] = documented("wall grid (ny, nx)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FitMetrics:
+    """How a field model's fit went."""
+
+    steps: int
+    seconds: float
+    final_loss: float | None
+    best_val_loss: float | None
+    stopped_early: bool
+
+    @classmethod
+    def of(cls, report: FitReport) -> FitMetrics:
+        return cls(steps=int(report.steps), seconds=round(report.seconds, 3),
+                   final_loss=report.final_loss, best_val_loss=report.best_val_loss,
+                   stopped_early=bool(report.stopped_early))
+
+
+@dataclass(frozen=True, kw_only=True)
+class ErrorMetrics:
+    """Complex errors of a predicted field on one set of samples (null when the set is
+    empty): relative_l2 = |P^ - P| / |P|, nmse_db = 20 log10 of it, phase_error is
+    magnitude-weighted (radians)."""
+
+    relative_l2: float | None
+    nmse_db: float | None
+    amplitude_rmse: float | None
+    relative_amplitude_rmse: float | None
+    phase_error: float | None
+    n_samples: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class SplitErrors:
+    """A prediction's errors on the sets of the thesis's protocol."""
+
+    heldout_pixels: ErrorMetrics = documented("wall samples never trained on, at training "
+                                              "frequencies")
+    heldout_frequencies: ErrorMetrics = documented("every wall sample at held-out frequencies")
+    all: ErrorMetrics = documented("every sample")
+    heldout_pixels_inside: ErrorMetrics = documented("held-out pixels inside the training "
+                                                     "grid's bounding box")
+
+    @classmethod
+    def of(cls, errors: Mapping[str, Mapping[str, Any]]) -> SplitErrors:
+        """From :func:`nlosfw.model.field_metrics`'s result."""
+        return cls(**{name: ErrorMetrics(**values) for name, values in errors.items()})
+
+    def by_set(self) -> dict[str, ErrorMetrics]:
+        """The errors by set name, in declaration order."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class DenoisingMetrics:
+    """Errors against the noise-free field (scenes with noise)."""
+
+    noisy_relative_l2: float | None = documented("of the noisy full field")
+    relative_l2: float | None = documented("of the prediction")
+    gain_db: float | None = documented("20 log10(noisy_relative_l2 / relative_l2)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class FieldMetrics:
+    """One field model of the run (``model``, ``interp`` or a ``compare`` label)."""
+
+    plugin: str
+    n_parameters: int
+    training_values: int = documented("real values trained on (2 per complex sample)")
+    parameters_per_value: float
+    predict_seconds: float | None = optional()
+    fit: FitMetrics
+    splits: SplitErrors | None = optional()
+    denoising: DenoisingMetrics | None = optional()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ImageScores:
+    """A reconstruction's max-intensity image against the true field's, both normalised
+    to 1 (null where undefined: PSNR of identical images, SSIM of tiny ones)."""
+
+    rmse: float | None
+    psnr: float | None
+    ssim: float | None
+    seconds: float | None = optional("time to reconstruct")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SingleFrequencyMetrics:
+    """Reconstructions from one frequency alone (as in the thesis's figures)."""
+
+    frequency: float = documented("cycles/m")
+    split: Literal["training", "held-out"]
+    sources: dict[str, ImageScores] = documented("scores by source", key="source")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReconstructionMetrics:
+    """Every field imaged on the same voxels, scored against the true field's image."""
+
+    imager: str
+    reference: Literal["true"]
+    depths: tuple[float, ...] = documented("depth planes (m)")
+    sources: dict[str, ImageScores] = documented("true, raw, interp, model and every "
+                                                 "compare label", key="source")
+    single_frequency: dict[str, SingleFrequencyMetrics] = documented(
+        "by frequency index", key="index")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Timings:
+    """Seconds per stage that ran, and in total."""
+
+    capture: float | None = optional()
+    transform: float | None = optional()
+    fit: float | None = optional()
+    predict: float | None = optional()
+    reconstruct: float | None = optional()
+    report: float | None = optional()
+    total: float | None = optional()
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunMetrics:
+    """The metrics of one run (``metrics.json``), nested by stage."""
+
+    schema_version: SchemaVersion = SCHEMA_VERSION
+    status: Status = "running"
+    run: RunInfo
+    capture: CaptureMetrics | None = optional()
+    transform: TransformMetrics | None = optional()
+    field: dict[str, FieldMetrics] | None = optional(
+        "by source: model, interp and every compare label", key="source")
+    reconstruction: ReconstructionMetrics | None = optional()
+    timings: Timings = dataclasses.field(default_factory=Timings)
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON object of metrics.json."""
+        return to_json(self)  # type: ignore[no-any-return]
+
+    def dumps(self) -> str:
+        """The text of metrics.json."""
+        return json.dumps(self.to_json(), indent=2) + "\n"
+
+    @classmethod
+    def from_json(cls, data: Any, where: str = "") -> RunMetrics:
+        """Metrics from the JSON object of a metrics.json of this :data:`SCHEMA_VERSION`."""
+        version = data.get("schema_version") if isinstance(data, dict) else None
+        if isinstance(data, dict) and version != SCHEMA_VERSION:
+            raise DataError(f"{where + ': ' if where else ''}schema_version is {version!r}; this "
+                            f"nlosfw reads version {SCHEMA_VERSION} (written by another nlosfw "
+                            "version: rerun it, or read it with the version that wrote it)")
+        return from_json(cls, data, where)
+
+    @classmethod
+    def read(cls, path: Path) -> RunMetrics:
+        """Read a metrics.json; a one-line :class:`DataError` names the file and the problem."""
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError) as err:
+            raise DataError(f"{path}: unreadable ({err})") from None
+        return cls.from_json(data, where=str(path))
+
+    def field_entry(self, source: str) -> FieldMetrics | None:
+        """The metrics of one field model (``model``, ``interp``, ...), if it was fitted."""
+        return (self.field or {}).get(source)
+
+    def image_scores(self, source: str) -> ImageScores | None:
+        """The reconstruction scores of one source, if it was imaged."""
+        return None if self.reconstruction is None else self.reconstruction.sources.get(source)
+
+
+def metrics_schema() -> dict[str, Any]:
+    """The JSON Schema of metrics.json (written as metrics.schema.json beside it)."""
+    return json_schema(RunMetrics, title=f"nlosfw metrics.json, schema version {SCHEMA_VERSION}",
+                       schema_id=f"urn:nlosfw:metrics:{SCHEMA_VERSION}")
+
+
+def metrics_schema_text() -> str:
+    """The text of metrics.schema.json."""
+    return json.dumps(metrics_schema(), indent=2) + "\n"
+
+
+def metrics_outline() -> str:
+    """The compact outline of metrics.json shown in the README."""
+    return outline(RunMetrics)

@@ -1,0 +1,166 @@
+"""What the stages of a run hand each other: typed, frozen results.
+
+capture -> :class:`CaptureResult` -> transform -> :class:`TransformResult` -> split and
+fit -> :class:`FitResult` (the :class:`~nlosfw.model.FieldSplit` and one
+:class:`FittedModel` per source) -> predict -> :class:`ImagedFields` -> reconstruct ->
+:class:`Reconstructions`; :class:`RunResults` holds them all for the report stage. The
+run's numbers are :class:`nlosfw.app.metrics.RunMetrics`.
+
+A *source* is a field's role in the run: ``true`` (the full field), ``raw`` (its
+training-grid samples at every frequency), ``model``, ``interp`` and the ``compare``
+labels. Mappings by source keep that order and are read-only.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from types import MappingProxyType
+from typing import Literal
+
+import numpy as np
+
+from nlosfw.capture.data import Capture
+from nlosfw.image.reconstruction import Reconstruction
+from nlosfw.model.interface import FieldModel, FitReport
+from nlosfw.model.protocol import FieldSplit
+from nlosfw.transform.field import PhasorField
+
+FrequencySplit = Literal["training", "held-out"]
+
+
+def _frozen_mapping(mapping: Mapping[str, object]) -> Mapping[str, object]:
+    return MappingProxyType(dict(mapping))
+
+
+@dataclass(frozen=True, eq=False)
+class CaptureResult:
+    """The run's capture, where it came from, and its cache key.
+
+    For a scene with noise, ``clean`` is the noise-free capture (cached under
+    ``clean_key``) that gives the denoising metrics.
+    """
+
+    capture: Capture
+    key: str
+    """Cache key: the file's digest, or everything that produced the simulation."""
+    source: Literal["simulated", "file"]
+    path: Path | None = None
+    """The file read (source ``file``)."""
+    simulator: str | None = None
+    """The simulator plugin (source ``simulated``)."""
+    cache_hit: bool | None = None
+    """Whether the simulated capture came from the cache."""
+    clean: Capture | None = None
+    clean_key: str | None = None
+
+    def __post_init__(self) -> None:
+        if (self.clean is None) != (self.clean_key is None):
+            raise ValueError("CaptureResult: clean and clean_key come together")
+        if (self.source == "file") != (self.path is not None):
+            raise ValueError("CaptureResult: a path exactly when the source is a file")
+
+    @property
+    def truth_depth(self) -> np.ndarray | None:
+        """The scene's ground-truth depth (X, Y) from ``scene_info``, when it has one."""
+        truth = (self.capture.scene_info.get("ground_truth") or {}).get("depth")
+        return None if truth is None else np.asarray(truth, dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class TransformResult:
+    """The capture's phasor field (and the noise-free capture's, for noisy scenes)."""
+
+    field: PhasorField
+    cache_hit: bool
+    clean: PhasorField | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class FittedModel:
+    """One fitted field model: its role in the run, its plugin, the model and its report."""
+
+    source: str
+    plugin: str
+    model: FieldModel
+    report: FitReport
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """The split of the field and every field model fitted to its training samples."""
+
+    split: FieldSplit
+    models: tuple[FittedModel, ...]
+
+    def __post_init__(self) -> None:
+        sources = [m.source for m in self.models]
+        if len(set(sources)) != len(sources):
+            raise ValueError(f"FitResult: sources must be unique, got {sources}")
+
+
+@dataclass(frozen=True, eq=False)
+class ImagedFields:
+    """The fields that are imaged: ``true``, ``raw`` and each fitted model's prediction."""
+
+    true: PhasorField
+    raw: PhasorField
+    predicted: Mapping[str, PhasorField]
+    """Predictions of the full field by source, in the order the models were fitted."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "predicted", _frozen_mapping(self.predicted))
+        if {"true", "raw"} & set(self.predicted):
+            raise ValueError("ImagedFields: 'true' and 'raw' are not prediction sources")
+
+    def items(self) -> Iterator[tuple[str, PhasorField]]:
+        """(source, field) for every field: true, raw, then the predictions."""
+        yield "true", self.true
+        yield "raw", self.raw
+        yield from self.predicted.items()
+
+    def by_source(self) -> Mapping[str, PhasorField]:
+        return _frozen_mapping(dict(self.items()))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True, eq=False)
+class SingleFrequencyImages:
+    """Reconstructions of every field from one frequency alone (as in the thesis's figures)."""
+
+    index: int
+    """Index into the full field's frequencies."""
+    frequency: float
+    split: FrequencySplit
+    by_source: Mapping[str, Reconstruction]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "by_source", _frozen_mapping(self.by_source))
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstructions:
+    """Every imaged field's reconstruction on the same voxels, by source (``true`` first)."""
+
+    voxels: np.ndarray
+    by_source: Mapping[str, Reconstruction]
+    seconds: Mapping[str, float]
+    """Time each reconstruction took, by source."""
+    single_frequency: tuple[SingleFrequencyImages, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "by_source", _frozen_mapping(self.by_source))
+        object.__setattr__(self, "seconds", _frozen_mapping(self.seconds))
+        if next(iter(self.by_source), None) != "true":
+            raise ValueError("Reconstructions: the first source must be 'true' (the reference)")
+
+
+@dataclass(frozen=True, eq=False)
+class RunResults:
+    """Everything a complete run produced, for the report stage (figures, tables)."""
+
+    capture: CaptureResult
+    transform: TransformResult
+    fit: FitResult
+    fields: ImagedFields
+    reconstructions: Reconstructions

@@ -1,0 +1,191 @@
+"""Networks registered for the shared neural trainer, and the field models made from them.
+
+A plugin module registers a network in its ``register_networks(register)`` hook::
+
+    register("example_fourier", engine="torch",
+             factory="my_package.network:build",      # factory(config, shape) -> nn.Module
+             config="my_package.hooks:FourierConfig",  # derives from NeuralFieldConfig
+             description="Fourier-feature MLP")
+
+and the registry then holds the field-model plugin ``example_fourier_torch``: a
+:class:`~nlosfw.model.NeuralFieldModel` bound to that network and to the engine,
+selectable as ``model=example_fourier_torch`` and checked by the conformance kit.
+Nothing is imported at registration: the factory, and with it torch or JAX, is
+imported when the model is first used.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any
+
+from nlosfw.common.errors import PluginError
+from nlosfw.model.neural_config import NeuralFieldConfig, Preset
+from nlosfw.model.thesis_networks import THESIS_NETWORKS, THESIS_TEST_CONFIG, presets_of
+from nlosfw.model.trainer import NeuralFieldModel
+from nlosfw.plugins.capabilities import Capability
+from nlosfw.plugins.registry import (
+    LazyFactory,
+    Registrar,
+    import_object,
+    registration_options,
+)
+
+
+class NetworkEngine(str, Enum):
+    """The engines a network can run on (the backend plugin that provides each)."""
+
+    torch = "torch"
+    """Any ``torch.nn.Module``; ``factory(config, shape)``; plugin ``nlosfw-torch``."""
+    jax = "jax"
+    """An equinox module trained with optax; ``factory(config, shape, key)``; ``nlosfw-jax``."""
+
+
+#: Engine class and the (module, pip requirement) pairs it needs, per engine.
+ENGINES: dict[NetworkEngine, tuple[str, Mapping[str, str]]] = {
+    NetworkEngine.torch: ("nlosfw_torch.engine:TorchEngine",
+                          {"nlosfw_torch": "nlosfw-torch", "torch": "torch==2.13.0"}),
+    NetworkEngine.jax: ("nlosfw_jax.engine:JaxEngine",
+                        {"nlosfw_jax": "nlosfw-jax", "jax": "jax", "optax": "optax",
+                         "equinox": "equinox"}),
+}
+
+
+_ENGINE_TITLES = {"torch": "PyTorch", "jax": "JAX"}
+
+#: What every network trained by the shared trainer can do, unless it declares otherwise.
+NETWORK_CAPABILITIES = (Capability.MULTI_FREQUENCY, Capability.SAVE_LOAD, Capability.NEURAL,
+                        Capability.GPU)
+
+
+@dataclass(frozen=True)
+class NetworkSpec(LazyFactory):
+    """One registered network: builds its field-model class on first use."""
+
+    name: str
+    engine: NetworkEngine
+    factory: str | Callable[..., Any]
+    """``factory(config, shape)`` (JAX: ``(config, shape, key)``), or ``"module:function"``."""
+    config: str | type
+    """Its config dataclass (deriving from NeuralFieldConfig), or ``"module:Class"``."""
+    description: str = ""
+    presets: Mapping[str, Preset] = field(default_factory=dict)
+    _bound: dict[str, type[NeuralFieldModel]] = field(default_factory=dict, compare=False,
+                                                      repr=False)
+
+    @property
+    def model_name(self) -> str:
+        """The field model's name: ``<name>_<engine>``."""
+        return f"{self.name}_{self.engine.value}"
+
+    def load(self) -> type[NeuralFieldModel]:
+        """The :class:`NeuralFieldModel` subclass running this network (imported once)."""
+        if "model" not in self._bound:
+            self._bound["model"] = network_model(self)
+        return self._bound["model"]
+
+
+def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
+    """A :class:`NeuralFieldModel` subclass for ``spec`` (imports the factory and engine)."""
+    what = f"model plugin '{spec.model_name}'"
+    try:
+        engine = import_object(ENGINES[spec.engine][0])
+        factory = import_object(spec.factory) if isinstance(spec.factory, str) else spec.factory
+        config = import_object(spec.config) if isinstance(spec.config, str) else spec.config
+    except (ImportError, AttributeError) as err:
+        raise PluginError(f"{what} cannot be imported: {err}") from None
+    if not (isinstance(config, type) and issubclass(config, NeuralFieldConfig)):
+        raise PluginError(f"{what}: its config {config!r} must be a dataclass deriving from "
+                          "nlosfw.model.NeuralFieldConfig")
+    title = "".join(part.capitalize() for part in spec.model_name.split("_"))
+    return type(title, (NeuralFieldModel,), {
+        "__doc__": spec.description or f"The network {spec.name} on the {spec.engine.value} "
+                                       "engine.",
+        "__module__": __name__,
+        "config_class": config, "family": spec.name, "backend": spec.engine.value,
+        "engine_class": engine, "network_factory": staticmethod(factory),
+        "network_presets": dict(spec.presets),
+    })
+
+
+@dataclass(frozen=True)
+class NetworkOptions:
+    """The keyword options of ``register(name, **options)`` in a ``register_networks`` hook."""
+
+    engine: str
+    """``torch`` or ``jax``: the field model is named ``<name>_<engine>``."""
+    factory: str | Callable[..., Any]
+    """Builds the network: ``"module:function"`` (imported on first use) or a callable."""
+    config: str | type
+    """Its options, a dataclass deriving from NeuralFieldConfig (or ``"module:Class"`` in a
+    module that imports neither torch nor JAX: the CLI reads it to list the options)."""
+    description: str = ""
+    requires: Mapping[str, str] | None = None
+    """Further importable modules the network needs -> their pip requirements."""
+    test_config: Mapping[str, Any] | None = None
+    """Small, fast options for the conformance kit."""
+    expected_failures: Mapping[str, str] | None = None
+    """Conformance check name -> why it is expected to fail."""
+    presets: Mapping[str, Preset] | None = None
+    """Published configurations, whose parameter counts the kit checks."""
+    capabilities: Iterable[str | Capability] | None = None
+    """What the field model can do (field-model vocabulary of
+    :data:`nlosfw.plugins.capabilities.VOCABULARY`); default :data:`NETWORK_CAPABILITIES`."""
+
+
+@dataclass
+class NetworkRegistrar:
+    """The ``register`` callable handed to ``register_networks`` hooks of one plugin module;
+    it registers field models through ``models`` (the module's field-model registrar)."""
+
+    models: Registrar
+
+    def __call__(self, name: str, **options: Any) -> None:
+        """Register network ``name`` as the field model ``<name>_<engine>`` (see
+        :class:`NetworkOptions`)."""
+        who = f"{self.models.distribution}: network {name!r}"
+        opts = registration_options(NetworkOptions, options, who)
+        try:
+            engine = NetworkEngine(opts.engine)
+        except ValueError:
+            valid = ", ".join(e.value for e in NetworkEngine)
+            raise PluginError(f"{who} names engine {opts.engine!r}; valid: {valid}") from None
+        network = NetworkSpec(name, engine, opts.factory, opts.config, opts.description,
+                              dict(opts.presets or {}))
+        self.models(network.model_name, network, config=opts.config,
+                    requires={**ENGINES[engine][1], **dict(opts.requires or {})},
+                    description=opts.description, test_config=opts.test_config,
+                    expected_failures=opts.expected_failures,
+                    capabilities=(NETWORK_CAPABILITIES if opts.capabilities is None
+                                  else opts.capabilities))
+
+
+#: Checks a thesis network is known to fail with the kit's short test fits.
+_THESIS_KNOWN_FAILURES = {
+    "tanh": {"check_fits_smooth_field[single_frequency]":
+             "one small tanh MLP per frequency reaches a relative L2 error of about 0.155 on "
+             "the kit's smooth field in 300 steps, above its 0.15 tolerance (thesis fig. 4.2: "
+             "tanh networks fit phasor fields poorly)"},
+}
+
+
+def register_thesis_networks(register: Callable[..., None], engine: str, factory: str) -> None:
+    """Register tanh, pe and siren for ``engine``, all built by ``factory`` (which reads the
+    network from its config's class, see :func:`nlosfw.model.thesis_architecture`)."""
+    for name, network in THESIS_NETWORKS.items():
+        register(name, engine=engine, factory=factory, config=network.config,
+                 description=f"{network.description}, {_ENGINE_TITLES[engine]}",
+                 test_config={**THESIS_TEST_CONFIG, "lr": network.test_lr},
+                 presets=presets_of(name),
+                 capabilities=(*NETWORK_CAPABILITIES, Capability.SINGLE_FREQUENCY),
+                 expected_failures=_THESIS_KNOWN_FAILURES.get(name))
+
+
+def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFieldModel]:
+    """The field-model class of thesis network ``name`` on ``engine`` (as registered)."""
+    network = THESIS_NETWORKS[name]
+    return NetworkSpec(name, NetworkEngine(engine), factory, network.config,
+                       f"{network.description}, {_ENGINE_TITLES[engine]}",
+                       presets_of(name)).load()

@@ -1,0 +1,97 @@
+"""The kit's entry points: which checks exist, the plan for a plugin, and pytest cases."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from nlosfw.common.errors import PluginError
+from nlosfw.plugins.kinds import PluginKind
+from nlosfw.plugins.registry import PluginSpec, Registry
+from nlosfw.testing.selection import CheckPlan, PlannedCheck, plan_check
+
+Check = Callable[..., None]
+
+
+def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
+    """Every check of plugins of ``kind`` (common checks, then kind-specific ones), whatever
+    they declare; :func:`check_plan` says which apply to one plugin."""
+    from nlosfw.testing import checks_imager, checks_model, checks_simulator, checks_transform
+    from nlosfw.testing.checks_common import COMMON_CHECKS
+
+    specific = {
+        PluginKind.SIMULATOR: checks_simulator.SIMULATOR_CHECKS,
+        PluginKind.PHASOR_TRANSFORM: checks_transform.TRANSFORM_CHECKS,
+        PluginKind.FIELD_MODEL: checks_model.MODEL_CHECKS,
+        PluginKind.IMAGER: checks_imager.IMAGER_CHECKS,
+    }[PluginKind(kind)]
+    return COMMON_CHECKS + tuple(specific)
+
+
+def check_plan(spec: PluginSpec) -> CheckPlan:
+    """The checks the kit runs on ``spec`` (per variant) and those it skips, with reasons.
+
+    Chosen from the capabilities ``spec`` declares, never from its name or type.
+    ``print(check_plan(spec).format())`` shows it. An ``expected_failures`` entry that
+    names no planned check is a one-line :class:`PluginError`.
+    """
+    planned = tuple(p for check in checks_for(spec.kind) for p in plan_check(spec, check))
+    known = {p.name for p in planned} | {p.check.__name__ for p in planned}
+    unknown = sorted(set(spec.expected_failures) - known)
+    if unknown:
+        raise PluginError(f"{spec.label}: expected_failures names no check of the kit: "
+                          f"{', '.join(unknown)}; valid: {', '.join(sorted(known))}")
+    return CheckPlan(spec, planned)
+
+
+def select_specs(registry: Registry | None = None, kinds: Iterable[str] | None = None,
+                 names: Iterable[str] | None = None) -> list[PluginSpec]:
+    """Registered plugins, optionally only some kinds or names (``name`` or ``kind:name``)."""
+    if registry is None:
+        from nlosfw.plugins.manager import load_plugins
+
+        registry = load_plugins().registry
+    wanted_kinds = {PluginKind(k) for k in kinds} if kinds is not None else None
+    wanted_names = set(names) if names is not None else None
+    return [spec for spec in registry.specs()
+            if (wanted_kinds is None or spec.kind in wanted_kinds)
+            and (wanted_names is None or {spec.name, spec.qualified_name} & wanted_names)]
+
+
+def check_cases(registry: Registry | None = None, kinds: Iterable[str] | None = None,
+                names: Iterable[str] | None = None) -> list[tuple[PluginSpec, PlannedCheck]]:
+    """Every planned (plugin, check) pair, skipped ones included (see ``skip_reason``)."""
+    return [(spec, planned) for spec in select_specs(registry, kinds, names)
+            for planned in check_plan(spec).checks]
+
+
+def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]:
+    """``pytest.param``s of (spec, check) pairs: skipped ones with their reason, plugins
+    with missing dependencies skipped with the pip command, expected failures strict."""
+    import pytest
+
+    params = []
+    for spec, planned in cases:
+        marks = []
+        missing = spec.install_command()
+        if missing:
+            marks.append(pytest.mark.skip(reason=f"{spec.qualified_name} needs: {missing}"))
+        if planned.skip_reason:
+            marks.append(pytest.mark.skip(reason=planned.skip_reason))
+        reason = (spec.expected_failures.get(planned.name)
+                  or spec.expected_failures.get(planned.check.__name__))
+        if reason:
+            marks.append(pytest.mark.xfail(reason=reason, strict=True))
+        params.append(pytest.param(spec, planned, marks=marks,
+                                   id=f"{spec.qualified_name}-{planned.name}"))
+    return params
+
+
+def parametrize_with_checks(registry: Registry | None = None, kinds: Iterable[str] | None = None,
+                            names: Iterable[str] | None = None) -> Any:
+    """A ``pytest.mark.parametrize("spec, check", ...)`` over every planned (plugin, check)
+    pair; checks that do not apply are reported as skipped with the reason."""
+    import pytest
+
+    return pytest.mark.parametrize("spec, check",
+                                   pytest_params(check_cases(registry, kinds, names)))

@@ -1,0 +1,42 @@
+"""Checks every test gets: each metrics.json a run wrote in the test's tmp_path matches the
+JSON Schema written beside it and reads back as the same :class:`RunMetrics`.
+
+A test that plants a malformed metrics.json on purpose is marked ``malformed_metrics``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+
+def check_metrics_file(path: Path) -> None:
+    """``path`` (a metrics.json) validates against ``metrics.schema.json`` beside it, and
+    :class:`RunMetrics` reads it back unchanged."""
+    import jsonschema
+
+    from nlosfw.app.metrics import RunMetrics
+
+    schema_path = path.with_name("metrics.schema.json")
+    assert schema_path.is_file(), f"{path}: no metrics.schema.json beside it"
+    schema = json.loads(schema_path.read_text())
+    data = json.loads(path.read_text())
+    jsonschema.Draft202012Validator.check_schema(schema)
+    errors = [f"{'/'.join(map(str, e.absolute_path))}: {e.message}"
+              for e in jsonschema.Draft202012Validator(schema).iter_errors(data)]
+    assert not errors, f"{path} does not match its schema: {errors}"
+    assert RunMetrics.from_json(data, where=str(path)).to_json() == data
+
+
+@pytest.fixture(autouse=True)
+def _metrics_files_match_their_schema(request: pytest.FixtureRequest):
+    if "tmp_path" not in request.fixturenames or request.node.get_closest_marker(
+            "malformed_metrics"):
+        yield
+        return
+    root: Path = request.getfixturevalue("tmp_path")
+    yield
+    for path in sorted(root.rglob("metrics.json")):
+        check_metrics_file(path)
