@@ -129,3 +129,17 @@ def test_every_public_name_exists():
         module = importlib.import_module(package)
         missing = [n for n in getattr(module, "__all__", ()) if not hasattr(module, n)]
         assert not missing, f"{package}.__all__ names what it does not define: {missing}"
+
+
+def test_no_private_hydra_or_omegaconf_api():
+    """Hydra and OmegaConf are used through their public API only (no ``hydra._internal``)."""
+    sources = sorted([*CORE.rglob("*.py"), *_third_party_sources()])
+    private = []
+    for path in sources:
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+            private += [f"{path.relative_to(ROOT)}: {n}" for n in names
+                        if n.split(".")[0] in ("hydra", "omegaconf")
+                        and any(part.startswith("_") for part in n.split(".")[1:])]
+    assert not private, f"private Hydra/OmegaConf modules imported: {private}"

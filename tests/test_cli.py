@@ -74,6 +74,27 @@ def set_nan(f):
         (["scene=tiny", "scene.time.start=50"], "error: scene.time: the window [50, 54.1) m"),
         (["capture.path=missing.hdf5"], "error: capture.path: file not found: missing.hdf5"),
         (["stop_after=everything"], "error: stop_after: must be one of"),
+        # checked by Hydra as it composes, against the structured configs
+        (["model=interp", "model.steps=abc"], "error: model.steps: unknown option; valid "
+                                              "options: demodulate, device, extrapolation"),
+        (["model.steps=abc"], "error: model.steps: must be an integer, got 'abc' (str)"),
+        (["model=interp", "model.extrapolation=linear"],
+         "error: model.extrapolation: must be one of 'nearest', 'cubic', got 'linear'"),
+        (["figures.dpi=abc"], "error: figures.dpi: must be an integer, got 'abc' (str)"),
+        (["scene.geometry.0.albedo=abc"],
+         "error: scene.geometry[0].albedo: must be a number, got 'abc' (str)"),
+        (["scene.geometry=[{type:point,position:[0,0,1],albedo:x}]"],
+         "error: scene.geometry: albedo: must be a number, got 'x' (str)"),
+        (["-m", "model=interp", "split.spectral=tail,bogus"],
+         "error: split.spectral: must be one of 'interleaved', 'tail', 'none', got 'bogus'"),
+        (["compare.pe.steps=3"], "error: compare.pe: not in the config (to add it, start the "
+                                 "override with +)"),
+        (["+compare.pe={name:pe_torch,steps:abc}"],
+         "error: compare.pe.steps: must be an integer, got 'abc' (str)"),
+        (["model.lr=nan"], "error: model.lr: must be a number, got NaN"),
+        (["--cfg", "bogus"], "error: command line: argument --cfg/-c: invalid choice: 'bogus'"),
+        (["-m", "--cfg", "job"], "error: command line: --multirun and --cfg cannot be given "
+                                 "together"),
     ],
 )
 def test_user_errors_one_line_exit_2_nothing_written(workdir, capsys, args, message):
@@ -122,6 +143,44 @@ def test_plus_group_selects_like_plain_group(workdir, capsys):
     status, out, err = run_cli(["+simulator=analytic", "+model=interp", "--cfg", "job"], capsys)
     assert status == 0, err
     assert "name: analytic" in out and "name: interp" in out
+
+
+def test_readme_plus_group_command_as_written(workdir, capsys):
+    pytest.importorskip("embreex")
+    pytest.importorskip("torch")
+    status, out, err = run_cli(["+simulator=embree", "+model=siren_torch", "--cfg", "job"],
+                               capsys)
+    assert status == 0, err
+    assert "name: embree" in out and "name: siren_torch" in out
+    assert "sampler: sobol" in out and "omega0_first: 15.0" in out   # the configs' defaults
+    assert not (workdir / "outputs").exists()
+
+
+@pytest.mark.parametrize(("config_name", "overrides", "runs"), [
+    ("reproduce", [], 7),
+    ("thesis_table4_1", [], 3),
+    ("config", ["experiment=noise_study"], 5),
+    ("config", ["hydra/launcher=parallel", "model=interp,nearest"], 2),
+    ("config", ["hydra/launcher=slurm_local", "model=interp,nearest"], 2),
+])
+def test_documented_sweeps_pass_the_preflight(workdir, monkeypatch, config_name, overrides,
+                                              runs):
+    """Every combination of the documented sweeps composes and validates before any run."""
+    pytest.importorskip("embreex")
+    pytest.importorskip("torch")
+    from nlosfw.app import hydra_app
+    from nlosfw.plugins import load_plugins
+
+    host = load_plugins()
+    hydra_app.register_configs(host)
+    hydra_app.ensure_resolvers()
+    checked = []
+    validate = hydra_app.validate_config
+    monkeypatch.setattr(hydra_app, "validate_config",
+                        lambda cfg, h: (checked.append(cfg), validate(cfg, h)))
+    hydra_app.preflight(overrides, host, config_name, multirun=True)
+    assert len(checked) == runs
+    assert not (workdir / "outputs").exists() and not (workdir / "multirun").exists()
 
 
 def test_full_run_writes_documented_artefacts(workdir):

@@ -87,9 +87,9 @@ def compose(overrides, host):
     from hydra.core.global_hydra import GlobalHydra
     from omegaconf import OmegaConf
 
-    from nlosfw.app.hydra_app import config_dir, ensure_resolvers, register_plugin_configs
+    from nlosfw.app.hydra_app import config_dir, ensure_resolvers, register_configs
 
-    register_plugin_configs(host)
+    register_configs(host)
     ensure_resolvers()
     GlobalHydra.instance().clear()
     with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):

@@ -1,5 +1,6 @@
 """The plugin system: discovery, registries, filtering, lazy loading, errors."""
 
+import enum
 import json
 import subprocess
 import sys
@@ -8,7 +9,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from nlosfw import PluginError, PluginKind, Simulator, SimulatorConfig
+from nlosfw import ConfigError, PluginError, PluginKind, Simulator, SimulatorConfig
 from nlosfw.plugins import hookimpl, load_plugins
 from nlosfw.plugins import manager as manager_module
 from nlosfw.plugins.manager import PluginFilter
@@ -166,3 +167,54 @@ def _env():
     import os
 
     return {k: v for k, v in os.environ.items() if k != "NLOSFW_PLUGINS"}
+
+
+def test_a_third_party_config_is_checked_by_hydra_as_it_composes():
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.errors import HydraException
+
+    from nlosfw.app.hydra_app import (
+        composition_error,
+        config_dir,
+        ensure_resolvers,
+        register_configs,
+        validate_config,
+    )
+
+    host = load_plugins(env={}, extra=[("dist-x", "x", plugin_module("zeta"))])
+    register_configs(host)
+    ensure_resolvers()
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+            cfg = compose(config_name="config", overrides=["simulator=zeta", "simulator.gain=2"])
+            assert cfg.simulator.name == "zeta" and cfg.simulator.gain == 2.0
+            validate_config(cfg, host)
+            with pytest.raises(HydraException) as info:
+                compose(config_name="config", overrides=["simulator=zeta", "simulator.gain=x"])
+    finally:
+        GlobalHydra.instance().clear()
+    error = composition_error(info.value)
+    assert isinstance(error, ConfigError)
+    assert str(error) == "simulator.gain: must be a number, got 'x' (str)"
+
+
+class Renamed(str, enum.Enum):
+    FAST = "fast"
+
+
+@dataclass(frozen=True)
+class RenamedConfig(SimulatorConfig):
+    mode: Renamed = Renamed.FAST
+
+
+def test_the_kit_refuses_choices_not_named_as_their_values():
+    from nlosfw.plugins.registry import PluginSpec
+    from nlosfw.testing.checks_common import check_config_round_trip
+
+    spec = PluginSpec(kind=PluginKind.SIMULATOR, name="renamed", factory=DummySimulator,
+                      distribution="dist-x", config=RenamedConfig)
+    with pytest.raises(AssertionError, match=r"option mode: members \['FAST'\] of Renamed "
+                                             r"must be named as their values"):
+        check_config_round_trip(spec)

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from importlib.resources import files
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
+from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.builtin_scenes import builtin_scene, builtin_scene_config, builtin_scene_names
 from nlosfw.simulate.geometry import ground_truth_maps, sample_surface, validate_scene
-from nlosfw.simulate.scene import Scene
+from nlosfw.simulate.scene import Scene, scene_from_config
 
 THESIS = ("thesis_planes", "thesis_concave", "thesis_two_planes", "thesis_occluded")
 QUICK = ("plane", "letter_t", "point")
@@ -24,15 +27,48 @@ def test_every_required_scene_is_built_in():
         assert name in names
 
 
+BLOCKS = ("wall", "capture", "time", "noise")
+
+
 @pytest.mark.parametrize("name", builtin_scene_names())
-def test_scene_files_hold_exactly_the_scene_fields(name):
+def test_scene_files_hold_scene_fields_and_share_the_blocks(name):
     text = (files("nlosfw.conf") / "scene" / f"{name}.yaml").read_text()
-    keys = set(yaml.safe_load(text))
+    data = yaml.safe_load(text)
     fields = {f.name for f in dataclasses.fields(Scene)}
-    assert keys <= fields
+    assert set(data) - {"defaults"} <= fields
+    assert data["defaults"] == [{"base@_here_": "default"}, "_self_"]
     if name != "tiny":
-        assert keys == fields
-        assert builtin_scene_config(name)["name"] == name
+        assert not set(data) & set(BLOCKS), "a scene file copies a shared block"
+    resolved = builtin_scene_config(name)
+    assert {"name", "geometry", *BLOCKS} <= set(resolved) <= fields
+    assert resolved["name"] == name
+
+
+def compose_scene(*overrides):
+    """``cfg.scene`` as the command line composes it (Hydra's compose API)."""
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from omegaconf import OmegaConf
+
+    from nlosfw.app.hydra_app import config_dir, ensure_resolvers, register_configs
+    from nlosfw.plugins import load_plugins
+
+    register_configs(load_plugins())
+    ensure_resolvers()
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3"):
+            cfg = compose(config_name="config", overrides=list(overrides))
+    finally:
+        GlobalHydra.instance().clear()
+    return OmegaConf.to_container(cfg, resolve=True)["scene"]
+
+
+@pytest.mark.parametrize("name", builtin_scene_names())
+def test_hydra_composes_the_scenes_builtin_scene_reads(name):
+    """The command line (Hydra's defaults list) and builtin_scene build the same scene."""
+    composed = scene_from_config(compose_scene(f"scene={name}"))
+    assert composed == builtin_scene(name)
 
 
 @pytest.mark.parametrize("name", THESIS + QUICK)
@@ -138,24 +174,25 @@ def test_bad_time_axis_is_refused_with_one_line():
         assert "\n" not in str(e.value)
 
 
-def test_scene_files_list_every_option_so_each_can_be_overridden():
-    """Hydra only lets `scene.a.b=x` override keys the file has: list them all."""
-    import dataclasses
-    from pathlib import Path
-
-    import yaml
-
-    from nlosfw.simulate.scene import Scene
-
+def test_scene_base_lists_every_option_and_each_can_be_overridden():
+    """The shared base documents every option of its blocks, and the command line can
+    override every option of a scene (the run's schema types ``scene`` as a Scene)."""
     def fields(cls):
         return {f.name: f for f in dataclasses.fields(cls)}
 
-    for path in sorted((Path(__file__).parents[1] / "conf" / "scene").glob("*.yaml")):
-        data = yaml.safe_load(path.read_text())
-        assert set(data) == set(fields(Scene)), path.name
-        for section in ("wall", "capture", "time", "noise"):
-            cls = fields(Scene)[section].default_factory
-            assert set(data[section]) == set(fields(cls)), f"{path.name}: {section}"
+    base = yaml.safe_load((files("nlosfw.conf") / "scene" / "base" / "default.yaml").read_text())
+    assert set(base) == set(BLOCKS)
+    for block in BLOCKS:
+        assert set(base[block]) == set(fields(fields(Scene)[block].default_factory)), block
+    scene = scene_from_config(compose_scene(
+        "scene=plane", "scene.wall.center=[0.1,0.2]", "scene.capture.type=confocal",
+        "scene.capture.device_legs=true", "scene.time.start=0.5", "scene.noise.model=poisson",
+        "scene.noise.jitter_ps=20", "scene.ground_truth_resolution=[8,8]",
+        "scene.geometry.0.rotation=[0,10,0]"))
+    assert scene.wall.center == (0.1, 0.2) and scene.is_confocal and scene.capture.device_legs
+    assert scene.time.start == 0.5 and scene.ground_truth_resolution == (8, 8)
+    assert scene.noise.model == "poisson" and scene.noise.jitter_ps == 20.0
+    assert scene.geometry[0].rotation == (0.0, 10.0, 0.0) and scene.geometry[0].size == (0.6, 0.6)
 
 
 def test_params_are_refused_where_they_would_be_ignored():
@@ -164,3 +201,19 @@ def test_params_are_refused_where_they_would_be_ignored():
 
     with pytest.raises(ConfigError, match="params: only heightfield items take params"):
         GeometryItem(type="rectangle", params={"bumps": []})
+
+
+@pytest.mark.parametrize("name", builtin_scene_names())
+def test_builtin_scenes_are_unchanged(name):
+    """Every built-in scene equals the one recorded in tests/data/builtin_scenes.json.
+
+    The file holds ``config_to_dict(builtin_scene(name))`` of every scene as written by
+    commit 343f1f1, when each YAML file still spelled out all of its blocks; it guards
+    the scenes against changes in how their files share those blocks.
+    """
+    recorded = json.loads((Path(__file__).parent / "data" / "builtin_scenes.json").read_text())
+    assert sorted(recorded) == builtin_scene_names()
+    scene = builtin_scene(name)
+    assert config_to_dict(scene) == recorded[name]
+    assert isinstance(scene.geometry, tuple) and isinstance(scene.wall.resolution, tuple)
+    assert all(isinstance(item.position, tuple) for item in scene.geometry)

@@ -2,32 +2,36 @@
 
 Three things happen before Hydra takes over:
 
-1. every registered plugin contributes a config group entry (``model=siren_torch``)
-   to Hydra's ConfigStore from its own config dataclass, so a third-party
-   plugin is selectable without touching ``conf/``;
+1. the run's schema (:class:`~nlosfw.app.settings.RunConfig`) and one config group entry
+   per registered plugin (``model=siren_torch``), made from the plugin's own config
+   dataclass, go into Hydra's ConfigStore: Hydra checks every name and type as it
+   composes, and a third-party plugin is selectable without touching ``conf/``;
 2. ``+group=name`` is accepted for the selector groups (``+simulator=embree``):
    Hydra refuses ``+`` for a group that already has a default, so the ``+`` is
    dropped there and the override selects the option as ``group=name`` does;
-3. the configuration is composed once and validated (every group choice, every
-   plugin option, the scene, the run settings; one composition per swept value),
-   so a mistake ends with one line and exit status 2 before any output exists.
+3. the configuration is composed with Hydra's compose API and validated (every group
+   choice, every plugin option, the scene, the run settings; one composition per swept
+   value), so a mistake ends with one line and exit status 2 before any output exists.
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import itertools
 import logging
 import math
+import re
 import sys
 import uuid
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
-from nlosfw.app.settings import SELECTOR_GROUPS, run_settings
-from nlosfw.common.config import config_defaults
+from nlosfw.app.settings import SELECTOR_GROUPS, RunConfig, run_settings
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
+from nlosfw.common.schema import is_schema_node, problem, schema_class
 from nlosfw.plugins import PluginHost
 from nlosfw.plugins.kinds import PluginKind
 
@@ -35,6 +39,9 @@ log = logging.getLogger(__name__)
 
 _PLUGIN_GROUPS = tuple(k.value for k in PluginKind)
 _MAX_PREFLIGHT_COMPOSITIONS = 64
+
+#: Name of the run's schema in Hydra's ConfigStore (the first entry of config.yaml's defaults).
+RUN_SCHEMA = "nlosfw_run_schema"
 
 
 def config_dir() -> Path:
@@ -52,24 +59,26 @@ def config_dir() -> Path:
                       "nlosfw with: pip install .")
 
 
-def register_plugin_configs(host: PluginHost) -> None:
-    """Store one config node per plugin in Hydra's ConfigStore (group = plugin kind)."""
+def register_configs(host: PluginHost) -> None:
+    """Store the run's schema and one entry per plugin (group = plugin kind) in Hydra's
+    ConfigStore; a plugin's entry is its config dataclass with the selector ``name``."""
     from hydra.core.config_store import ConfigStore
+    from omegaconf.errors import OmegaConfBaseException
 
     store = ConfigStore.instance()
+    store.store(name=RUN_SCHEMA, node=schema_class(RunConfig), provider="nlosfw")
     for spec in host.registry.specs():
         try:
-            defaults = config_defaults(spec.config_class())
-        except NlosfwError as err:
+            cls = spec.config_class()
+            if "name" in {f.name for f in dataclasses.fields(cls)}:
+                log.warning("plugin %s is not selectable: its config has a field 'name', which "
+                            "is the group's plugin selector", spec.qualified_name)
+                continue
+            store.store(group=spec.kind.value, name=spec.name,
+                        node=schema_class(cls, spec.name), provider=spec.distribution)
+        except (NlosfwError, OmegaConfBaseException, TypeError) as err:
             log.warning("plugin %s has no usable config and is not selectable: %s",
-                        spec.qualified_name, err)
-            continue
-        if "name" in defaults:
-            log.warning("plugin %s is not selectable: its config has a field 'name', which is "
-                        "the group's plugin selector", spec.qualified_name)
-            continue
-        store.store(group=spec.kind.value, name=spec.name,
-                    node={"name": spec.name, **defaults}, provider=spec.distribution)
+                        spec.qualified_name, one_line(err))
 
 
 def normalise_overrides(args: Sequence[str]) -> list[str]:
@@ -83,6 +92,39 @@ def normalise_overrides(args: Sequence[str]) -> list[str]:
         else:
             out.append(arg)
     return out
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise ConfigError("", f"command line: {message}")
+
+
+def parse_command_line(args: Sequence[str]) -> argparse.Namespace:
+    """The flags and overrides of Hydra's command line (``hydra.main`` reads them again).
+
+    nlosfw needs the overrides, the config name and whether it is a multirun, to compose
+    and check the configuration before Hydra runs anything.
+    """
+    parser = _Parser(prog="python -m nlosfw", add_help=False, allow_abbrev=False)
+    parser.add_argument("overrides", nargs="*")
+    for flags in (["--help", "-h"], ["--hydra-help"], ["--version"], ["--resolve"],
+                  ["--run", "-r"], ["--multirun", "-m"], ["--shell-completion", "-sc"]):
+        parser.add_argument(*flags, action="store_true")
+    for flags in (["--package", "-p"], ["--config-path", "-cp"], ["--config-name", "-cn"],
+                  ["--config-dir", "-cd"], ["--experimental-rerun"]):
+        parser.add_argument(*flags)
+    parser.add_argument("--cfg", "-c", choices=["job", "hydra", "all"])
+    parser.add_argument("--info", "-i", nargs="?", const="all",
+                        choices=["all", "config", "defaults", "defaults-tree", "plugins",
+                                 "searchpath"])
+    parsed = parser.parse_args(list(args))
+    modes = [flag for flag, given in (("--run", parsed.run), ("--multirun", parsed.multirun),
+                                      ("--cfg", parsed.cfg), ("--info", parsed.info),
+                                      ("--shell-completion", parsed.shell_completion)) if given]
+    if len(modes) > 1:
+        raise ConfigError("", f"command line: {' and '.join(modes)} cannot be given together; "
+                              "use one of --run, --multirun, --cfg, --info, --shell-completion")
+    return parsed
 
 
 def ensure_resolvers() -> None:
@@ -130,7 +172,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                     return compose(config_name=config_name, overrides=combo,
                                    return_hydra_config=with_hydra)
                 except (HydraException, OmegaConfBaseException) as err:
-                    raise ConfigError("", one_line(err, whole=True)) from None
+                    raise composition_error(err) from None
 
             if multirun:
                 given = {o.get_key_element() for o in parsed}
@@ -155,25 +197,43 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
         GlobalHydra.instance().clear()
 
 
+def composition_error(err: Exception) -> NlosfwError:
+    """Hydra's or OmegaConf's error while composing, as one line naming the option."""
+    from hydra.errors import MissingConfigException
+    from omegaconf.errors import OmegaConfBaseException
+
+    if isinstance(err, MissingConfigException) and "/" in (err.missing_cfg_file or ""):
+        group, _, name = str(err.missing_cfg_file).rpartition("/")
+        if group in SELECTOR_GROUPS:
+            return _unknown_choice(group, name, sorted(err.options or []))
+    cause = err if isinstance(err, OmegaConfBaseException) else err.__cause__
+    if isinstance(cause, OmegaConfBaseException) and cause.full_key:
+        key, what = str(cause.full_key), problem(cause, cause.value)
+        override = re.match(r"(?:Error merging override |Could not override ')([^=']+)", str(err))
+        dotted = re.sub(r"\[(\d+)\]", r".\1", key)             # geometry[0] -> geometry.0
+        if override and not (dotted.startswith(override.group(1))
+                             or override.group(1).startswith(dotted)):
+            # OmegaConf names a key inside a merged value relative to that value
+            return ConfigError(override.group(1), f"{key}: {what}")
+        return ConfigError(key, what)
+    return ConfigError("", one_line(err, whole=True))
+
+
 def validate_config(cfg: Any, host: PluginHost) -> None:
     """Check a composed config: plugin names, installed dependencies, options, scene, settings."""
-    from omegaconf import OmegaConf
-
     from nlosfw.simulate.scene import scene_from_config
 
-    plain = OmegaConf.to_container(cfg, resolve=True)
-    settings = run_settings(plain)
+    settings = run_settings(cfg)
     for group in _PLUGIN_GROUPS:
-        node = dict(plain.get(group) or {})
+        node = cfg.get(group)
         if not node:
             raise ConfigError(group, "no plugin selected")
-        name = node.pop("name", None)
-        spec = host.registry.get(group, str(name))
+        spec = host.registry.get(group, str(node.get("name")))
         command = spec.install_command()
         if command:
             raise PluginError(f"{group} plugin '{spec.name}' needs packages that are not "
                               f"installed; run: {command}")
-        spec.make_config(node)
+        spec.make_config(_plugin_options(node, spec.config_class()))
     for label, options in settings.compare.items():
         node = dict(options)
         spec = host.registry.get("model", str(node.pop("name")))
@@ -189,9 +249,10 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
     if settings.capture.path is None:
         from nlosfw.simulate.geometry import validate_scene
 
-        scene = validate_scene(scene_from_config(plain.get("scene"))).scene
-        node = dict(plain["simulator"])
-        host.registry.create("simulator", str(node.pop("name")), node).check_scene(scene)
+        scene = validate_scene(scene_from_config(cfg.get("scene"))).scene
+        simulator = host.registry.get("simulator", str(cfg.simulator.name))
+        simulator.create(_plugin_options(cfg.simulator, simulator.config_class())
+                         ).check_scene(scene)
         return
     path = Path(settings.capture.path).expanduser()
     if not path.is_file():
@@ -204,16 +265,15 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
 def main(argv: Sequence[str]) -> int:
     """Run the Hydra app with ``argv`` (without the program name); return the exit status."""
     import hydra
-    from hydra._internal.utils import get_args_parser
 
     from nlosfw.plugins import load_plugins
 
     argv = normalise_overrides(argv)
-    args = get_args_parser().parse_args(argv)
+    args = parse_command_line(argv)
     host = load_plugins()
-    register_plugin_configs(host)
+    register_configs(host)
     ensure_resolvers()
-    if not (args.help or args.hydra_help or args.shell_completion):
+    if not (args.help or args.hydra_help or args.shell_completion or args.version):
         preflight(args.overrides, host, args.config_name or "config", bool(args.multirun))
     decorated = hydra.main(config_path=str(config_dir()), config_name="config",
                            version_base="1.3")(_task)
@@ -238,6 +298,14 @@ def _task(cfg: Any) -> float | None:
         raise SystemExit(2) from None
 
 
+def _plugin_options(node: Any, config_class: type) -> Any:
+    """A plugin's options from its composed group node: the node itself when Hydra composed
+    it from the plugin's entry (its ``name`` is part of that schema), else without ``name``."""
+    if is_schema_node(node, config_class):
+        return node
+    return {k: v for k, v in node.items() if k != "name"}
+
+
 def _values(override: Any) -> list[str]:
     if override.is_sweep_override():
         return [str(v) for v in override.sweep_string_iterator()]
@@ -246,16 +314,20 @@ def _values(override: Any) -> list[str]:
 
 
 def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
+    """Refuse an unknown scene, plugin or preset name (``loader``: Hydra's ConfigLoader)."""
     if key not in SELECTOR_GROUPS:
         return
-    options = sorted(loader.get_group_options(key))
+    options = loader.get_group_options(key)
     for value in values:
         if value in ("null", "None") and key == "experiment":
             continue
         if value not in options:
-            noun = f"{key} plugin" if key in _PLUGIN_GROUPS else key
-            hint = ""
-            if key in _PLUGIN_GROUPS:
-                hint = " (is its plugin installed? see: python -m nlosfw plugins)"
-            valid = ", ".join(options) or "(none)"
-            raise ConfigError("", f"unknown {noun} '{value}'; valid: {valid}{hint}")
+            raise _unknown_choice(key, value, sorted(options))
+
+
+def _unknown_choice(group: str, value: str, options: list[str]) -> ConfigError:
+    noun = f"{group} plugin" if group in _PLUGIN_GROUPS else group
+    hint = " (is its plugin installed? see: python -m nlosfw plugins)" if (
+        group in _PLUGIN_GROUPS) else ""
+    valid = ", ".join(options) or "(none)"
+    return ConfigError("", f"unknown {noun} '{value}'; valid: {valid}{hint}")

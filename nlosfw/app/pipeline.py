@@ -71,7 +71,7 @@ def run_pipeline(cfg: Any) -> float | None:
     from omegaconf import OmegaConf
 
     run_dir = Path(HydraConfig.get().runtime.output_dir)
-    plain = cast("dict[str, Any]", OmegaConf.to_container(cfg, resolve=True))
+    plain = cast("dict[str, Any]", OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
     return Pipeline(run_dir, plain, load_plugins()).run()
 
 

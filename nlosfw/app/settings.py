@@ -1,22 +1,39 @@
 """The run options of ``python -m nlosfw`` outside the plugin and scene groups.
 
-These are the top-level keys of ``conf/config.yaml``; :func:`run_settings`
-validates them by name and type like every other config.
+These are the top-level keys of ``conf/config.yaml``. :class:`RunConfig` adds the
+selected scene and plugins to them: it is the schema Hydra composes ``config.yaml``
+against, and :func:`run_settings` validates the settings by name, type and range like
+every other config.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
-from nlosfw.common.config import config_from_mapping, require
+from omegaconf import MISSING
+
+from nlosfw.common.config import Choice, config_from_mapping, require
+from nlosfw.common.schema import is_schema_node
+from nlosfw.model.protocol import SpectralSplit
+from nlosfw.simulate.scene import Scene
 
 #: The config groups that select a scene or a plugin (plus presets).
 SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment")
 
 #: Pipeline stages in order; ``stop_after`` accepts any of them (``simulate`` = ``capture``).
 STAGES = ("capture", "transform", "fit", "predict", "reconstruct", "report")
-StopAfter = Literal["capture", "simulate", "transform", "fit", "predict", "reconstruct"]
+
+
+class StopAfter(Choice):
+    """The last stage a run performs (``simulate`` is ``capture``)."""
+
+    capture = "capture"
+    simulate = "simulate"
+    transform = "transform"
+    fit = "fit"
+    predict = "predict"
+    reconstruct = "reconstruct"
 
 
 @dataclass(frozen=True)
@@ -33,7 +50,7 @@ class SplitSettings:
 
     spatial_step: int = 2
     """Keep every k-th wall sample in x and y for training."""
-    spectral: Literal["interleaved", "tail", "none"] = "interleaved"
+    spectral: SpectralSplit = SpectralSplit.interleaved
     """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
     spectral_fraction: float = 0.1
 
@@ -121,14 +138,30 @@ class RunSettings:
     def last_stage(self) -> str:
         if self.stop_after is None:
             return STAGES[-1]
-        return "capture" if self.stop_after == "simulate" else self.stop_after
+        return "capture" if self.stop_after == "simulate" else str(self.stop_after)
 
     def runs(self, stage: str) -> bool:
         """Whether ``stage`` runs given ``stop_after``."""
         return STAGES.index(stage) <= STAGES.index(self.last_stage)
 
 
+@dataclass(frozen=True)
+class RunConfig(RunSettings):
+    """The schema of a run's whole config: the settings, the scene and one plugin per kind.
+
+    Only Hydra uses it (as the first entry of ``config.yaml``'s defaults list): each plugin
+    group's entry brings its own schema, the plugin's config class.
+    """
+
+    scene: Scene = MISSING
+    simulator: Any = MISSING
+    transform: Any = MISSING
+    model: Any = MISSING
+    imager: Any = MISSING
+
+
 def run_settings(cfg: Any) -> RunSettings:
-    """Validate the non-group part of a composed config (a mapping)."""
-    plain = {k: v for k, v in dict(cfg).items() if k not in SELECTOR_GROUPS}
-    return config_from_mapping(RunSettings, plain, "")
+    """The validated settings of a run's config (the node Hydra composed, or a mapping)."""
+    if not is_schema_node(cfg, RunSettings):
+        cfg = {k: v for k, v in dict(cfg).items() if k not in SELECTOR_GROUPS}
+    return config_from_mapping(RunSettings, cfg, "")

@@ -5,8 +5,8 @@ import only these."""
 
 
 from nlosfw.common.config import (
+    Choice,
     Configurable,
-    config_defaults,
     config_from_mapping,
     config_to_dict,
     require,
@@ -28,7 +28,7 @@ __all__ = [
     "__version__",
     "atomic_path",
     "available_cores",
-    "config_defaults",
+    "Choice",
     "config_from_mapping",
     "config_to_dict",
     "ConfigError",

@@ -19,14 +19,13 @@ sum the frequencies before a single inverse FFT).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 import scipy.fft
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.config import require
+from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
 from nlosfw.image.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
@@ -36,11 +35,18 @@ from nlosfw.transform.field import PhasorField, regular_grid_spacing
 _RTOL = 1e-6
 
 
+class Precision(Choice):
+    """FFT precision: complex64 or complex128."""
+
+    single = "single"
+    double = "double"
+
+
 @dataclass(frozen=True)
 class FFTImagerConfig(PropagationConfig):
     """Options of the ``fft`` imager."""
 
-    precision: Literal["single", "double"] = "single"
+    precision: Precision = Precision.single
     """FFT precision: complex64 (fast, ~1e-6 relative) or complex128."""
     workers: int = -1
     """Threads of scipy.fft (-1: all cores)."""

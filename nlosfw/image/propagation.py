@@ -15,11 +15,11 @@ from __future__ import annotations
 import time
 from abc import abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar
 
 import numpy as np
 
-from nlosfw.common.config import require
+from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.reconstruction import Reconstruction
@@ -27,14 +27,19 @@ from nlosfw.image.rsd_kernel import check_geometry
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.temporal_dft import unit_phasor
 
-Combine = Literal["coherent", "incoherent"]
+
+class Combine(Choice):
+    """How the frequencies' propagated fields make one image (see the module docstring)."""
+
+    coherent = "coherent"
+    incoherent = "incoherent"
 
 
 @dataclass(frozen=True)
 class PropagationConfig(ImagerConfig):
     """Options shared by the ``rsd`` and ``fft`` imagers."""
 
-    combine: Combine = "coherent"
+    combine: Combine = Combine.coherent
     """``coherent``: |sum_f w_f U_f|^2; ``incoherent``: sum_f |w_f U_f|^2."""
     time: float = 0.0
     """Virtual time (m of path) of the coherent image; 0 images the pulse as it focuses."""

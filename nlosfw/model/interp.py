@@ -26,11 +26,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from nlosfw.common.config import Choice
 from nlosfw.common.errors import DataError, FitError
 from nlosfw.model.interface import (
     FieldModel,
@@ -48,11 +49,18 @@ from nlosfw.transform.field import PhasorField
 _FREQ_CHUNK = 8
 
 
+class Extrapolation(Choice):
+    """Outside the training hull: clamp to the hull, or continue the cubic end pieces."""
+
+    nearest = "nearest"
+    cubic = "cubic"
+
+
 @dataclass(frozen=True)
 class InterpConfig(FieldModelConfig):
     """Options of the interpolation baseline (``seed`` and ``device`` are ignored)."""
 
-    extrapolation: Literal["nearest", "cubic"] = "nearest"
+    extrapolation: Extrapolation = Extrapolation.nearest
     """Outside the training hull: clamp to the hull, or continue the cubic end pieces."""
     demodulate: bool = True
     """Interpolate P e^{+2 pi i f tau} (tau the field's common path delay, as the neural

@@ -12,14 +12,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
+from nlosfw.common.config import Choice
 from nlosfw.common.errors import DataError
 from nlosfw.transform.field import PhasorField
 
-SpectralSplit = Literal["interleaved", "tail", "none"]
+
+class SpectralSplit(Choice):
+    """Which frequencies are held out: spread over the band (interpolation), the highest
+    ones (extrapolation), or none."""
+
+    interleaved = "interleaved"
+    tail = "tail"
+    none = "none"
 
 
 @dataclass(frozen=True, eq=False)
@@ -65,7 +73,7 @@ def heldout_frequency_indices(n_frequencies: int, spectral: str, fraction: float
 
 
 def split_field(field: PhasorField, spatial_step: int = 2,
-                spectral: SpectralSplit = "interleaved", spectral_fraction: float = 0.1
+                spectral: str = "interleaved", spectral_fraction: float = 0.1
                 ) -> FieldSplit:
     """Split ``field`` for training as in the thesis.
 
@@ -79,7 +87,7 @@ def split_field(field: PhasorField, spatial_step: int = 2,
         raise DataError(f"split_field: expected a PhasorField, got {type(field).__name__}")
     if int(spatial_step) != spatial_step or spatial_step < 1:
         raise DataError(f"split_field: spatial_step must be an integer >= 1, got {spatial_step}")
-    if spectral not in ("interleaved", "tail", "none"):
+    if spectral not in tuple(SpectralSplit):
         raise DataError(f"split_field: spectral must be interleaved, tail or none, got "
                         f"{spectral!r}")
     if not 0 < spectral_fraction < 1:

@@ -6,7 +6,10 @@ serve Hydra (``scene=thesis_two_planes``) and Python code::
     from nlosfw.simulate.builtin_scenes import builtin_scene
     scene = builtin_scene("thesis_two_planes", wall={"resolution": [32, 32]})
 
-Every YAML file holds exactly the fields of :class:`nlosfw.simulate.Scene`.
+A scene file holds fields of :class:`nlosfw.simulate.Scene` and takes its wall, capture,
+time axis and noise from the base every built-in scene shares, through Hydra's defaults
+list: ``- base@_here_: default`` merges ``conf/scene/base/default.yaml`` into the scene,
+then the file's own fields (``_self_``, last) override what they name.
 """
 
 from __future__ import annotations
@@ -32,14 +35,28 @@ def builtin_scene_names() -> list[str]:
 
 
 def builtin_scene_config(name: str) -> dict[str, Any]:
-    """The plain config mapping of built-in scene ``name``; unknown names list the valid ones."""
+    """The plain config mapping of built-in scene ``name`` (its defaults list resolved as
+    Hydra composes it); unknown names list the valid ones."""
     names = builtin_scene_names()
     if name not in names:
         raise ConfigError("scene", f"unknown scene {name!r}; valid: {', '.join(names)}")
-    text = (files(SCENE_PACKAGE) / "scene" / f"{name}.yaml").read_text(encoding="utf-8")
-    config = yaml.safe_load(text)
-    if not isinstance(config, dict):
-        raise ConfigError("scene", f"conf/scene/{name}.yaml does not hold a mapping")
+    own = _read(f"{name}.yaml")
+    defaults = own.pop("defaults", [])
+    if "_self_" not in defaults:
+        defaults = [*defaults, "_self_"]            # Hydra's rule: own fields come last
+    config: dict[str, Any] = {}
+    for entry in defaults:
+        if entry == "_self_":
+            config = merge_config(config, own)
+        elif isinstance(entry, Mapping) and len(entry) == 1:
+            ((group, option),) = entry.items()
+            group, _, package = str(group).partition("@")
+            block = _read(f"{group}/{option}.yaml")
+            config = merge_config(config, block if package == "_here_" else {group: block})
+        else:
+            raise ConfigError("scene", f"conf/scene/{name}.yaml: defaults entry {entry!r} is not "
+                                       "'_self_', '<group>: <option>' or "
+                                       "'<group>@_here_: <option>'")
     return config
 
 
@@ -61,3 +78,14 @@ def merge_config(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[
         else:
             out[key] = value
     return out
+
+
+def _read(relative: str) -> dict[str, Any]:
+    """A mapping from ``conf/scene/<relative>``."""
+    path = files(SCENE_PACKAGE) / "scene" / relative
+    if not path.is_file():
+        raise ConfigError("scene", f"conf/scene/{relative} does not exist")
+    config = yaml.safe_load(path.read_text(encoding="utf-8"))
+    if not isinstance(config, dict):
+        raise ConfigError("scene", f"conf/scene/{relative} does not hold a mapping")
+    return config

@@ -8,11 +8,11 @@ It is built from the ``scene`` Hydra config group with
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-from nlosfw.common.config import config_from_mapping, require
+from nlosfw.common.config import Choice, config_from_mapping, require
 
 #: Geometry item types understood by :mod:`nlosfw.simulate.geometry`.
 GEOMETRY_TYPES = ("rectangle", "box", "mesh", "patch", "point", "heightfield")
@@ -49,11 +49,18 @@ class WallConfig:
         return np.stack([x, y, np.zeros_like(x)], axis=-1)
 
 
+class CaptureType(Choice):
+    """One laser spot and a grid of sensor points, or laser and sensor at each point."""
+
+    single_spot = "single_spot"
+    confocal = "confocal"
+
+
 @dataclass(frozen=True)
 class CaptureSetup:
     """Where the laser hits the wall and where the devices are."""
 
-    type: Literal["single_spot", "confocal"] = "single_spot"
+    type: CaptureType = CaptureType.single_spot
     laser_spot: tuple[float, float] = (0.0, 0.0)
     """Laser spot (x, y) on the wall for single-spot captures."""
     laser_position: tuple[float, float, float] = (-0.5, 0.0, 0.25)
@@ -126,11 +133,18 @@ class GeometryItem:
                 f"only heightfield items take params; a {self.type} has none")
 
 
+class NoiseModel(Choice):
+    """No photon noise, or Poisson photon counts."""
+
+    none = "none"
+    poisson = "poisson"
+
+
 @dataclass(frozen=True)
 class NoiseConfig:
     """Measurement noise applied after rendering (see :mod:`nlosfw.simulate.noise`)."""
 
-    model: Literal["none", "poisson"] = "none"
+    model: NoiseModel = NoiseModel.none
     photons: float = 1e6
     """Expected number of signal photons in the whole capture (poisson)."""
     dark_counts: float = 0.0

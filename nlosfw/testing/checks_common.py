@@ -10,6 +10,7 @@ What it needs from the plugin is declared with
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 import os
 import subprocess
@@ -22,6 +23,7 @@ import yaml
 
 from nlosfw.common.config import config_from_mapping, config_to_dict
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.schema import schema_class
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures
@@ -82,8 +84,9 @@ def check_interface(spec: PluginSpec) -> None:
 
 
 def check_config_round_trip(spec: PluginSpec) -> None:
-    """Defaults and test settings survive dict -> YAML -> OmegaConf (as Hydra composes it)
-    -> config unchanged; the config has no field ``name`` (the selector key of its group)."""
+    """Defaults and test settings survive dict -> YAML -> the plugin's Hydra group entry (as
+    Hydra composes it) -> config unchanged; the config has no field ``name`` (the selector
+    key of its group), and its choices are enums whose members are named as their values."""
     from omegaconf import OmegaConf
 
     cls = spec.config_class()
@@ -92,15 +95,23 @@ def check_config_round_trip(spec: PluginSpec) -> None:
     assert "name" not in {f.name for f in dataclasses.fields(cls)}, (
         f"{spec.qualified_name}: a config field called 'name' would collide with the plugin "
         "name that selects it in its Hydra group")
+    for f in dataclasses.fields(cls):
+        choice = typing.get_type_hints(cls)[f.name]
+        if isinstance(choice, type) and issubclass(choice, enum.Enum):
+            renamed = [m.name for m in choice if m.name != m.value]
+            assert not renamed, (
+                f"{spec.qualified_name}: option {f.name}: members {renamed} of {choice.__name__} "
+                "must be named as their values (OmegaConf matches enum options by name)")
     for options in ({}, dict(spec.test_config)):
         config = spec.make_config(options)
         plain = config_to_dict(config)
         again = yaml.safe_load(yaml.safe_dump(plain))
         assert again == json.loads(json.dumps(plain)), "config_to_dict must be YAML/JSON-safe"
-        node = OmegaConf.create({"name": spec.name, **again})        # the ConfigStore node
-        composed = OmegaConf.to_container(node, resolve=True)
-        composed.pop("name")
-        rebuilt = config_from_mapping(cls, composed, spec.kind.value)
+        entry = OmegaConf.structured(schema_class(cls, spec.name))     # the ConfigStore entry
+        composed = OmegaConf.to_container(OmegaConf.merge(entry, again), resolve=True)
+        assert isinstance(composed, dict) and composed.pop("name") == spec.name
+        rebuilt = config_from_mapping(cls, {str(k): v for k, v in composed.items()},
+                                      spec.kind.value)
         assert rebuilt == config, (
             f"{spec.qualified_name}: config changed in a round trip: {config} != {rebuilt}")
         instance = spec.create(options)

@@ -20,7 +20,7 @@ from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.transform.field import PhasorField
-from nlosfw.transform.temporal_dft import Method, temporal_dft, unit_phasor
+from nlosfw.transform.temporal_dft import temporal_dft, unit_phasor
 
 
 def check_capture(capture: Capture, transform: str) -> None:
@@ -67,7 +67,7 @@ class FieldOptions:
     spectral weights and extra metadata."""
 
     transform: str
-    method: Method
+    method: str
     remove_device_legs: bool
     weights: np.ndarray | None = None
     metadata: Mapping[str, Any] = dataclasses.field(default_factory=dict)

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
@@ -30,6 +29,7 @@ from nlosfw.transform.frequencies import (
     wall_spacing,
 )
 from nlosfw.transform.interface import PhasorTransform, PhasorTransformConfig
+from nlosfw.transform.temporal_dft import DftMethod
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class FFTTransformConfig(PhasorTransformConfig):
     capture's (set it to the spacing of a denser grid the field will be upsampled to)."""
     remove_device_legs: bool = True
     """Take the device-to-wall legs out of the phase when the capture's time axis has them."""
-    method: Literal["auto", "direct", "fft"] = "auto"
+    method: DftMethod = DftMethod.auto
     """``fft`` needs exact DFT bins; ``direct`` is a streamed matrix product; ``auto`` picks."""
 
     def __post_init__(self) -> None:

@@ -17,16 +17,23 @@ matches a brute-force float64 DFT to about 1e-12 relative.
 
 from __future__ import annotations
 
-from typing import Literal
-
 import numpy as np
 import scipy.fft
 from scipy.linalg import blas
 
+from nlosfw.common.config import Choice
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.transform.frequencies import dft_length
 
-Method = Literal["auto", "direct", "fft"]
+
+class DftMethod(Choice):
+    """How the temporal DFT is evaluated: ``fft`` needs exact DFT bins, ``direct`` is a
+    streamed matrix product, ``auto`` picks the cheaper one."""
+
+    auto = "auto"
+    direct = "direct"
+    fft = "fft"
+
 
 #: Working memory of a chunk, at least this many bytes even for tiny outputs.
 _MIN_CHUNK_BYTES = 8 << 20
@@ -49,7 +56,7 @@ def unit_phasor(cycles: np.ndarray, dtype: type = np.complex128) -> np.ndarray:
 
 
 def choose_method(frequencies: np.ndarray, delta_t: float, n_bins: int,
-                  method: Method = "auto") -> tuple[str, int | None]:
+                  method: str = "auto") -> tuple[str, int | None]:
     """('direct' | 'fft', DFT length or None) for these frequencies.
 
     ``auto`` takes the FFT when the frequencies are exact DFT bins and the FFT
@@ -71,7 +78,7 @@ def choose_method(frequencies: np.ndarray, delta_t: float, n_bins: int,
 
 
 def temporal_dft(H: np.ndarray, t_start: float, delta_t: float, frequencies: np.ndarray,
-                 method: Method = "auto", max_chunk_bytes: int | None = None
+                 method: str = "auto", max_chunk_bytes: int | None = None
                  ) -> tuple[np.ndarray, str]:
     """P[f, s] for a histogram ``H`` of shape (T, S); returns (complex128 (F, S), method used).
 

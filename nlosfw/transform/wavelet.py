@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import scipy.fft
@@ -39,6 +39,7 @@ from nlosfw.transform.common import FieldOptions, check_capture, transform_captu
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.frequencies import validate_frequencies, wall_spacing
 from nlosfw.transform.interface import PhasorTransform, PhasorTransformConfig
+from nlosfw.transform.temporal_dft import DftMethod
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +64,7 @@ class WaveletTransformConfig(PhasorTransformConfig):
     capture's."""
     remove_device_legs: bool = True
     """Take the device-to-wall legs out of the phase when the capture's time axis has them."""
-    method: Literal["auto", "direct", "fft"] = "auto"
+    method: DftMethod = DftMethod.auto
     """How the transform is evaluated (see the ``fft`` transform)."""
 
     def __post_init__(self) -> None:

@@ -7,22 +7,28 @@ import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from nlosfw import DataError, FieldModel, FieldModelConfig, FitError, FitReport, PhasorField
-from nlosfw.common import config_from_mapping, config_to_dict
+from nlosfw.common import Choice, config_from_mapping, config_to_dict
 
 _FORMAT = "nlosfw-example-nearest"
+
+
+class FrequencyInterpolation(Choice):
+    """Between training frequencies: linear interpolation or the nearest one."""
+
+    linear = "linear"
+    nearest = "nearest"
 
 
 @dataclass(frozen=True)
 class NearestConfig(FieldModelConfig):
     """Options of the nearest-neighbour model."""
 
-    frequency_interpolation: Literal["linear", "nearest"] = "linear"
+    frequency_interpolation: FrequencyInterpolation = FrequencyInterpolation.linear
 
 
 class NearestFieldModel(FieldModel):

@@ -132,7 +132,7 @@ class EmbreeSimulator(Simulator):
         info["render"] = {
             "simulator": "embree",
             "samples": int(cfg.samples) if mesh.n_faces else 0,
-            "sampler": cfg.sampler,
+            "sampler": str(cfg.sampler),
             "threads": int(job.threads),
             "rays": int(tally.rays),
             "unobstructed_fraction": (tally.unobstructed / tally.rays

@@ -3,10 +3,26 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
-from nlosfw.common import require
+from nlosfw.common import Choice, require
 from nlosfw.simulate import SimulatorConfig
+
+
+class Variant(Choice):
+    """The Mitsuba variants mitransient can use (LLVM JIT backends)."""
+
+    llvm_ad_mono = "llvm_ad_mono"
+    llvm_ad_rgb = "llvm_ad_rgb"
+
+
+class Sampler(Choice):
+    """Mitsuba sampler plugins."""
+
+    independent = "independent"
+    stratified = "stratified"
+    multijitter = "multijitter"
+    orthogonal = "orthogonal"
+    ldsampler = "ldsampler"
 
 
 @dataclass(frozen=True)
@@ -15,7 +31,7 @@ class MitsubaConfig(SimulatorConfig):
 
     spp: int = 4096
     """Samples (paths) per sensor."""
-    variant: Literal["llvm_ad_mono", "llvm_ad_rgb"] = "llvm_ad_mono"
+    variant: Variant = Variant.llvm_ad_mono
     """Mitsuba variant (the LLVM backends; mitransient needs a JIT variant). Grey albedos
     make every rgb channel equal; the capture holds their mean."""
     bounces: int = 3
@@ -29,8 +45,7 @@ class MitsubaConfig(SimulatorConfig):
     point of a hidden surface facing it. Fast, but where a sight line from the wall crosses
     two such surfaces (shadowing) the first one is counted twice (the simulator logs a
     warning when that happens); false: BSDF sampling, unbiased and very slow."""
-    sampler: Literal["independent", "stratified", "multijitter", "orthogonal",
-                     "ldsampler"] = "independent"
+    sampler: Sampler = Sampler.independent
     """Mitsuba sampler plugin."""
     threads: int = 0
     """Dr.Jit worker threads (0: Dr.Jit's default, every core)."""

@@ -96,7 +96,7 @@ class MitsubaSimulator(Simulator):
         cfg = self.config
         start = time.perf_counter()
         scene = geometry.scene
-        mi = load_mitsuba(cfg.variant)
+        mi = load_mitsuba(str(cfg.variant))
         import drjit as dr
 
         if cfg.threads:
@@ -131,7 +131,7 @@ class MitsubaSimulator(Simulator):
         info = dict(capture.scene_info)
         info["render"] = {
             "simulator": "mitsuba",
-            "variant": cfg.variant,
+            "variant": str(cfg.variant),
             "spp": int(cfg.spp),
             "passes": passes,
             "paths": int(cfg.spp) * nx * ny,
@@ -182,7 +182,7 @@ def _build_scene(mi: Any, scene: Scene, meshes: list[TriangleMesh], cfg: Mitsuba
             "sensor": {
                 "type": "nlos_capture_meter",
                 "sensor_origin": [float(v) for v in cap.sensor_position],
-                "sampler": {"type": cfg.sampler, "sample_count": 1},
+                "sampler": {"type": str(cfg.sampler), "sample_count": 1},
                 "film": {
                     "type": "transient_hdr_film",
                     "width": nx,
