@@ -14,12 +14,12 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
-from nlosfw.common.config import require
+from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import ConfigError
 from nlosfw.model.interface import FieldModelConfig
 
 
-class FieldMode(str, Enum):
+class FieldMode(Choice):
     """How the field is split across networks."""
 
     multi = "multi"
@@ -28,7 +28,7 @@ class FieldMode(str, Enum):
     """One network F_f(x, y) per training frequency, all trained at once as a batch."""
 
 
-class LRSchedule(str, Enum):
+class LRSchedule(Choice):
     """Decay of the learning rate after warm-up."""
 
     constant = "constant"

@@ -22,12 +22,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from enum import Enum
 from typing import Any, TypeVar
 
 import numpy as np
 
-from nlosfw.common.config import config_from_mapping, require
+from nlosfw.common.config import Choice, config_from_mapping, require
 from nlosfw.common.errors import DataError, FitError
 from nlosfw.model.neural_config import (
     FieldMode,
@@ -40,14 +39,14 @@ from nlosfw.model.neural_config import (
 C = TypeVar("C", bound=NeuralFieldConfig)
 
 
-class FrequencyInput(str, Enum):
+class FrequencyInput(Choice):
     """How the PE network sees the frequency in multi mode."""
 
     raw = "raw"
     encoded = "encoded"
 
 
-class PEActivation(str, Enum):
+class PEActivation(Choice):
     """Activation of the PE network's hidden layers."""
 
     relu = "relu"
