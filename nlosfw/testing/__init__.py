@@ -28,7 +28,14 @@ from nlosfw.plugins.registry import PluginSpec, Registry
 from nlosfw.testing import fixtures
 from nlosfw.testing.checks_common import COMMON_CHECKS
 from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy
-from nlosfw.testing.fixtures import tiny_scene_config
+from nlosfw.testing.fixtures import (
+    Agreement,
+    analytic_agreement,
+    relative_l2,
+    rendered,
+    scene_with,
+    tiny_scene_config,
+)
 
 Check = Callable[[PluginSpec], None]
 
@@ -85,6 +92,8 @@ def parametrize_with_checks(registry: Registry | None = None, kinds: Iterable[st
 
 
 __all__ = [
+    "Agreement",
+    "analytic_agreement",
     "ENGINE_CASES",
     "Check",
     "assert_engine_matches_numpy",
@@ -92,5 +101,8 @@ __all__ = [
     "checks_for",
     "fixtures",
     "parametrize_with_checks",
+    "relative_l2",
+    "rendered",
+    "scene_with",
     "tiny_scene_config",
 ]
