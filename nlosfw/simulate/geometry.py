@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.capture.geometry import device_legs
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.scene import GeometryItem, Scene
 
@@ -333,11 +332,7 @@ def path_length_range(scene: Scene, mesh: TriangleMesh,
     sensors = scene.wall.grid_xyz().reshape(-1, 3)
     lasers = sensors if scene.is_confocal else np.broadcast_to(scene.laser_spot_xyz(),
                                                                sensors.shape)
-    legs = np.zeros(sensors.shape[0])
-    if scene.capture.device_legs:
-        laser = sensors if scene.is_confocal else scene.laser_spot_xyz()
-        legs = device_legs(laser, sensors, scene.capture.laser_position,
-                           scene.capture.sensor_position)
+    legs = scene.device_path(sensors)
     boxes = []
     for i in np.unique(mesh.item):
         corners = mesh.vertices[mesh.faces[mesh.item == i]].reshape(-1, 3)
@@ -428,9 +423,7 @@ def _sampled_path_range(scene: Scene, mesh: TriangleMesh, points: PointScatterer
                           grid[[0, 0, -1, -1], [0, -1, 0, -1]]])
     laser = sub if scene.is_confocal else scene.laser_spot_xyz()
     path, _ = three_bounce(laser, cloud_pts, None, np.ones(cloud_pts.shape[0]), sub)
-    if scene.capture.device_legs:
-        path = path + device_legs(laser, sub, scene.capture.laser_position,
-                                  scene.capture.sensor_position)[None, :]
+    path = path + scene.device_path(sub)[None, :]
     return float(path.min()), float(path.max())
 
 

@@ -15,7 +15,6 @@ from typing import Any
 import numpy as np
 
 from nlosfw.capture.enums import GridFormat, HFormat
-from nlosfw.capture.geometry import device_legs
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.simulate.physics import bin_index, three_bounce
@@ -46,10 +45,7 @@ def _patch_quadrature(scene: Scene, n: int = 64) -> tuple[np.ndarray, np.ndarray
     sensors = scene.wall.grid_xyz().reshape(-1, 3)
     laser = sensors if scene.is_confocal else scene.laser_spot_xyz()
     path, weight = three_bounce(laser, pts, normals, area, sensors)
-    if scene.capture.device_legs:
-        path = path + device_legs(laser, sensors, scene.capture.laser_position,
-                                  scene.capture.sensor_position)[None, :]
-    return path, weight
+    return path + scene.device_path(sensors)[None, :], weight
 
 
 def _profiles(H: np.ndarray) -> np.ndarray:
