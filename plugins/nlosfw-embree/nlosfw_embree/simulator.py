@@ -24,6 +24,7 @@ import time
 import warnings
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -50,6 +51,35 @@ log = logging.getLogger(__name__)
 _CHUNK = 1 << 20
 
 
+@dataclass(frozen=True)
+class _Pass:
+    """One render's fixed inputs and the histogram and ray counts it accumulates into."""
+
+    scene: Scene
+    xs: np.ndarray
+    """(X,) sensor x coordinates (grid rows)."""
+    ys: np.ndarray
+    """(Y,) sensor y coordinates."""
+    tracer: OcclusionTracer
+    legs: tuple[np.ndarray, float] | None
+    """(per-sensor leg (X, Y), fixed leg) when the time axis counts the device legs."""
+    hist: np.ndarray
+    """(X, Y * (bins + 2)) histogram with an underflow and an overflow bin per sensor."""
+    threads: int
+    stats: dict[str, int] = field(default_factory=lambda: {"rays": 0, "unobstructed": 0})
+
+    def run_rows(self, work: Callable[[list[int]], tuple[int, int]]) -> None:
+        """Run ``work`` on the threads' interleaved grid rows and count its rays."""
+        n = len(self.xs)
+        rows = [list(range(k, n, self.threads)) for k in range(min(self.threads, n))]
+        results = _run(work, rows)
+        self.count(sum(r[0] for r in results), sum(r[1] for r in results))
+
+    def count(self, rays: int, unobstructed: int) -> None:
+        self.stats["rays"] += int(rays)
+        self.stats["unobstructed"] += int(unobstructed)
+
+
 class EmbreeSimulator(Simulator):
     """Monte Carlo (or randomised QMC) three-bounce transport with Embree occlusion rays."""
 
@@ -59,15 +89,12 @@ class EmbreeSimulator(Simulator):
         cfg = self.config
         start = time.perf_counter()
         scene, mesh, points = geometry.scene, geometry.mesh, geometry.points
-        tracer = OcclusionTracer(mesh)
         grid = scene.wall.grid_xyz()
         nx, ny = grid.shape[:2]
-        xs, ys = grid[:, 0, 0], grid[0, :, 1]
         bins = scene.time.bins
         threads = cfg.threads or available_cores()
-        hist = np.zeros((nx, ny * (bins + 2)))
-        stats = {"rays": 0, "unobstructed": 0}
-        legs = _device_legs(scene, grid)
+        job = _Pass(scene, grid[:, 0, 0], grid[0, :, 1], OcclusionTracer(mesh),
+                    _device_legs(scene, grid), np.zeros((nx, ny * (bins + 2))), threads)
 
         if mesh.n_faces:
             rng = np.random.default_rng([cfg.seed, 0x656D62])  # "emb" stream
@@ -78,16 +105,13 @@ class EmbreeSimulator(Simulator):
                 uv = _draw(sobol, n) if sobol is not None else rng.random((n, 2))
                 p, normals, albedo = surface_points(mesh, uv)
                 area_albedo = albedo * area / cfg.samples
-                if scene.is_confocal:
-                    self._confocal(scene, xs, ys, p, normals, area_albedo, tracer, legs, hist,
-                                   threads, stats)
-                else:
-                    self._single_spot(scene, xs, ys, p, normals, area_albedo, tracer, legs,
-                                      hist, threads, stats)
+                render = self._confocal if scene.is_confocal else self._single_spot
+                render(job, p, normals, area_albedo)
         if points.positions.shape[0]:
-            self._points(scene, grid, points, tracer, legs, hist, stats)
+            self._points(job, grid, points)
 
-        H = hist.reshape(nx, ny, bins + 2)[:, :, 1:-1]
+        stats = job.stats
+        H = job.hist.reshape(nx, ny, bins + 2)[:, :, 1:-1]
         capture = scene_capture(scene, np.moveaxis(H, -1, 0))
         seconds = time.perf_counter() - start
         info = dict(capture.scene_info)
@@ -105,70 +129,61 @@ class EmbreeSimulator(Simulator):
         return capture.replace(scene_info=info)
 
     # ------------------------------------------------------------------ surfaces
-    def _single_spot(self, scene: Scene, xs: np.ndarray, ys: np.ndarray, p: np.ndarray,
-                     normals: np.ndarray, area_albedo: np.ndarray, tracer: OcclusionTracer,
-                     legs: tuple[np.ndarray, float] | None, hist: np.ndarray, threads: int,
-                     stats: dict) -> None:
+    def _single_spot(self, job: _Pass, p: np.ndarray, normals: np.ndarray,
+                     area_albedo: np.ndarray) -> None:
         cfg = self.config
-        t = scene.time
-        lit, traced = laser_side(p, normals, area_albedo, scene.laser_spot_xyz(), tracer,
+        t = job.scene.time
+        legs = job.legs
+        lit, traced = laser_side(p, normals, area_albedo, job.scene.laser_spot_xyz(), job.tracer,
                                  delta_t=t.bin_width, t_start=t.start,
                                  fixed_path=legs[1] if legs else 0.0,
                                  ray_offset=cfg.ray_offset)
-        stats["rays"] += traced
-        stats["unobstructed"] += lit.n
+        job.count(traced, lit.n)
         if lit.n == 0:
             return
         batch = min(cfg.batch, lit.n)
         real = lit.n
         lit = lit.padded(batch)
-        rows = [list(range(k, len(xs), threads)) for k in range(min(threads, len(xs)))]
 
         def work(my_rows: list[int]) -> tuple[int, int]:
-            kernel = SingleSpotRows(xs, ys, batch, t.bins, t.bin_width, tracer,
+            kernel = SingleSpotRows(job.xs, job.ys, batch, t.bins, t.bin_width, job.tracer,
                                     legs[0] if legs else None)
             for b0 in range(0, lit.n, batch):
                 kernel.load(lit.batch(b0, batch))
                 for ix in my_rows:
-                    kernel.row(ix, hist[ix], n_real=min(batch, real - b0))
+                    kernel.row(ix, job.hist[ix], n_real=min(batch, real - b0))
             return kernel.traced, kernel.free
 
-        results = _run(work, rows)
-        stats["rays"] += sum(r[0] for r in results)
-        stats["unobstructed"] += sum(r[1] for r in results)
+        job.run_rows(work)
 
-    def _confocal(self, scene: Scene, xs: np.ndarray, ys: np.ndarray, p: np.ndarray,
-                  normals: np.ndarray, area_albedo: np.ndarray, tracer: OcclusionTracer,
-                  legs: tuple[np.ndarray, float] | None, hist: np.ndarray, threads: int,
-                  stats: dict) -> None:
+    def _confocal(self, job: _Pass, p: np.ndarray, normals: np.ndarray,
+                  area_albedo: np.ndarray) -> None:
         cfg = self.config
-        t = scene.time
+        t = job.scene.time
+        legs = job.legs
         keep = (area_albedo > 0) & (p[:, 2] > 0)
         p, normals, area_albedo = p[keep], normals[keep], area_albedo[keep]
-        batch = max(16, min(cfg.batch, (1 << 18) // max(1, len(ys))))
-        rows = [list(range(k, len(xs), threads)) for k in range(min(threads, len(xs)))]
+        batch = max(16, min(cfg.batch, (1 << 18) // max(1, len(job.ys))))
 
         def work(my_rows: list[int]) -> tuple[int, int]:
             traced = free = 0
             for b0 in range(0, p.shape[0], batch):
                 sl = slice(b0, b0 + batch)
                 for ix in my_rows:
-                    a, b = confocal_rows(xs, ys, ix, p[sl], normals[sl], area_albedo[sl],
-                                         tracer, bins=t.bins, delta_t=t.bin_width,
-                                         t_start=t.start, legs=legs[0] if legs else None,
-                                         ray_offset=cfg.ray_offset, out=hist[ix])
+                    a, b = confocal_rows(job.xs, job.ys, ix, p[sl], normals[sl],
+                                         area_albedo[sl], job.tracer, bins=t.bins,
+                                         delta_t=t.bin_width, t_start=t.start,
+                                         legs=legs[0] if legs else None,
+                                         ray_offset=cfg.ray_offset, out=job.hist[ix])
                     traced, free = traced + a, free + b
             return traced, free
 
-        results = _run(work, rows)
-        stats["rays"] += sum(r[0] for r in results)
-        stats["unobstructed"] += sum(r[1] for r in results)
+        job.run_rows(work)
 
     # ------------------------------------------------------------------ points
-    def _points(self, scene: Scene, grid: np.ndarray, points: PointScatterers,
-                tracer: OcclusionTracer, legs: tuple[np.ndarray, float] | None,
-                hist: np.ndarray, stats: dict) -> None:
+    def _points(self, job: _Pass, grid: np.ndarray, points: PointScatterers) -> None:
         """Closed-form paths of point scatterers, times the visibility of both legs."""
+        scene, legs, hist = job.scene, job.legs, job.hist
         t = scene.time
         sensors = grid.reshape(-1, 3)
         n_s = sensors.shape[0]
@@ -176,27 +191,24 @@ class EmbreeSimulator(Simulator):
         path, weight = three_bounce(laser, points.positions, None, points.albedo, sensors)
         if legs is not None:
             path = path + legs[0].reshape(-1)[None, :] + legs[1]
-        visible = self._visible(sensors, points.positions, tracer, stats)        # (P, S)
+        visible = self._visible(sensors, points.positions, job)                  # (P, S)
         if not scene.is_confocal:
-            visible &= self._visible(scene.laser_spot_xyz()[None], points.positions,
-                                     tracer, stats)
+            visible &= self._visible(scene.laser_spot_xyz()[None], points.positions, job)
         slot = np.clip(np.floor((path - t.start) / t.bin_width) + 1, 0, t.bins + 1)
         flat = (slot.astype(np.int64) + (np.arange(n_s) * (t.bins + 2))[None, :])
         weight = np.where(visible, weight, 0.0)
         hist.reshape(-1)[:] += np.bincount(flat.reshape(-1), weights=weight.reshape(-1),
                                            minlength=hist.size)
 
-    def _visible(self, wall_points: np.ndarray, targets: np.ndarray, tracer: OcclusionTracer,
-                 stats: dict) -> np.ndarray:
+    def _visible(self, wall_points: np.ndarray, targets: np.ndarray, job: _Pass) -> np.ndarray:
         """(P, W) whether each target is visible from each wall point (rays stop short)."""
         d = targets[:, None, :] - wall_points[None, :, :]
         r = np.linalg.norm(d, axis=-1)
-        occ = tracer.occluded(
+        occ = job.tracer.occluded(
             np.broadcast_to(wall_points[None], d.shape).reshape(-1, 3).astype(np.float32),
             d.reshape(-1, 3).astype(np.float32),
             (1.0 - self.config.ray_offset / r).reshape(-1).astype(np.float32))
-        stats["rays"] += occ.shape[0]
-        stats["unobstructed"] += int(np.count_nonzero(occ))
+        job.count(occ.shape[0], np.count_nonzero(occ))
         return (occ != 0).reshape(r.shape)
 
 
