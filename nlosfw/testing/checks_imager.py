@@ -21,6 +21,7 @@ import numpy as np
 from nlosfw.common.errors import DataError
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures, reference
+from nlosfw.testing.checks_common import one_line_error
 from nlosfw.transform.field import PhasorField
 
 SHAPE = (12, 16)
@@ -98,13 +99,9 @@ def check_imager_rejects_voxels_behind_wall(spec: PluginSpec) -> None:
     wall = fixtures.rect_wall_grid(SHAPE, SPACING)
     for depth in (0.0, -0.3):
         voxels = fixtures.aligned_voxels(wall, [0.5, depth])
-        try:
-            spec.create(dict(spec.test_config)).reconstruct(field, voxels)
-        except DataError as err:
-            assert "\n" not in str(err), f"error must be one line: {err!r}"
-        else:
-            raise AssertionError(f"{spec.qualified_name}: accepted voxels at z = {depth} "
-                                 "(the wall is z = 0, the hidden scene z > 0)")
+        one_line_error(spec, f"voxels at z = {depth} (the wall is z = 0, the hidden scene z > 0)",
+                       lambda v=voxels: spec.create(dict(spec.test_config)).reconstruct(field, v),
+                       DataError)
 
 
 def check_imager_output_shapes(spec: PluginSpec) -> None:

@@ -20,6 +20,7 @@ from nlosfw.plugins.registry import PluginSpec
 from nlosfw.simulate.physics import bin_index, three_bounce
 from nlosfw.simulate.scene import Scene, scene_from_config
 from nlosfw.testing import fixtures
+from nlosfw.testing.checks_common import one_line_error
 
 #: Energy and energy-ratio tolerance (relative).
 ENERGY_RTOL = 0.05
@@ -182,15 +183,11 @@ def check_bad_scene_rejected(spec: PluginSpec) -> None:
     }
     simulator = spec.create(dict(spec.test_config))
     for option, config in cases.items():
-        try:
-            simulator.simulate(scene_from_config(config))
-        except ConfigError as err:
-            text = str(err)
-            assert option in text and "\n" not in text, (
-                f"{spec.qualified_name}: expected one line naming {option}, got {text!r}")
-        else:
-            raise AssertionError(f"{spec.qualified_name}: a scene with a bad {option} was "
-                                 "simulated without error")
+        text = one_line_error(spec, f"a scene with a bad {option}",
+                              lambda c=config: simulator.simulate(scene_from_config(c)),
+                              ConfigError)
+        assert option in text, (
+            f"{spec.qualified_name}: expected one line naming {option}, got {text!r}")
 
 
 SIMULATOR_CHECKS = (
