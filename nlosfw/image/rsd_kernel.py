@@ -54,7 +54,7 @@ def check_geometry(geometry: CaptureGeometry) -> None:
 
 def wall_field(field: PhasorField, dtype: type = np.complex128) -> np.ndarray:
     """P'_f: the field's values (F, Y, X) with the device legs undone (a new array)."""
-    values = np.array(field.values, dtype=dtype)
+    values: np.ndarray = np.array(field.values, dtype=dtype)
     geometry = field.geometry
     if geometry.t_accounts_first_and_last_bounces:
         legs = geometry.device_path(field.wall_xyz)                  # (Y, X)
@@ -89,7 +89,7 @@ def phasor_series(frequencies: np.ndarray, path: np.ndarray, dtype: type = np.co
     f = np.asarray(frequencies, dtype=float)
     if out is None:
         out = np.empty(f.shape + np.shape(path), dtype=dtype)
-    for i, phasor in phasor_steps(f, path, out.dtype, scale):
+    for i, phasor in phasor_steps(f, path, out.dtype.type, scale):
         out[i] = phasor
     return out
 

@@ -179,8 +179,8 @@ class Scene:
         if not self.capture.device_legs:
             return np.zeros(points.shape[:-1])
         laser = points if self.is_confocal else self.laser_spot_xyz()
-        return device_legs(laser, points, self.capture.laser_position,
-                           self.capture.sensor_position)
+        return device_legs(laser, points, np.asarray(self.capture.laser_position, dtype=float),
+                           np.asarray(self.capture.sensor_position, dtype=float))
 
 
 def scene_from_config(mapping: Any, where: str = "scene") -> Scene:

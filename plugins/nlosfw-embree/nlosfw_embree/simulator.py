@@ -208,7 +208,7 @@ class EmbreeSimulator(Simulator):
             np.broadcast_to(wall_points[None], d.shape).reshape(-1, 3).astype(np.float32),
             d.reshape(-1, 3).astype(np.float32),
             (1.0 - self.config.ray_offset / r).reshape(-1).astype(np.float32))
-        job.count(occ.shape[0], np.count_nonzero(occ))
+        job.count(occ.shape[0], int(np.count_nonzero(occ)))
         return (occ != 0).reshape(r.shape)
 
 
