@@ -33,20 +33,11 @@ from typing import Any
 import numpy as np
 
 from nlosfw.simulate.builtin_scenes import builtin_scene
-from nlosfw.simulate.geometry import validate_scene
-
-
-def rendered(simulator, scene):
-    """The noise-free transient of a scene (validated first, as simulate() does)."""
-    return simulator.render(validate_scene(scene))
+from nlosfw.testing import relative_l2 as rel_l2
+from nlosfw.testing import rendered
 
 TARGET_ERROR = 0.03
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_simulators.json"
-
-
-def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
-    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
-    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
 def peak_rss_gb() -> float:

@@ -8,23 +8,13 @@ from scipy import integrate
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.analytic import AnalyticSimulator
-from nlosfw.simulate.geometry import validate_scene
 from nlosfw.simulate.physics import three_bounce
-from nlosfw.simulate.scene import scene_from_config
-from nlosfw.testing.fixtures import tiny_scene_config
-
-
-def rendered(simulator, scene):
-    """The noise-free transient of a scene (validated first, as simulate() does)."""
-    return simulator.render(validate_scene(scene))
+from nlosfw.testing.fixtures import analytic_agreement, relative_l2, rendered
+from nlosfw.testing.fixtures import scene_with as kit_scene_with
 
 
 def scene_with(geometry, **capture):
-    config = tiny_scene_config(bins=400)
-    config["wall"]["resolution"] = [6, 5]
-    config["capture"].update(capture)
-    config["geometry"] = geometry
-    return scene_from_config(config)
+    return kit_scene_with(geometry, resolution=(6, 5), **capture)
 
 
 @pytest.mark.parametrize("capture", [{}, {"type": "confocal"}, {"device_legs": True}])
@@ -149,3 +139,29 @@ def test_three_bounce_matches_the_formula_term_by_term(confocal):
                         / (np.pi**3 * r_l**2 * r_s**2)) if same_side else 0.0
             assert weight[i, j] == pytest.approx(expected, rel=1e-12, abs=1e-300)
             assert path[i, j] == pytest.approx(r_l + r_s, rel=1e-12)
+
+
+# --------------------------------------------------------------------------- the kit's helpers
+class _Scaled(AnalyticSimulator):
+    """The analytic transient times 2, but sensor (0, 0) times 3: known disagreements."""
+
+    def render(self, geometry):
+        capture = super().render(geometry)
+        H = 2.0 * np.asarray(capture.H, dtype=float)
+        H[:, 0, 0] *= 1.5
+        return capture.replace(H=H.astype(capture.H.dtype))
+
+
+def test_analytic_agreement_reports_known_disagreements():
+    scene = scene_with([{"type": "rectangle", "position": [0.1, -0.05, 0.6], "size": [0.3, 0.2],
+                         "rotation": [10.0, -20.0, 5.0]}])
+    same = analytic_agreement(AnalyticSimulator({"patch_size": 0.003}), scene)
+    assert same == (1.0, 0.0, 0.0)
+    H = rendered(AnalyticSimulator({"patch_size": 0.003}), scene).H.astype(float)
+    share = H[:, 0, 0].sum() / H.sum()                   # sensor 0's part of the energy
+    l2_share = np.linalg.norm(H[:, 0, 0]) ** 2 / np.linalg.norm(H) ** 2
+    got = analytic_agreement(_Scaled({"patch_size": 0.003}), scene)
+    assert got.total == pytest.approx(2.0 + share, rel=1e-6)
+    assert got.worst_sensor == pytest.approx(2.0, rel=1e-6)
+    assert got.relative_l2 == pytest.approx(np.sqrt(1.0 + 3.0 * l2_share), rel=1e-6)
+    assert relative_l2([2.0, 1.2], [2.0, 0.0]) == pytest.approx(0.6, rel=1e-15)

@@ -195,3 +195,135 @@ def test_blocked_fraction_finds_shadowing_only_where_it_exists():
                            ("thesis_occluded", True), ("thesis_concave", True)):
         s = builtin_scene(name)
         assert (blocked_fraction(s, scene_mesh(s)) > 0) == shadowed, name
+
+
+# --------------------------------------------------------------------------- ray casting
+def _ray_code(request, monkeypatch):
+    """'embree' (skipped without embreex) or 'numpy': the trimesh ray code the test uses."""
+    trimesh = pytest.importorskip("trimesh")
+    if request.param == "embree" and not trimesh.ray.has_embree:
+        pytest.skip("embreex is not installed")
+    if request.param == "numpy":
+        monkeypatch.setattr(trimesh.ray, "has_embree", False)
+    return request.param
+
+
+@pytest.fixture(params=["embree", "numpy"])
+def ray_code(request, monkeypatch):
+    return _ray_code(request, monkeypatch)
+
+
+def _grid(xs, ys, z=0.0):
+    x, y = np.meshgrid(np.asarray(xs, float), np.asarray(ys, float), indexing="ij")
+    return np.stack([x, y, np.full_like(x, z)], axis=-1)
+
+
+def test_ground_truth_counts_rays_through_edges_and_corners():
+    """Rays exactly on shared and outer edges and on corners of a square hit it."""
+    square = item_mesh(GeometryItem(type="rectangle", position=(0.0, 0.0, 0.5), size=(0.4, 0.4),
+                                    albedo=0.3))
+    assert square.n_faces == 2                    # two triangles sharing a diagonal
+    corners = square.vertices[:, :2]
+    on_edges = np.array([[-0.2, -0.2], [0.2, 0.2], [0.0, 0.0], [0.1, 0.1], [-0.2, 0.05],
+                         [0.2, -0.1], [0.0, 0.2], [0.1, -0.2]])
+    outside = np.array([[0.2 + 1e-7, 0.0], [0.0, -0.2 - 1e-7], [0.3, 0.3]])
+    points = np.concatenate([corners, on_edges, outside])
+    grid = np.concatenate([points, np.zeros((points.shape[0], 1))], axis=1)[:, None, :]
+    depth, albedo = ground_truth_maps(square, grid)
+    inside = np.arange(points.shape[0]) < corners.shape[0] + on_edges.shape[0]
+    np.testing.assert_allclose(depth[inside, 0], 0.5, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(albedo[inside, 0], 0.3)
+    assert np.all(depth[~inside] == -1) and np.all(albedo[~inside] == 0)
+
+
+def test_ground_truth_through_the_vertices_of_a_curved_surface():
+    """Rays through the shared vertices of a heightfield see the vertex heights exactly."""
+    mesh = item_mesh(GeometryItem(type="heightfield", position=(0, 0, 0.6), size=(0.4, 0.4),
+                                  params={"resolution": 9, "bumps": [
+                                      {"x": -0.05, "y": 0.05, "radius": 0.1, "height": 0.1,
+                                       "shape": "cone"},
+                                      {"x": 0.1, "y": -0.1, "radius": 0.08, "height": -0.05}]}))
+    assert np.ptp(mesh.vertices[:, 2]) > 0.05
+    vertices = mesh.vertices[np.unique(mesh.faces)]
+    grid = np.concatenate([vertices[:, :2], np.zeros((vertices.shape[0], 1))], 1)[:, None]
+    depth, _ = ground_truth_maps(mesh, grid)
+    np.testing.assert_allclose(depth[:, 0], vertices[:, 2], rtol=0, atol=1e-12)
+
+
+def test_first_hits_find_the_nearest_of_stacked_surfaces(ray_code):
+    """Listed back to front, overlapping, one tilted: each ray reports the nearest."""
+    from nlosfw.simulate.geometry import first_hits
+
+    items = [{"type": "rectangle", "position": [0.0, 0.0, 0.9], "size": [0.8, 0.8],
+              "albedo": 0.1},
+             {"type": "rectangle", "position": [0.1, 0.0, 0.7], "size": [0.4, 0.4],
+              "albedo": 0.2},
+             {"type": "rectangle", "position": [-0.1, 0.0, 0.5], "size": [0.2, 0.2],
+              "rotation": [0.0, 30.0, 0.0], "albedo": 0.3}]
+    mesh = scene_mesh(scene(items))
+    origins = _grid(np.linspace(-0.387, 0.387, 27), np.linspace(-0.383, 0.383, 23)).reshape(-1, 3)
+    face, distance = first_hits(mesh, origins, np.tile([0.0, 0.0, 1.0], (origins.shape[0], 1)))
+    x, y = origins[:, 0], origins[:, 1]
+    # the tilted square (rotated about y) spans x = -0.1 +- 0.1 cos 30, z = 0.5 -+ x' sin 30
+    tilted = (np.abs(x + 0.1) < 0.1 * np.cos(np.pi / 6) - 1e-9) & (np.abs(y) < 0.1 - 1e-9)
+    middle = ~tilted & (np.abs(x - 0.1) < 0.2) & (np.abs(y) < 0.2)
+    back = ~tilted & ~middle
+    assert tilted.sum() > 10 and middle.sum() > 10 and back.sum() > 10
+    expected_z = 0.5 - (x + 0.1) * np.tan(np.pi / 6)        # + x' (towards +x) moves to -z
+    np.testing.assert_allclose(distance[tilted], expected_z[tilted], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(distance[middle], 0.7, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(distance[back], 0.9, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(mesh.albedo[face[tilted]], 0.3)
+    np.testing.assert_array_equal(mesh.albedo[face[middle]], 0.2)
+    np.testing.assert_array_equal(mesh.albedo[face[back]], 0.1)
+    # rays through the shared diagonals and the corners of the back square hit it once
+    corners = mesh.vertices[np.unique(mesh.faces[mesh.item == 0])]
+    diagonal = np.array([[0.35, 0.35, 0.0], [-0.3, -0.3, 0.0], [0.25, -0.25, 0.0]])
+    probes = np.concatenate([diagonal, corners * [0.999, 0.999, 0.0]])
+    face, distance = first_hits(mesh, probes, np.tile([0.0, 0.0, 1.0], (probes.shape[0], 1)))
+    assert np.all(face >= 0)
+    np.testing.assert_allclose(distance, 0.9, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("gap, expected", [(2e-6, 0.5), (2e-7, 0.0)])
+def test_segments_ending_on_a_surface_are_not_blocked(ray_code, gap, expected):
+    """Two equal squares ``gap`` apart: sight lines to the back one cross the front one.
+
+    Half of the sampled segments end on the front square (never blocked), half on
+    the back one: blocked when the front square lies more than the last micrometre
+    of the segment (gap / cos > 1e-6 for every segment here) before its end.
+    """
+    from nlosfw.simulate.geometry import blocked_fraction
+
+    items = [{"type": "rectangle", "position": [0.0, 0.0, 0.5], "size": [0.3, 0.3]},
+             {"type": "rectangle", "position": [0.0, 0.0, 0.5 - gap], "size": [0.3, 0.3]}]
+    s = scene(items)
+    assert blocked_fraction(s, scene_mesh(s)) == expected
+
+
+def test_blocked_fraction_is_the_same_with_either_ray_code(monkeypatch):
+    trimesh = pytest.importorskip("trimesh")
+    if not trimesh.ray.has_embree:
+        pytest.skip("embreex is not installed")
+    from nlosfw.simulate.builtin_scenes import builtin_scene
+    from nlosfw.simulate.geometry import blocked_fraction
+
+    scenes = [builtin_scene(n) for n in ("thesis_occluded", "thesis_concave", "thesis_planes")]
+    embree = [blocked_fraction(s, scene_mesh(s)) for s in scenes]
+    monkeypatch.setattr(trimesh.ray, "has_embree", False)
+    assert [blocked_fraction(s, scene_mesh(s)) for s in scenes] == embree
+
+
+def test_rays_that_meet_nothing(ray_code):
+    from nlosfw.simulate.geometry import first_hits
+
+    mesh = scene_mesh(scene([{"type": "rectangle", "position": [0.0, 0.0, 0.5],
+                              "size": [0.2, 0.2]}]))
+    origins = np.array([[0.5, 0.5, 0.0], [0.0, 0.0, 0.0]])
+    face, distance = first_hits(mesh, origins, np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]))
+    assert face.tolist() == [-1, -1] and np.all(np.isinf(distance))
+    depth, albedo = ground_truth_maps(mesh, origins[:1, None])
+    assert depth.tolist() == [[-1.0]] and albedo.tolist() == [[0.0]]
+    empty = TriangleMesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0),
+                         np.zeros(0, np.int64))
+    assert ground_truth_maps(empty, origins[:, None])[0].tolist() == [[-1.0], [-1.0]]

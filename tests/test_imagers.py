@@ -19,6 +19,7 @@ from nlosfw.common.errors import DataError
 from nlosfw.image.fft import FFTImager
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
 from nlosfw.image.rsd import RSDImager
+from nlosfw.image.rsd_kernel import phasor_series, phasor_steps
 from nlosfw.testing import fixtures, reference
 from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
@@ -211,6 +212,45 @@ def test_rsd_on_a_non_planar_wall():
                                reference.naive_rsd(bumpy, voxels), rtol=1e-10)
     with pytest.raises(DataError, match="regular"):
         FFTImager().reconstruct(bumpy, voxels)
+
+
+@pytest.mark.parametrize("order", ["ascending", "descending", "shuffled", "irregular"])
+def test_phasor_steps_are_the_closed_form_phasors(order):
+    """Each phasor of the recurrence (600 steps: two exact refreshes) is exp(2 pi i f d) / d."""
+    rng = np.random.default_rng(3)
+    path = rng.uniform(0.2, 3.0, (7, 5))
+    scale = 1.0 / path
+    freqs = 2.0 + 0.05 * np.arange(600)
+    if order == "descending":
+        freqs = freqs[::-1]
+    elif order == "shuffled":
+        freqs = rng.permutation(freqs)
+    elif order == "irregular":
+        freqs = freqs * (1 + 0.01 * np.sin(np.arange(600)))
+    expected = np.exp(2j * np.pi * freqs[:, None, None] * path) * scale
+    seen = np.zeros(freqs.size, dtype=int)
+    for i, phasor in phasor_steps(freqs, path, scale=scale):
+        np.testing.assert_allclose(phasor, expected[i], rtol=1e-12, atol=0)
+        seen[i] += 1
+    assert np.all(seen == 1)
+    np.testing.assert_allclose(phasor_series(freqs, path, scale=scale), expected, rtol=1e-12,
+                               atol=0)
+    single = phasor_series(freqs, path, np.complex64, scale=scale)
+    assert single.dtype == np.complex64
+    np.testing.assert_allclose(single, expected, rtol=2e-6, atol=0)
+
+
+def test_phasor_steps_memory_does_not_grow_with_frequencies():
+    path = np.random.default_rng(4).uniform(0.2, 3.0, (128, 128))    # 256 KiB of complex128
+    tracemalloc.start()
+    try:
+        for _ in phasor_steps(np.linspace(1.0, 9.0, 2000), path, scale=1.0 / path):
+            pass
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    # a handful of (128, 128) arrays, not 2000 of them (500 MiB)
+    assert peak < 12 * path.nbytes, f"peak {peak / 2**20:.1f} MiB"
 
 
 def test_chunking_changes_nothing_and_bounds_memory():

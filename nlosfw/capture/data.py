@@ -240,7 +240,3 @@ class Capture:
     def replace(self, **changes: Any) -> Capture:
         """A new capture with some fields replaced (validated again)."""
         return dataclasses.replace(self, **changes)
-
-    def ytal_dict(self) -> dict[str, Any]:
-        """The capture as y-tal's field dict (same keys as ``NLOSCaptureData.as_dict()``)."""
-        return {name: getattr(self, name) for name in YTAL_FIELDS}

@@ -11,7 +11,14 @@ from nlosfw.image.propagation import PropagationConfig, PropagationImager
 from nlosfw.image.reconstruction import Reconstruction, cell_centres, plane_voxels, volume_voxels
 from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
 from nlosfw.image.rsd import RSDImager, RSDImagerConfig
-from nlosfw.image.rsd_kernel import kernel, laser_phase, path_multiplier, phasor_series, wall_field
+from nlosfw.image.rsd_kernel import (
+    kernel,
+    laser_phase,
+    path_multiplier,
+    phasor_series,
+    phasor_steps,
+    wall_field,
+)
 from nlosfw.image.scores import image_metrics, normalise, psnr, rmse, ssim
 
 __all__ = [
@@ -26,6 +33,7 @@ __all__ = [
     "normalise",
     "path_multiplier",
     "phasor_series",
+    "phasor_steps",
     "plane_voxels",
     "PropagationConfig",
     "PropagationImager",

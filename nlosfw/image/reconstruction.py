@@ -36,11 +36,6 @@ class Reconstruction:
             raise DataError("intensity: must be real and finite")
 
     @property
-    def is_volume(self) -> bool:
-        """True for a stack of planes (Z, Y, X)."""
-        return self.intensity.ndim == 3
-
-    @property
     def depths(self) -> np.ndarray:
         """Depth (z) of each plane of a plane or volume reconstruction."""
         if self.intensity.ndim == 2:

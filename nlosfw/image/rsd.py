@@ -5,9 +5,10 @@ For every voxel and frequency it sums the shared kernel of
 O(voxels x wall samples x frequencies), exact, for planes, stacks of planes
 or arbitrary points, and for any wall (no grid needed). Voxels are processed
 in blocks whose kernel tables fit ``chunk_mb``, so memory stays bounded for
-any number of voxels. For uniformly spaced frequencies the kernel of f + df
-is the kernel of f times exp(2 pi i df m r) (in float64, recomputed exactly
-every 256 steps), which avoids one complex exponential per voxel, sample and frequency.
+any number of voxels. The kernels of one block come one frequency at a time
+from :func:`~nlosfw.image.rsd_kernel.phasor_steps` (for uniformly spaced
+frequencies a recurrence that avoids one complex exponential per voxel, sample
+and frequency), so no table over frequencies is ever stored.
 Sums use numpy's own loops (``einsum``), not a multithreaded BLAS matrix-vector
 product, whose speed collapses when the cores are shared.
 """
@@ -22,14 +23,8 @@ import numpy as np
 from nlosfw.common.config import require
 from nlosfw.common.cores import available_cores
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
-from nlosfw.image.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
+from nlosfw.image.rsd_kernel import laser_phase, path_multiplier, phasor_steps, wall_field
 from nlosfw.transform.field import PhasorField
-from nlosfw.transform.frequencies import uniform_step
-from nlosfw.transform.temporal_dft import unit_phasor
-
-#: Steps of the frequency recurrence between exact recomputations of the kernel (float64:
-#: the recurrence drifts by ~1e-16 per step).
-_REFRESH = 256
 
 
 @dataclass(frozen=True)
@@ -90,28 +85,13 @@ class RSDImager(PropagationImager):
                     + (vox[:, None, 1] - wall[None, :, 1]) ** 2
                     + (vox[:, None, 2] - wall[None, :, 2]) ** 2)                # (n, S)
         fields = np.empty((freqs.size, vox.shape[0]), dtype=np.complex128)
-        order, step = _uniform_order(freqs)
-        if step is None:
-            for i, f in enumerate(freqs):
-                np.einsum("vs,s->v", kernel(np.array([f]), r, m)[0], values[i], out=fields[i])
-        else:
-            mult = unit_phasor(step * m * r)
-            for j, i in enumerate(order):
-                if j % _REFRESH == 0:
-                    kern = kernel(freqs[i:i + 1], r, m)[0]
-                else:
-                    kern *= mult
-                np.einsum("vs,s->v", kern, values[i], out=fields[i])
+        scale = 1.0 / r
+        r *= m                                                         # the path m r
+        for i, kern in phasor_steps(freqs, r, scale=scale):
+            np.einsum("vs,s->v", kern, values[i], out=fields[i])
         phase = laser_phase(freqs, vox, geometry)
         if phase is not None:
             fields *= phase
         acc = FrequencySum(coeffs, self.config.combine, (vox.shape[0],))
         acc.add(fields)
         return acc.intensity()
-
-
-def _uniform_order(freqs: np.ndarray) -> tuple[np.ndarray, float | None]:
-    """(ascending order, step) if the frequencies are uniformly spaced, else (order, None)."""
-    order = np.argsort(freqs, kind="stable")
-    step = uniform_step(freqs[order])
-    return order, step if step is not None and step > 0 else None

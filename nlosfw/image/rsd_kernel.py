@@ -19,6 +19,8 @@ same sum as a convolution over the wall (the kernel depends on x_v - x_s only).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
 from nlosfw.capture.enums import CaptureKind
@@ -52,7 +54,7 @@ def check_geometry(geometry: CaptureGeometry) -> None:
 
 def wall_field(field: PhasorField, dtype: type = np.complex128) -> np.ndarray:
     """P'_f: the field's values (F, Y, X) with the device legs undone (a new array)."""
-    values = np.array(field.values, dtype=dtype)
+    values: np.ndarray = np.array(field.values, dtype=dtype)
     geometry = field.geometry
     if geometry.t_accounts_first_and_last_bounces:
         legs = geometry.device_path(field.wall_xyz)                  # (Y, X)
@@ -82,33 +84,51 @@ def phasor_series(frequencies: np.ndarray, path: np.ndarray, dtype: type = np.co
                   out: np.ndarray | None = None, scale: np.ndarray | None = None) -> np.ndarray:
     """scale * exp(+2 pi i f path) for every frequency, shape (F, *path.shape).
 
-    For uniformly spaced frequencies each step multiplies by exp(2 pi i df path)
-    in float64, recomputed exactly every 64 steps (error ~1e-14), instead of
-    evaluating cos and sin for every frequency.
+    Stores every frequency's phasor; :func:`phasor_steps` yields them one at a time.
+    """
+    f = np.asarray(frequencies, dtype=float)
+    if out is None:
+        out = np.empty(f.shape + np.shape(path), dtype=dtype)
+    for i, phasor in phasor_steps(f, path, out.dtype.type, scale):
+        out[i] = phasor
+    return out
+
+
+def phasor_steps(frequencies: np.ndarray, path: np.ndarray, dtype: type = np.complex128,
+                 scale: np.ndarray | None = None) -> Iterator[tuple[int, np.ndarray]]:
+    """(i, scale * exp(+2 pi i f_i path)) for every frequency, one frequency at a time.
+
+    Memory stays at a few arrays of ``path``'s shape whatever the number of
+    frequencies: the yielded array is reused for the next frequency (copy it to
+    keep it). When the frequencies, in ascending order, are uniformly spaced by
+    df, they are visited in that order and each step multiplies by
+    exp(2 pi i df path) in complex128, recomputed exactly every 256 steps (error
+    ~1e-13), instead of evaluating cos and sin for every frequency; otherwise each
+    phasor is evaluated exactly in ``dtype``, in the given order.
     """
     f = np.asarray(frequencies, dtype=float)
     path = np.asarray(path, dtype=float)
-    if out is None:
-        out = np.empty(f.shape + path.shape, dtype=dtype)
-    step = uniform_step(f) if f.size > 2 else None
+    order = np.argsort(f, kind="stable")
+    step = uniform_step(f[order]) if f.size > 2 else None
     if step is None:
         for i, fi in enumerate(f):
-            out[i] = unit_phasor(fi * path, out.dtype)
+            phasor = unit_phasor(fi * path, dtype)
             if scale is not None:
-                out[i] *= scale
-        return out
+                phasor *= scale
+            yield i, phasor
+        return
     advance = unit_phasor(step * path)
-    current = None
-    for i, fi in enumerate(f):
-        if i % _REFRESH == 0:
-            current = unit_phasor(fi * path)
+    current = np.empty(path.shape, dtype=np.complex128)
+    for j, i in enumerate(order):
+        if j % _REFRESH == 0:
+            current[...] = unit_phasor(f[i] * path)
             if scale is not None:
                 current *= scale
         else:
             current *= advance
-        out[i] = current
-    return out
+        yield int(i), current
 
 
-#: Steps of the frequency recurrence between exact evaluations.
-_REFRESH = 64
+#: Steps of the frequency recurrence between exact evaluations (float64: the
+#: recurrence drifts by ~1e-16 per step).
+_REFRESH = 256

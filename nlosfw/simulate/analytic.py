@@ -18,7 +18,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.geometry import device_legs
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.geometry import SceneGeometry, TriangleMesh, blocked_fraction
@@ -63,10 +62,7 @@ class AnalyticSimulator(Simulator):
         n_sensors = sensors.shape[0]
         bins = scene.time.bins
         laser = sensors if scene.is_confocal else scene.laser_spot_xyz()
-        legs = np.zeros(n_sensors)
-        if scene.capture.device_legs:
-            legs = device_legs(laser, sensors, scene.capture.laser_position,
-                               scene.capture.sensor_position)
+        legs = scene.device_path(sensors)
         hist = np.zeros(n_sensors * bins)
         # element chunks of at least 2 x bins, so that each bincount's output (a block of
         # sensors x bins) is smaller than its input (elements x the same sensors)

@@ -16,7 +16,6 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.capture.geometry import device_legs
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.scene import GeometryItem, Scene
 
@@ -216,48 +215,56 @@ def sample_surface(mesh: TriangleMesh, n: int, rng: np.random.Generator,
     return points, normals, albedo, float(mesh.face_areas().sum()) / n
 
 
-def ground_truth_maps(mesh: TriangleMesh, grid_xyz: np.ndarray,
-                      chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+def ground_truth_maps(mesh: TriangleMesh,
+                      grid_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Depth and albedo seen from the wall along +z at ``grid_xyz`` (X, Y, 3).
 
     Returns ``(depth, albedo)`` with shape (X, Y): depth is the distance from
     the wall to the first surface hit, -1 where nothing is hit (as in y-tal),
-    and albedo is 0 there.
+    and albedo is 0 there. A ray through a triangle's edge or corner hits it,
+    also on a surface's outer boundary, on every install (``inclusive_edges``).
     """
-    shape = grid_xyz.shape[:-1]
-    xy = grid_xyz.reshape(-1, 3)[:, :2]
-    depth = np.full(xy.shape[0], np.inf)
-    albedo = np.zeros(xy.shape[0])
-    tris = mesh.triangles()
-    for start in range(0, mesh.n_faces, chunk):
-        t = tris[start:start + chunk]
-        a, b, c = t[:, 0], t[:, 1], t[:, 2]
-        lo, hi = t[..., :2].min(axis=1), t[..., :2].max(axis=1)
-        inside_box = np.all((xy[:, None] >= lo[None] - 1e-12) & (xy[:, None] <= hi[None] + 1e-12),
-                            axis=2)
-        ray_i, tri_i = np.nonzero(inside_box)
-        if ray_i.size == 0:
-            continue
-        p = xy[ray_i]
-        a2, b2, c2 = a[tri_i, :2], b[tri_i, :2], c[tri_i, :2]
-        v0, v1, v2 = b2 - a2, c2 - a2, p - a2
-        den = v0[:, 0] * v1[:, 1] - v1[:, 0] * v0[:, 1]
-        ok = np.abs(den) > 1e-15
-        den = np.where(ok, den, 1.0)
-        w1 = (v2[:, 0] * v1[:, 1] - v1[:, 0] * v2[:, 1]) / den
-        w2 = (v0[:, 0] * v2[:, 1] - v2[:, 0] * v0[:, 1]) / den
-        hit = ok & (w1 >= -1e-9) & (w2 >= -1e-9) & (w1 + w2 <= 1 + 1e-9)
-        z = a[tri_i, 2] + w1 * (b[tri_i, 2] - a[tri_i, 2]) + w2 * (c[tri_i, 2] - a[tri_i, 2])
-        ray_i, z, face = ray_i[hit], z[hit], tri_i[hit] + start
-        order = np.lexsort((z, ray_i))  # nearest hit first for each ray
-        ray_i, z, face = ray_i[order], z[order], face[order]
-        first = np.r_[True, ray_i[1:] != ray_i[:-1]]
-        ray_i, z, face = ray_i[first], z[first], face[first]
-        closer = z < depth[ray_i]
-        depth[ray_i[closer]] = z[closer]
-        albedo[ray_i[closer]] = mesh.albedo[face[closer]]
-    depth[~np.isfinite(depth)] = -1.0
+    origins = np.asarray(grid_xyz, dtype=float).reshape(-1, 3)
+    directions = np.broadcast_to(np.array([0.0, 0.0, 1.0]), origins.shape)
+    face, distance = first_hits(mesh, origins, directions, inclusive_edges=True)
+    hit = face >= 0
+    depth = np.where(hit, distance, -1.0)
+    albedo = np.zeros(origins.shape[0])
+    albedo[hit] = mesh.albedo[face[hit]]
+    shape = np.shape(grid_xyz)[:-1]
     return depth.reshape(shape), albedo.reshape(shape)
+
+
+def first_hits(mesh: TriangleMesh, origins: np.ndarray, directions: np.ndarray,
+               inclusive_edges: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(face, distance) of the first triangle each ray (N, 3) meets, (N,) each.
+
+    ``face`` is -1 and ``distance`` inf where a ray meets nothing. Rays are cast
+    through trimesh's ray interface: by default with Embree when embreex is
+    installed (float32 traversal, hit points recomputed in float64; watertight,
+    so a ray exactly on an edge that two triangles share hits one of them, but one
+    exactly on a surface's outer edge may miss), else with trimesh's float64 numpy
+    code. ``inclusive_edges`` always uses the numpy code, which counts a ray
+    through any edge or corner (within 1e-12 barycentric) as a hit: the same
+    answer on every install, for maps that must not depend on what is installed.
+    """
+    origins = np.asarray(origins, dtype=float)
+    directions = np.asarray(directions, dtype=float)
+    directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    face = np.full(origins.shape[0], -1, dtype=np.int64)
+    distance = np.full(origins.shape[0], np.inf)
+    if mesh.n_faces == 0 or origins.shape[0] == 0:
+        return face, distance
+    import trimesh  # here, not at the top: importing trimesh imports embreex when installed
+
+    rays = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False, validate=False,
+                           use_embree=not inclusive_edges).ray
+    location, ray, tri = rays.intersects_location(origins, directions, multiple_hits=False)
+    location = np.asarray(location, dtype=float).reshape(-1, 3)     # (0,) when nothing is hit
+    ray = np.asarray(ray, dtype=np.int64)
+    face[ray] = tri
+    distance[ray] = np.einsum("ij,ij->i", location - origins[ray], directions[ray])
+    return face, distance
 
 
 @dataclass(frozen=True, eq=False)
@@ -333,11 +340,7 @@ def path_length_range(scene: Scene, mesh: TriangleMesh,
     sensors = scene.wall.grid_xyz().reshape(-1, 3)
     lasers = sensors if scene.is_confocal else np.broadcast_to(scene.laser_spot_xyz(),
                                                                sensors.shape)
-    legs = np.zeros(sensors.shape[0])
-    if scene.capture.device_legs:
-        laser = sensors if scene.is_confocal else scene.laser_spot_xyz()
-        legs = device_legs(laser, sensors, scene.capture.laser_position,
-                           scene.capture.sensor_position)
+    legs = scene.device_path(sensors)
     boxes = []
     for i in np.unique(mesh.item):
         corners = mesh.vertices[mesh.faces[mesh.item == i]].reshape(-1, 3)
@@ -360,8 +363,9 @@ def blocked_fraction(scene: Scene, mesh: TriangleMesh, points_per_item: int = 48
 
     Segments join a ``wall_points`` x ``wall_points`` grid of wall points and the
     laser spot to ``points_per_item`` area-uniform samples of every item (and to
-    point scatterers); each is tested against every triangle (Moller-Trumbore,
-    ignoring the last micrometre of the segment). 0 means no shadowing was found.
+    point scatterers); a segment is blocked when its first hit (:func:`first_hits`)
+    lies more than a micrometre before its end, so a segment that ends on a
+    surface is not. 0 means no shadowing was found.
     """
     grid = scene.wall.grid_xyz()
     ix = np.linspace(0, grid.shape[0] - 1, wall_points).round().astype(int)
@@ -378,32 +382,9 @@ def blocked_fraction(scene: Scene, mesh: TriangleMesh, points_per_item: int = 48
         return 0.0
     origin = np.repeat(starts, end.shape[0], axis=0)
     d = np.tile(end, (starts.shape[0], 1)) - origin
-    blocked = np.zeros(origin.shape[0], bool)
-    tris = mesh.triangles()
-    seg_lo, seg_hi = np.minimum(origin, origin + d), np.maximum(origin, origin + d)
-    for first in range(0, tris.shape[0], 256):
-        t = tris[first:first + 256]
-        lo, hi = t.min(axis=1), t.max(axis=1)
-        near = np.all((seg_lo[:, None] <= hi[None]) & (seg_hi[:, None] >= lo[None]), axis=2)
-        seg, tri = np.nonzero(near & ~blocked[:, None])
-        if seg.size == 0:
-            continue
-        a, e1, e2 = t[tri, 0], t[tri, 1] - t[tri, 0], t[tri, 2] - t[tri, 0]
-        dd = d[seg]
-        pvec = np.cross(dd, e2)
-        det = np.einsum("ij,ij->i", e1, pvec)
-        ok = np.abs(det) > 1e-14
-        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        tvec = origin[seg] - a
-        u = np.einsum("ij,ij->i", tvec, pvec) * inv
-        qvec = np.cross(tvec, e1)
-        v = np.einsum("ij,ij->i", dd, qvec) * inv
-        along = np.einsum("ij,ij->i", e2, qvec) * inv
-        length = np.linalg.norm(dd, axis=1)
-        hit = (ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (along > 1e-9)
-               & (along < 1 - 1e-6 / np.maximum(length, 1e-12)))
-        blocked[seg[hit]] = True
-    return float(blocked.mean())
+    length = np.linalg.norm(d, axis=1)
+    _, distance = first_hits(mesh, origin, d)
+    return float(np.mean(distance < length - 1e-6))
 
 
 def _box_distance(points: np.ndarray, bmin: np.ndarray, bmax: np.ndarray) -> np.ndarray:
@@ -428,9 +409,7 @@ def _sampled_path_range(scene: Scene, mesh: TriangleMesh, points: PointScatterer
                           grid[[0, 0, -1, -1], [0, -1, 0, -1]]])
     laser = sub if scene.is_confocal else scene.laser_spot_xyz()
     path, _ = three_bounce(laser, cloud_pts, None, np.ones(cloud_pts.shape[0]), sub)
-    if scene.capture.device_legs:
-        path = path + device_legs(laser, sub, scene.capture.laser_position,
-                                  scene.capture.sensor_position)[None, :]
+    path = path + scene.device_path(sub)[None, :]
     return float(path.min()), float(path.max())
 
 

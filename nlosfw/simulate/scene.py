@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from nlosfw.capture.geometry import device_legs
 from nlosfw.common.config import Choice, config_from_mapping, require
 
 #: Geometry item types understood by :mod:`nlosfw.simulate.geometry`.
@@ -181,6 +182,19 @@ class Scene:
     def laser_spot_xyz(self) -> np.ndarray:
         """The single laser spot on the wall (3,)."""
         return np.array([self.capture.laser_spot[0], self.capture.laser_spot[1], 0.0])
+
+    def device_path(self, wall_points: np.ndarray) -> np.ndarray:
+        """Device legs (...) of light measured at ``wall_points`` (..., 3), in metres.
+
+        Zero unless the time axis counts them (``capture.device_legs``); the
+        laser leg ends at the laser spot, or at the wall point for confocal scans.
+        """
+        points = np.asarray(wall_points, dtype=float)
+        if not self.capture.device_legs:
+            return np.zeros(points.shape[:-1])
+        laser = points if self.is_confocal else self.laser_spot_xyz()
+        return device_legs(laser, points, np.asarray(self.capture.laser_position, dtype=float),
+                           np.asarray(self.capture.sensor_position, dtype=float))
 
 
 def scene_from_config(mapping: Any, where: str = "scene") -> Scene:

@@ -29,7 +29,14 @@ from __future__ import annotations
 
 from nlosfw.testing import fixtures
 from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy
-from nlosfw.testing.fixtures import tiny_scene_config
+from nlosfw.testing.fixtures import (
+    Agreement,
+    analytic_agreement,
+    relative_l2,
+    rendered,
+    scene_with,
+    tiny_scene_config,
+)
 from nlosfw.testing.kit import (
     Check,
     check_cases,
@@ -52,6 +59,8 @@ from nlosfw.testing.selection import (
 
 __all__ = [
     "DEVICE_LEGS",
+    "Agreement",
+    "analytic_agreement",
     "ENGINE_CASES",
     "FREQUENCY_MODES",
     "GEOMETRIES",
@@ -68,6 +77,9 @@ __all__ = [
     "fixtures",
     "parametrize_with_checks",
     "requires",
+    "relative_l2",
+    "rendered",
+    "scene_with",
     "tiny_scene_config",
     "variant",
 ]

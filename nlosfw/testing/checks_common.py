@@ -16,13 +16,14 @@ import os
 import subprocess
 import sys
 import typing
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import yaml
 
 from nlosfw.common.config import config_from_mapping, config_to_dict
-from nlosfw.common.errors import ConfigError
+from nlosfw.common.errors import ConfigError, NlosfwError
 from nlosfw.common.schema import schema_class
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.registry import PluginSpec
@@ -118,16 +119,31 @@ def check_config_round_trip(spec: PluginSpec) -> None:
         assert instance.config == config, f"{spec.qualified_name}: instance lost its config"
 
 
+def one_line_error(spec: PluginSpec, action: str, call: Callable[[], object],
+                   expected: type[NlosfwError] = NlosfwError) -> str:
+    """The text of the one-line ``expected`` error that ``call()`` must raise.
+
+    AssertionError (naming the plugin and ``action``) when it raises nothing,
+    another exception, or a message that is empty or longer than one line.
+    """
+    try:
+        call()
+    except expected as err:
+        text = str(err)
+        assert text and "\n" not in text, (
+            f"{spec.qualified_name}: {action}: the error must be one line, got {text!r}")
+        return text
+    except Exception as err:  # a bare ValueError, KeyError... is not a user-facing error
+        raise AssertionError(f"{spec.qualified_name}: {action}: raised {type(err).__name__} "
+                             f"({err}); expected {expected.__name__}") from err
+    raise AssertionError(f"{spec.qualified_name}: {action}: no error was raised")
+
+
 def check_bad_config_rejected(spec: PluginSpec) -> None:
     """Unknown options and values of the wrong type give a ConfigError naming the option."""
-    try:
-        spec.make_config({"no_such_option_xyz": 1})
-    except ConfigError as err:
-        text = str(err)
-        assert "no_such_option_xyz" in text and "valid options" in text, text
-        assert "\n" not in text, f"error must be one line: {text!r}"
-    else:
-        raise AssertionError(f"{spec.qualified_name}: an unknown option was accepted")
+    text = one_line_error(spec, "an unknown option",
+                          lambda: spec.make_config({"no_such_option_xyz": 1}), ConfigError)
+    assert "no_such_option_xyz" in text and "valid options" in text, text
     hints = typing.get_type_hints(spec.config_class())
     for f in dataclasses.fields(spec.config_class()):
         if hints[f.name] in (int, float, bool):

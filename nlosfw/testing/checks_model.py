@@ -24,13 +24,13 @@ import numpy as np
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.errors import NlosfwError
 from nlosfw.model.interface import FieldModelConfig
 from nlosfw.model.model_files import write_model_file
 from nlosfw.model.protocol import error_metrics, split_field
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures
+from nlosfw.testing.checks_common import one_line_error
 from nlosfw.testing.selection import FREQUENCY_MODES, requires
 from nlosfw.transform.field import PhasorField
 
@@ -69,20 +69,6 @@ def _fitted(spec: PluginSpec, field: PhasorField | None = None, **options: Any) 
     model = spec.create({**spec.test_config, **options})
     model.fit(fit_fixture() if field is None else field)
     return model
-
-
-def _one_line_error(spec: PluginSpec, action: str, call: Any) -> str:
-    try:
-        call()
-    except NlosfwError as err:
-        text = str(err)
-        assert text and "\n" not in text, (
-            f"{spec.qualified_name}: {action}: the error must be one line, got {text!r}")
-        return text
-    except Exception as err:  # a bare ValueError, KeyError... is not a user-facing error
-        raise AssertionError(f"{spec.qualified_name}: {action}: raised {type(err).__name__} "
-                             f"({err}); expected an nlosfw error (DataError, FitError)") from err
-    raise AssertionError(f"{spec.qualified_name}: {action}: no error was raised")
 
 
 @requires(each=FREQUENCY_MODES)
@@ -160,12 +146,12 @@ def check_save_load_round_trip(spec: PluginSpec, single: bool) -> None:
         assert loaded.n_parameters == model.n_parameters, "parameter count changed on load"
         corrupt = Path(tmp) / "corrupt.bin"
         corrupt.write_bytes(path.read_bytes()[: max(1, path.stat().st_size // 3)])
-        _one_line_error(spec, "loading a truncated file", lambda: factory.load(corrupt))
+        one_line_error(spec, "loading a truncated file", lambda: factory.load(corrupt))
         foreign = Path(tmp) / "foreign.npz"
         write_model_file(foreign, "no_such_model_xyz", FieldModelConfig(),
                          {"p0": np.zeros(3)})
-        _one_line_error(spec, "loading another model's file", lambda: factory.load(foreign))
-        _one_line_error(spec, "loading a missing file",
+        one_line_error(spec, "loading another model's file", lambda: factory.load(foreign))
+        one_line_error(spec, "loading a missing file",
                         lambda: factory.load(Path(tmp) / "missing.npz"))
 
 
@@ -174,22 +160,22 @@ def check_bad_input_rejected(spec: PluginSpec, single: bool) -> None:
     """One-line errors: predict before fit, empty or all-zero fields, bad frequencies."""
     fresh = spec.create(dict(spec.test_config))
     pts = fixtures.wall_grid(4)[..., :2]
-    _one_line_error(spec, "predict before fit", lambda: fresh.predict(pts, np.array([2.0])))
+    one_line_error(spec, "predict before fit", lambda: fresh.predict(pts, np.array([2.0])))
     field = fit_fixture(single)
     zero = field.replace(values=np.zeros_like(field.values))
-    _one_line_error(spec, "fitting an all-zero field",
+    one_line_error(spec, "fitting an all-zero field",
                     lambda: spec.create(dict(spec.test_config)).fit(zero))
     empty = PhasorField(values=np.zeros((0, 4, 4), np.complex64), frequencies=np.zeros(0),
                         wall_xyz=fixtures.wall_grid(4),
                         geometry=CaptureGeometry(kind=CaptureKind.SINGLE_SPOT,
                                                  laser_point=np.zeros(3)))
-    _one_line_error(spec, "fitting an empty field",
+    one_line_error(spec, "fitting an empty field",
                     lambda: spec.create(dict(spec.test_config)).fit(empty))
     model = _fitted(spec, field)
     for bad in (np.array([np.nan]), np.array([np.inf]), np.array([0.0]), np.array([-2.0])):
-        _one_line_error(spec, f"predicting at frequency {bad[0]}",
+        one_line_error(spec, f"predicting at frequency {bad[0]}",
                         lambda bad=bad: model.predict(pts, bad))
-    _one_line_error(spec, "predicting at NaN points",
+    one_line_error(spec, "predicting at NaN points",
                     lambda: model.predict(np.full((3, 2), np.nan), np.array([2.0])))
 
 

@@ -19,13 +19,13 @@ from typing import Any
 import numpy as np
 
 from nlosfw.capture.enums import GridFormat, HFormat
-from nlosfw.capture.geometry import device_legs
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.simulate.physics import bin_index, three_bounce
 from nlosfw.simulate.scene import Scene, scene_from_config
 from nlosfw.testing import fixtures
+from nlosfw.testing.checks_common import one_line_error
 from nlosfw.testing.selection import DEVICE_LEGS, GEOMETRIES, combine, requires
 
 #: Energy and energy-ratio tolerance (relative).
@@ -52,10 +52,7 @@ def _patch_quadrature(scene: Scene, n: int = 64) -> tuple[np.ndarray, np.ndarray
     sensors = scene.wall.grid_xyz().reshape(-1, 3)
     laser = sensors if scene.is_confocal else scene.laser_spot_xyz()
     path, weight = three_bounce(laser, pts, normals, area, sensors)
-    if scene.capture.device_legs:
-        path = path + device_legs(laser, sensors, scene.capture.laser_position,
-                                  scene.capture.sensor_position)[None, :]
-    return path, weight
+    return path + scene.device_path(sensors)[None, :], weight
 
 
 def _profiles(H: np.ndarray) -> np.ndarray:
@@ -225,15 +222,11 @@ def check_bad_scene_rejected(spec: PluginSpec, confocal: bool) -> None:
     }
     simulator = spec.create(dict(spec.test_config))
     for option, config in cases.items():
-        try:
-            simulator.simulate(scene_from_config(config))
-        except ConfigError as err:
-            text = str(err)
-            assert option in text and "\n" not in text, (
-                f"{spec.qualified_name}: expected one line naming {option}, got {text!r}")
-        else:
-            raise AssertionError(f"{spec.qualified_name}: a scene with a bad {option} was "
-                                 "simulated without error")
+        text = one_line_error(spec, f"a scene with a bad {option}",
+                              lambda c=config: simulator.simulate(scene_from_config(c)),
+                              ConfigError)
+        assert option in text, (
+            f"{spec.qualified_name}: expected one line naming {option}, got {text!r}")
 
 
 SIMULATOR_CHECKS = (

@@ -6,7 +6,7 @@ so fixtures never depend on the plugin under test.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -14,6 +14,8 @@ from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.image.reconstruction import volume_voxels
+from nlosfw.simulate.geometry import validate_scene
+from nlosfw.simulate.interface import Simulator
 from nlosfw.simulate.scene import Scene, scene_from_config
 from nlosfw.transform.field import PhasorField
 
@@ -49,35 +51,20 @@ def tiny_capture(**kwargs: Any) -> Capture:
 
 
 def wall_grid(n: int = 16, size: float = 1.0) -> np.ndarray:
-    """Cell-centred wall points (Y, X, 3) in the plane z = 0."""
-    c = -size / 2 + (np.arange(n) + 0.5) * size / n
-    y, x = np.meshgrid(c, c, indexing="ij")
-    return np.stack([x, y, np.zeros_like(x)], axis=-1)
+    """Cell-centred wall points (Y, X, 3) of an n x n grid on a ``size`` m wall in z = 0."""
+    return rect_wall_grid((n, n), size / n)
 
 
 def point_phasor_field(target: tuple[float, float, float] = TINY_TARGET, n: int = 16,
                        size: float = 1.0, frequencies: Any = (4.0,),
                        confocal: bool = False) -> PhasorField:
-    """Exact phasor field of one point scatterer (the transform of its three-bounce transient).
+    """Exact phasor field of one point scatterer on the n x n :func:`wall_grid` of ``size``.
 
     P_f(x_s) = exp(-2 pi i f d) / (r_l^2 r_s^2) with d the laser -> point -> sensor
-    path, the wall's cosine factors included, laser spot at the wall centre.
+    path, the wall's cosine factors included, laser spot at the wall centre
+    (:func:`point_field` on a square grid, without device legs).
     """
-    wall = wall_grid(n, size)
-    p = np.asarray(target, dtype=float)
-    r_s = np.linalg.norm(wall - p, axis=-1)
-    if confocal:
-        r_l = r_s
-        geometry = CaptureGeometry(kind=CaptureKind.CONFOCAL)
-    else:
-        laser = np.zeros(3)
-        r_l = np.full_like(r_s, np.linalg.norm(p - laser))
-        geometry = CaptureGeometry(kind=CaptureKind.SINGLE_SPOT, laser_point=laser)
-    amp = (p[2] / r_l) * (p[2] / r_s) / (r_l**2 * r_s**2)
-    f = np.atleast_1d(np.asarray(frequencies, dtype=float))
-    values = amp[None] * np.exp(-2j * np.pi * f[:, None, None] * (r_l + r_s)[None])
-    return PhasorField(values=values.astype(np.complex128), frequencies=f, wall_xyz=wall,
-                       geometry=geometry, metadata={"target": list(target)})
+    return point_field(target, (n, n), size / n, frequencies, confocal=confocal)
 
 
 def smooth_field(n: int = 16, frequencies: Any = None, seed: int = 0,
@@ -219,3 +206,57 @@ def exhaustive_capture() -> Capture:
                    laser_grid_format=GridFormat.X_Y_3, sensor_xyz=np.array(DEVICE_XYZ),
                    laser_xyz=np.array(DEVICE_XYZ), delta_t=0.05, t_start=0.0,
                    t_accounts_first_and_last_bounces=False)
+
+
+# --------------------------------------------------------------------------- simulator tests
+def scene_with(geometry: list[dict[str, Any]], resolution: tuple[int, int] = (12, 10),
+               bins: int = 400, bin_width: float = 0.01, **capture: Any) -> Scene:
+    """A 1 m wall of ``resolution`` = (nx, ny) sensors seeing ``geometry`` (items as in YAML).
+
+    ``capture`` updates the capture block of :func:`tiny_scene_config` (for
+    example ``type="confocal"``, ``device_legs=True``).
+    """
+    config = tiny_scene_config(bins=bins, bin_width=bin_width)
+    config["wall"]["resolution"] = list(resolution)
+    config["capture"].update(capture)
+    config["geometry"] = geometry
+    return scene_from_config(config)
+
+
+def rendered(simulator: Simulator, scene: Scene) -> Capture:
+    """The noise-free transient of ``scene`` (validated first, as ``simulate()`` does)."""
+    return simulator.render(validate_scene(scene))
+
+
+def relative_l2(a: np.ndarray, b: np.ndarray) -> float:
+    """||a - b|| / ||b|| over all entries, in float64."""
+    b = np.asarray(b, dtype=float)
+    return float(np.linalg.norm(np.asarray(a, dtype=float) - b) / np.linalg.norm(b))
+
+
+class Agreement(NamedTuple):
+    """How a transient compares with a reference transient of the same scene."""
+
+    total: float
+    """Total energy over the reference's."""
+    worst_sensor: float
+    """Largest |sensor energy / reference sensor energy - 1|."""
+    relative_l2: float
+    """:func:`relative_l2` of the whole transients."""
+
+
+def analytic_agreement(simulator: Simulator, scene: Scene,
+                       patch_size: float = 0.003) -> Agreement:
+    """Compare ``simulator``'s transient of ``scene`` with the ``analytic`` simulator's.
+
+    For occlusion-free scenes, where both follow the same radiometric convention,
+    bins and sensor order; ``patch_size`` is the analytic simulator's quadrature cell.
+    """
+    from nlosfw.simulate.analytic import AnalyticSimulator
+
+    reference = rendered(AnalyticSimulator({"patch_size": patch_size}), scene).H.astype(float)
+    H = rendered(simulator, scene).H.astype(float)
+    per_sensor = H.sum(axis=0) / reference.sum(axis=0)                  # (nx, ny)
+    return Agreement(total=float(H.sum() / reference.sum()),
+                     worst_sensor=float(np.abs(per_sensor - 1).max()),
+                     relative_l2=relative_l2(H, reference))

@@ -73,11 +73,6 @@ class PhasorField:
         return (int(self.values.shape[1]), int(self.values.shape[2]))
 
     @property
-    def wavelengths(self) -> np.ndarray:
-        """Wavelengths in metres (1/frequency)."""
-        return 1.0 / self.frequencies
-
-    @property
     def effective_weights(self) -> np.ndarray:
         """The weights, or ones when none were given."""
         if self.weights is None:

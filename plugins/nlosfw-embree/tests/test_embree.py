@@ -13,32 +13,17 @@ from nlosfw.simulate import (
     scene_from_config,
     three_bounce,
 )
-from nlosfw.testing import tiny_scene_config
+from nlosfw.testing import (
+    analytic_agreement,
+    relative_l2,
+    rendered,
+    scene_with,
+    tiny_scene_config,
+)
 
 pytest.importorskip("embreex")
 
 from nlosfw_embree.simulator import EmbreeSimulator
-
-from nlosfw.simulate import validate_scene
-
-
-def rendered(simulator, scene):
-    """The noise-free transient of a scene (validated first, as simulate() does)."""
-    return simulator.render(validate_scene(scene))
-
-
-def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(np.asarray(a, float) - b) / np.linalg.norm(b))
-
-
-def scene_with(geometry: list[dict], resolution=(12, 10), bins=400, bin_width=0.01,
-               **capture) -> object:
-    config = tiny_scene_config(bins=bins, bin_width=bin_width)
-    config["wall"]["resolution"] = list(resolution)      # X != Y: a transposition shows
-    config["capture"].update(capture)
-    config["geometry"] = geometry
-    return scene_from_config(config)
-
 
 TILTED = [{"type": "rectangle", "position": [0.1, -0.05, 0.6], "size": [0.3, 0.2],
            "rotation": [10.0, -20.0, 5.0], "albedo": 0.7}]
@@ -50,12 +35,10 @@ TILTED = [{"type": "rectangle", "position": [0.1, -0.05, 0.6], "size": [0.3, 0.2
 def test_agrees_with_analytic_in_absolute_value(capture):
     """Occlusion-free scene: same radiometric convention, same bins, same grid order."""
     scene = scene_with(TILTED, **capture)
-    reference = rendered(AnalyticSimulator({"patch_size": 0.003}), scene).H.astype(float)
-    H = rendered(EmbreeSimulator({"samples": 1 << 16}), scene).H
-    assert H.sum() / reference.sum() == pytest.approx(1.0, abs=0.003)
-    per_sensor = H.sum(axis=0) / reference.sum(axis=0)
-    assert np.abs(per_sensor - 1).max() < 0.01
-    assert rel_l2(H, reference) < 0.02
+    agree = analytic_agreement(EmbreeSimulator({"samples": 1 << 16}), scene)
+    assert agree.total == pytest.approx(1.0, abs=0.003)
+    assert agree.worst_sensor < 0.01
+    assert agree.relative_l2 < 0.02
 
 
 def test_shadowing_matches_independent_visibility():
@@ -99,7 +82,7 @@ def test_shadowing_matches_independent_visibility():
     unshadowed = rendered(AnalyticSimulator({"patch_size": 0.004}), scene).H.sum()
     assert ref.sum() < 0.97 * unshadowed                       # the shadow matters here
     assert capture.H.sum() / ref.sum() == pytest.approx(1.0, abs=0.005)
-    assert rel_l2(capture.H, ref) < 0.03
+    assert relative_l2(capture.H, ref) < 0.03
     assert capture.scene_info["render"]["unobstructed_fraction"] < 0.99
 
 
@@ -124,7 +107,7 @@ def test_closed_box_renders_as_its_front_face():
     H = rendered(EmbreeSimulator({"samples": 1 << 16}), scene_with([box])).H
     reference = rendered(AnalyticSimulator({"patch_size": 0.003}), scene_with([face])).H
     assert H.sum() / reference.sum() == pytest.approx(1.0, abs=0.01)
-    assert rel_l2(H, reference) < 0.04
+    assert relative_l2(H, reference) < 0.04
 
 
 def test_mesh_file_renders_like_the_same_rectangle(tmp_path):
@@ -166,7 +149,7 @@ def test_sobol_sampling_is_unbiased_and_beats_independent_sampling():
                 for s in range(4)]
         mean = np.mean(runs, axis=0)
         assert mean.sum() / reference.sum() == pytest.approx(1.0, abs=0.01)
-        errors[sampler] = np.mean([rel_l2(h, reference) for h in runs])
+        errors[sampler] = np.mean([relative_l2(h, reference) for h in runs])
     assert errors["sobol"] < 0.7 * errors["independent"]
 
 

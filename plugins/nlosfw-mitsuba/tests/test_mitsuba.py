@@ -11,29 +11,11 @@ import pytest
 from nlosfw_mitsuba.llvm import configure_llvm, find_libllvm, llvm_version
 
 from nlosfw.common import ConfigError, PluginError
-from nlosfw.simulate import AnalyticSimulator, builtin_scene, scene_from_config, validate_scene
-from nlosfw.testing import tiny_scene_config
+from nlosfw.simulate import builtin_scene
+from nlosfw.testing import analytic_agreement, rendered, scene_with
 
 TILTED = [{"type": "rectangle", "position": [0.1, -0.05, 0.6], "size": [0.3, 0.2],
            "rotation": [10.0, -20.0, 5.0], "albedo": 0.7}]
-
-
-def rendered(simulator, scene):
-    """The noise-free transient of a scene (validated first, as simulate() does)."""
-    return simulator.render(validate_scene(scene))
-
-
-
-def rel_l2(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(np.asarray(a, float) - b) / np.linalg.norm(b))
-
-
-def scene_with(geometry: list[dict], resolution=(12, 10), bins=400, **capture) -> object:
-    config = tiny_scene_config(bins=bins, bin_width=0.01)
-    config["wall"]["resolution"] = list(resolution)      # X != Y: a transposition shows
-    config["capture"].update(capture)
-    config["geometry"] = geometry
-    return scene_from_config(config)
 
 
 # --------------------------------------------------------------------------- LLVM
@@ -83,12 +65,10 @@ from nlosfw_mitsuba.simulator import MitsubaSimulator  # noqa: E402
 def test_agrees_with_analytic_in_absolute_value(capture):
     """Same radiometric scale (the projector factor divided out), bins and grid order."""
     scene = scene_with(TILTED, **capture)
-    reference = rendered(AnalyticSimulator({"patch_size": 0.003}), scene).H.astype(float)
-    H = rendered(MitsubaSimulator({"spp": 8192}), scene).H
-    assert H.sum() / reference.sum() == pytest.approx(1.0, abs=0.01)
-    per_sensor = H.sum(axis=0) / reference.sum(axis=0)
-    assert np.abs(per_sensor - 1).max() < 0.03
-    assert rel_l2(H, reference) < 0.08
+    agree = analytic_agreement(MitsubaSimulator({"spp": 8192}), scene)
+    assert agree.total == pytest.approx(1.0, abs=0.01)
+    assert agree.worst_sensor < 0.03
+    assert agree.relative_l2 < 0.08
 
 
 @pytest.mark.slow

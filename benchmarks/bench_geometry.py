@@ -1,0 +1,104 @@
+"""Benchmark of the hidden-geometry ray queries: ground-truth maps and the shadowing test.
+
+For each thesis scene with its 64 x 64 wall: the time of
+:func:`nlosfw.simulate.geometry.ground_truth_maps` (one +z ray per wall point, the
+mesh built once, as ``simulate()`` does) and of
+:func:`nlosfw.simulate.geometry.blocked_fraction` (the analytic simulator's
+sight-line test, ~17 wall points x every surface sample). Best of ``--repeat``
+wall-clock seconds; the first call (building the ray structure) is included in
+every repeat, since each simulation builds it anew.
+
+Both functions cast rays through trimesh, which uses Embree (embreex) when it is
+installed and its own numpy code (with an rtree index) otherwise; ``--numpy``
+forces the numpy code. Each run is stored under ``--label`` in
+``benchmarks/results/bench_geometry.json`` (other labels are kept), so one file
+holds, e.g., the timings before and after a change.
+
+    python benchmarks/bench_geometry.py [--label after] [--numpy] [--repeat 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlosfw.simulate.builtin_scenes import builtin_scene
+from nlosfw.simulate.geometry import blocked_fraction, ground_truth_maps, validate_scene
+
+RESULTS = Path(__file__).resolve().parent / "results" / "bench_geometry.json"
+SCENES = ("thesis_two_planes", "thesis_occluded", "thesis_planes", "thesis_concave")
+
+
+def best_of(repeat: int, call: Callable[[], Any]) -> tuple[float, Any]:
+    """(best wall-clock seconds over ``repeat`` calls, the last result)."""
+    times = []
+    for _ in range(repeat):
+        start = time.perf_counter()
+        result = call()
+        times.append(time.perf_counter() - start)
+    return min(times), result
+
+
+def backend(force_numpy: bool) -> str:
+    """Which ray code trimesh uses here (forcing its numpy code if asked)."""
+    try:
+        import trimesh.ray
+    except ImportError:
+        return "none"
+    if force_numpy:
+        trimesh.ray.has_embree = False     # what Trimesh() checks when it picks its ray code
+    return "embree" if trimesh.ray.has_embree else "numpy"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--label", default="current", help="name of this run in the JSON")
+    parser.add_argument("--numpy", action="store_true", help="force trimesh's numpy ray code")
+    parser.add_argument("--repeat", type=int, default=5)
+    args = parser.parse_args(argv)
+
+    rays = backend(args.numpy)
+    rows = []
+    print(f"{'scene':<20} {'faces':>6} {'ground truth s':>15} {'blocked s':>10} "
+          f"{'blocked':>8}  (rays: {rays}, best of {args.repeat})")
+    for name in SCENES:
+        scene = builtin_scene(name)
+        geometry = validate_scene(scene)
+        grid = scene.wall.grid_xyz()
+        mesh = geometry.mesh
+        gt_s, (depth, _) = best_of(args.repeat,
+                                   lambda m=mesh, g=grid: ground_truth_maps(m, g))
+        bf_s, blocked = best_of(args.repeat,
+                                lambda s=scene, m=mesh: blocked_fraction(s, m))
+        row = {"scene": name, "wall": list(grid.shape[:2]), "faces": mesh.n_faces,
+               "ground_truth_s": gt_s, "blocked_fraction_s": bf_s,
+               "blocked_fraction": blocked, "hit_pixels": int(np.count_nonzero(depth > 0))}
+        rows.append(row)
+        print(f"{name:<20} {row['faces']:>6} {gt_s:>15.4f} {bf_s:>10.4f} {blocked:>8.4f}")
+
+    results: dict[str, Any] = {"benchmark": "bench_geometry", "runs": {}}
+    if RESULTS.exists():
+        results = json.loads(RESULTS.read_text())
+    results["runs"][args.label] = {
+        "rays": rays,
+        "repeat": args.repeat,
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                    "numpy": np.__version__, "load_average": os.getloadavg()[0]},
+        "scenes": rows,
+    }
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(results, indent=2) + "\n")
+    print(f"wrote {RESULTS} (run {args.label!r})")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
