@@ -212,7 +212,7 @@ class RunMetrics:
 
     def to_json(self) -> dict[str, Any]:
         """The JSON object of metrics.json."""
-        return to_json(self)  # type: ignore[no-any-return]
+        return to_json(self)
 
     def dumps(self) -> str:
         """The text of metrics.json."""

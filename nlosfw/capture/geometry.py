@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import DataError
@@ -14,8 +15,8 @@ from nlosfw.common.errors import DataError
 SPEED_OF_LIGHT = 299_792_458.0
 
 
-def device_legs(laser_points: np.ndarray, sensor_points: np.ndarray,
-                laser_xyz: np.ndarray, sensor_xyz: np.ndarray) -> np.ndarray:
+def device_legs(laser_points: ArrayLike, sensor_points: ArrayLike,
+                laser_xyz: ArrayLike, sensor_xyz: ArrayLike) -> np.ndarray:
     """Optical path of the device legs |laser_xyz - x_l| + |x_s - sensor_xyz|, shape (S,)."""
     sensors = np.asarray(sensor_points, dtype=float)
     laser = np.asarray(laser_points, dtype=float)

@@ -65,7 +65,9 @@ def read_dataset(f: h5py.File, key: str, path: Path) -> np.ndarray:
 def read_yaml(f: h5py.File, key: str, path: Path) -> dict:
     if key not in f:
         return {}
-    raw = read_dataset(f, key, path)
+    raw: Any = read_dataset(f, key, path)
+    if not isinstance(raw, (str, bytes)):
+        raise DataError(f"{path}: field '{key}' is not a YAML string")
     try:
         value = yaml_safe.load(raw)
     except Exception as err:  # yaml errors

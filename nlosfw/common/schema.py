@@ -178,7 +178,7 @@ def _put(parent: Any, key: Any, value: Any, where: str) -> None:
             _put(child, i, item, f"{where}[{i}]")
     else:
         _set(parent, key, value, where, value)
-        kind = OmegaConf.get_type(parent, key)   # type: ignore[arg-type]  # or a list index
+        kind = OmegaConf.get_type(parent, key)   # or a list index
         if kind is bool and not isinstance(value, bool):
             raise ConfigError(where, f"must be true or false, got {_describe(value)}")
 

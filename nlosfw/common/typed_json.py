@@ -146,7 +146,7 @@ def from_json(cls: type[T], data: Any, where: str = "") -> T:
     ``3.0``.
     """
     try:
-        return _decode(data, cls, "")  # type: ignore[no-any-return]
+        return _decode(data, cls, "")
     except DataError as err:
         raise DataError(f"{where}: {err}" if where else str(err)) from None
 

@@ -8,6 +8,7 @@ no arbitrary Python object is ever built from a file.
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
 import numpy as np
@@ -33,9 +34,9 @@ def _numpy_attr(dotted: str) -> Any:
     if name in ("dtype", "ndarray"):
         return getattr(np, name)
     try:
-        from numpy._core import multiarray  # numpy >= 2
+        multiarray = importlib.import_module("numpy._core.multiarray")  # numpy >= 2
     except ImportError:  # pragma: no cover - numpy 1
-        from numpy.core import multiarray
+        multiarray = importlib.import_module("numpy.core.multiarray")
     return getattr(multiarray, name)
 
 
@@ -44,6 +45,8 @@ class _Loader(yaml.SafeLoader):
 
 
 def _construct_tuple(loader: yaml.SafeLoader, node: yaml.Node) -> tuple:
+    if not isinstance(node, yaml.SequenceNode):
+        raise yaml.constructor.ConstructorError(None, None, "a python/tuple must be a sequence")
     return tuple(loader.construct_sequence(node, deep=True))
 
 
@@ -55,9 +58,12 @@ def _construct_apply(loader: yaml.SafeLoader, suffix: str, node: yaml.Node) -> A
     func = _numpy_attr(suffix)
     if isinstance(node, yaml.SequenceNode):
         args, state = loader.construct_sequence(node, deep=True), None
-    else:
+    elif isinstance(node, yaml.MappingNode):
         value = loader.construct_mapping(node, deep=True)
         args, state = value.get("args", []), value.get("state")
+    else:
+        raise yaml.constructor.ConstructorError(None, None, f"python/object/apply:{suffix} "
+                                                "needs a sequence or a mapping")
     if suffix.endswith("scalar"):  # scalar(dtype, bytes)
         dtype, data = args
         if isinstance(data, str):

@@ -95,6 +95,17 @@ def _rectilinear_axes(wall_xyz: np.ndarray) -> tuple[np.ndarray, np.ndarray] | N
     return (xs, ys) if ok else None
 
 
+@dataclass(frozen=True, eq=False)
+class _Samples:
+    """The stored field: demodulated values (F, Y, X) on increasing axes x, y, f."""
+
+    values: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    f: np.ndarray
+    delay: float = 0.0
+
+
 class InterpFieldModel(FieldModel):
     """Tensor-product cubic spline of the complex field over (y, x, f); see the module doc."""
 
@@ -102,11 +113,12 @@ class InterpFieldModel(FieldModel):
 
     def __init__(self, config: Any = None) -> None:
         super().__init__(config)
-        self._values: np.ndarray | None = None   # (F, Y, X) complex, axes increasing
-        self._x: np.ndarray | None = None
-        self._y: np.ndarray | None = None
-        self._f: np.ndarray | None = None
-        self._delay = 0.0
+        self._samples: _Samples | None = None
+
+    def _stored(self) -> _Samples:
+        if self._samples is None:
+            raise FitError("interp: call fit() or load() before predict() or save()")
+        return self._samples
 
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Any = None) -> FitReport:
@@ -124,8 +136,8 @@ class InterpFieldModel(FieldModel):
                 raise DataError(f"interp: the training field's {name} repeat a value")
         values = field.values[of][:, oy][:, :, ox].astype(np.complex128)
         delay = estimate_delay(values, f[of]) if self.config.demodulate else 0.0
-        self._values = values * np.exp(2j * np.pi * f[of] * delay)[:, None, None]
-        self._x, self._y, self._f, self._delay = xs[ox], ys[oy], f[of], delay
+        self._samples = _Samples(values * np.exp(2j * np.pi * f[of] * delay)[:, None, None],
+                                 xs[ox], ys[oy], f[of], delay)
         if on_step is not None:
             on_step(TrainingStep(step=1, total_steps=1, loss=0.0))
         return FitReport(steps=1, seconds=0.0, final_loss=0.0)
@@ -133,35 +145,33 @@ class InterpFieldModel(FieldModel):
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
         """The spline at wall points (..., 2) and frequencies (F,) -> complex (F, ...)."""
         xy, f = check_query(wall_xy, frequencies, "interp")
-        if self._values is None:
-            raise FitError("interp: call fit() or load() before predict() or save()")
+        stored = self._stored()
         mode = self.config.extrapolation
         pts = xy.reshape(-1, 2)
-        wf = spline_weights(self._f, f, mode)                    # (F', F)
-        wx = spline_weights(self._x, pts[:, 0], mode)             # (P, X)
-        wy = spline_weights(self._y, pts[:, 1], mode)             # (P, Y)
+        wf = spline_weights(stored.f, f, mode)                    # (F', F)
+        wx = spline_weights(stored.x, pts[:, 0], mode)             # (P, X)
+        wy = spline_weights(stored.y, pts[:, 1], mode)             # (P, Y)
         out = np.empty((f.size, pts.shape[0]), dtype=np.complex128)
         for k in range(0, f.size, _FREQ_CHUNK):
             sl = slice(k, k + _FREQ_CHUNK)
-            v = np.tensordot(wf[sl], self._values, axes=(1, 0))  # (f, Y, X)
+            v = np.tensordot(wf[sl], stored.values, axes=(1, 0))  # (f, Y, X)
             rows = np.matmul(wy[None].astype(np.complex128), v)  # (f, P, X)
             out[sl] = np.einsum("fpx,px->fp", rows, wx)
-        out *= np.exp(-2j * np.pi * f * self._delay)[:, None]
+        out *= np.exp(-2j * np.pi * f * stored.delay)[:, None]
         return out.reshape((f.size, *xy.shape[:-1]))
 
     @property
     def n_parameters(self) -> int:
         """Stored real values: 2 per complex training sample."""
-        if self._values is None:
+        if self._samples is None:
             raise FitError("interp: the number of stored values is known after fit or load")
-        return int(2 * self._values.size)
+        return int(2 * self._samples.values.size)
 
     def save(self, path: str | Path) -> None:
-        if self._values is None:
-            raise FitError("interp: call fit() or load() before predict() or save()")
+        stored = self._stored()
         write_model_file(path, "interp", self.config,
-                         {"values": self._values, "x": self._x, "y": self._y, "f": self._f},
-                         {"delay": self._delay})
+                         {"values": stored.values, "x": stored.x, "y": stored.y, "f": stored.f},
+                         {"delay": stored.delay})
 
     @classmethod
     def load(cls, path: str | Path) -> InterpFieldModel:
@@ -178,6 +188,5 @@ class InterpFieldModel(FieldModel):
         if values.shape != (f.size, y.size, x.size) or not np.all(np.isfinite(values)):
             raise DataError(f"model file {path}: values of shape {values.shape} do not match "
                             f"the axes ({f.size}, {y.size}, {x.size})")
-        model._values, model._x, model._y, model._f = values.astype(np.complex128), x, y, f
-        model._delay = delay
+        model._samples = _Samples(values.astype(np.complex128), x, y, f, delay)
         return model

@@ -31,7 +31,7 @@ def write_model_file(path: str | Path, model: str, config: Any, arrays: Mapping[
     """
     header = {"format": FILE_FORMAT, "version": FILE_VERSION, "model": model,
               "config": config_to_dict(config), **dict(extra or {})}
-    payload = {f"a_{k}": np.asarray(v) for k, v in arrays.items()}
+    payload: dict[str, Any] = {f"a_{k}": np.asarray(v) for k, v in arrays.items()}
     payload["header"] = np.array(json.dumps(header))
     with open(Path(path), "wb") as fh:
         np.savez(fh, **payload)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from enum import Enum
 
+from nlosfw.common.config import Configurable
 from nlosfw.image.interface import Imager
 from nlosfw.model.interface import FieldModel
 from nlosfw.simulate.interface import Simulator
@@ -20,7 +21,7 @@ class PluginKind(str, Enum):
 
 
 #: The interface class of each plugin kind (by :class:`PluginKind` value).
-INTERFACES: dict[str, type] = {
+INTERFACES: dict[str, type[Configurable]] = {
     "simulator": Simulator,
     "transform": PhasorTransform,
     "model": FieldModel,

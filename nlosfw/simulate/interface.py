@@ -76,7 +76,7 @@ class Simulator(Configurable, ABC):
             raise DataError(f"{type(self).__name__}.render returned H of shape {capture.H.shape}, "
                             f"expected {expected}")
         res = scene.ground_truth_resolution or scene.wall.resolution
-        gt_wall = type(scene.wall)(size=scene.wall.size, resolution=tuple(res),
+        gt_wall = type(scene.wall)(size=scene.wall.size, resolution=(int(res[0]), int(res[1])),
                                    center=scene.wall.center)
         depth, albedo = ground_truth_maps(geometry.mesh, gt_wall.grid_xyz())
         info = dict(capture.scene_info)

@@ -92,7 +92,12 @@ def check_config_round_trip(spec: PluginSpec) -> None:
 
     cls = spec.config_class()
     assert dataclasses.is_dataclass(cls), f"{spec.qualified_name}: config must be a dataclass"
-    assert cls.__dataclass_params__.frozen, f"{spec.qualified_name}: config must be frozen"
+    try:
+        setattr(spec.make_config({}), "_frozen_probe", 1)  # noqa: B010
+    except dataclasses.FrozenInstanceError:
+        pass
+    else:
+        raise AssertionError(f"{spec.qualified_name}: config must be frozen")
     assert "name" not in {f.name for f in dataclasses.fields(cls)}, (
         f"{spec.qualified_name}: a config field called 'name' would collide with the plugin "
         "name that selects it in its Hydra group")

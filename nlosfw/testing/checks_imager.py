@@ -22,6 +22,8 @@ runs once per declared one) and the voxel layouts they accept (``plane_voxels``,
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from nlosfw.common.errors import DataError
@@ -113,7 +115,7 @@ def check_imager_rejects_voxels_behind_wall(spec: PluginSpec, confocal: bool) ->
     for depth in (0.0, -0.3):
         voxels = fixtures.aligned_voxels(wall, [0.5, depth])
         one_line_error(spec, f"voxels at z = {depth} (the wall is z = 0, the hidden scene z > 0)",
-                       lambda v=voxels: spec.create(dict(spec.test_config)).reconstruct(field, v),
+                       partial(spec.create(dict(spec.test_config)).reconstruct, field, voxels),
                        DataError)
 
 

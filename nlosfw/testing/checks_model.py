@@ -17,6 +17,7 @@ on many frequencies, asked for others) and ``single_frequency`` (fitted on one);
 from __future__ import annotations
 
 import tempfile
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -174,7 +175,7 @@ def check_bad_input_rejected(spec: PluginSpec, single: bool) -> None:
     model = _fitted(spec, field)
     for bad in (np.array([np.nan]), np.array([np.inf]), np.array([0.0]), np.array([-2.0])):
         one_line_error(spec, f"predicting at frequency {bad[0]}",
-                        lambda bad=bad: model.predict(pts, bad))
+                       partial(model.predict, pts, bad))
     one_line_error(spec, "predicting at NaN points",
                     lambda: model.predict(np.full((3, 2), np.nan), np.array([2.0])))
 

@@ -13,6 +13,7 @@ Each check runs once per capture geometry the simulator declares (``single_spot`
 from __future__ import annotations
 
 import tempfile
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -223,7 +224,7 @@ def check_bad_scene_rejected(spec: PluginSpec, confocal: bool) -> None:
     simulator = spec.create(dict(spec.test_config))
     for option, config in cases.items():
         text = one_line_error(spec, f"a scene with a bad {option}",
-                              lambda c=config: simulator.simulate(scene_from_config(c)),
+                              partial(_simulate_config, simulator, config),
                               ConfigError)
         assert option in text, (
             f"{spec.qualified_name}: expected one line naming {option}, got {text!r}")
@@ -238,3 +239,8 @@ SIMULATOR_CHECKS = (
     check_mesh_file_matches_patch,
     check_bad_scene_rejected,
 )
+
+
+def _simulate_config(simulator: Any, config: dict[str, Any]) -> Any:
+    """Simulate the scene of a plain config mapping (validated on the way)."""
+    return simulator.simulate(scene_from_config(config))

@@ -19,6 +19,7 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.errors import DataError
 from nlosfw.transform.field import PhasorField
 
 
@@ -47,13 +48,21 @@ def device_legs(geometry: CaptureGeometry, wall_points: np.ndarray) -> np.ndarra
     pts = np.asarray(wall_points, dtype=float)
     if not geometry.t_accounts_first_and_last_bounces:
         return np.zeros(pts.shape[:-1])
+    sensor, laser = _point(geometry.sensor_xyz), _point(geometry.laser_xyz)
     out = np.zeros(pts.shape[:-1])
     for idx in np.ndindex(*pts.shape[:-1]):
         p = pts[idx]
-        leg_s = math.dist(p, geometry.sensor_xyz)
-        spot = p if geometry.kind is CaptureKind.CONFOCAL else geometry.laser_point
-        out[idx] = leg_s + math.dist(spot, geometry.laser_xyz)
+        leg_s = math.dist(p, sensor)
+        spot = p if geometry.kind is CaptureKind.CONFOCAL else _point(geometry.laser_point)
+        out[idx] = leg_s + math.dist(spot, laser)
     return out
+
+
+def _point(xyz: np.ndarray | None) -> np.ndarray:
+    """A position the reference needs; DataError when the geometry lacks it."""
+    if xyz is None:
+        raise DataError("the capture geometry lacks a position the reference needs")
+    return np.asarray(xyz, dtype=float)
 
 
 def naive_rsd(field: PhasorField, voxels: np.ndarray, time: float = 0.0) -> np.ndarray:
@@ -75,7 +84,7 @@ def naive_rsd(field: PhasorField, voxels: np.ndarray, time: float = 0.0) -> np.n
                 path = (2 * r if confocal else r) + legs[s]
                 u += values[k, s] * np.exp(2j * np.pi * f * path) / r
             if not confocal:
-                u *= np.exp(2j * np.pi * f * math.dist(v, field.geometry.laser_point))
+                u *= np.exp(2j * np.pi * f * math.dist(v, _point(field.geometry.laser_point)))
             total += weights[k] * np.exp(2j * np.pi * f * time) * u
         out[idx] = abs(total) ** 2
     return out

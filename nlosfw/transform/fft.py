@@ -25,6 +25,7 @@ from nlosfw.transform.field import PhasorField
 from nlosfw.transform.frequencies import (
     check_frequency_values,
     default_band,
+    grid_spacing,
     validate_frequencies,
     wall_spacing,
 )
@@ -86,10 +87,12 @@ class FFTTransform(PhasorTransform):
     def frequencies_for(self, capture: Capture) -> np.ndarray:
         """The frequencies this transform uses for ``capture`` (validated)."""
         cfg = self.config
-        spacing = wall_spacing(cfg.grid_spacing, capture, required=not cfg.frequencies)
         if cfg.frequencies:
             freqs = np.asarray(cfg.frequencies, dtype=float)
+            spacing = wall_spacing(cfg.grid_spacing, capture, required=False)
             return validate_frequencies(freqs, capture.delta_t, spacing, "transform.frequencies")
+        spacing = (cfg.grid_spacing if cfg.grid_spacing is not None
+                   else grid_spacing(capture.sensor_grid_xyz))
         try:
             lo, hi = default_band(spacing, capture.delta_t, cfg.f_min, cfg.f_max)
         except ConfigError as err:

@@ -31,6 +31,15 @@ class NearestConfig(FieldModelConfig):
     frequency_interpolation: FrequencyInterpolation = FrequencyInterpolation.linear
 
 
+@dataclass(frozen=True, eq=False)
+class _Samples:
+    """The training samples: wall points (N, 2), sorted frequencies (F,), values (F, N)."""
+
+    xy: np.ndarray
+    freqs: np.ndarray
+    values: np.ndarray
+
+
 class NearestFieldModel(FieldModel):
     """Copies the nearest training wall sample; interpolates between training frequencies."""
 
@@ -38,52 +47,52 @@ class NearestFieldModel(FieldModel):
 
     def __init__(self, config: NearestConfig | None = None) -> None:
         super().__init__(config)
-        self._xy: np.ndarray | None = None
-        self._freqs: np.ndarray | None = None
-        self._values: np.ndarray | None = None
+        self._samples: _Samples | None = None
 
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Callable | None = None) -> FitReport:
         if field.values.size == 0 or not np.any(field.values):
             raise FitError("field: empty or all zero; nothing to fit")
         order = np.argsort(field.frequencies)
-        self._freqs = field.frequencies[order]
-        self._xy = field.wall_xyz[..., :2].reshape(-1, 2)
-        self._values = field.values[order].reshape(len(order), -1)
+        self._samples = _Samples(xy=field.wall_xyz[..., :2].reshape(-1, 2),
+                                 freqs=field.frequencies[order],
+                                 values=field.values[order].reshape(len(order), -1))
         return FitReport(steps=0, seconds=0.0, final_loss=0.0)
 
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
-        if self._values is None:
+        if self._samples is None:
             raise FitError("nearest: predict called before fit or load")
+        known = self._samples
         wall_xy = np.asarray(wall_xy, dtype=float)
         if wall_xy.shape[-1:] != (2,) or not np.all(np.isfinite(wall_xy)):
             raise DataError("wall_xy: must be finite (x, y) pairs, shape (..., 2)")
         freqs = np.atleast_1d(np.asarray(frequencies, dtype=float))
         if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
             raise DataError("frequencies: must be finite and > 0 (cycles per metre)")
-        _, nearest = cKDTree(self._xy).query(wall_xy.reshape(-1, 2))
-        at_points = self._values[:, nearest]                      # (F_train, N)
-        if self.config.frequency_interpolation == "nearest" or self._freqs.size == 1:
-            idx = np.abs(freqs[:, None] - self._freqs[None]).argmin(axis=1)
+        _, nearest = cKDTree(known.xy).query(wall_xy.reshape(-1, 2))
+        at_points = known.values[:, nearest]                      # (F_train, N)
+        if self.config.frequency_interpolation == "nearest" or known.freqs.size == 1:
+            idx = np.abs(freqs[:, None] - known.freqs[None]).argmin(axis=1)
             out = at_points[idx]
         else:
-            hi = np.clip(np.searchsorted(self._freqs, freqs), 1, self._freqs.size - 1)
+            hi = np.clip(np.searchsorted(known.freqs, freqs), 1, known.freqs.size - 1)
             lo = hi - 1
-            w = np.clip((freqs - self._freqs[lo]) / (self._freqs[hi] - self._freqs[lo]), 0, 1)
+            w = np.clip((freqs - known.freqs[lo]) / (known.freqs[hi] - known.freqs[lo]), 0, 1)
             out = (1 - w)[:, None] * at_points[lo] + w[:, None] * at_points[hi]
         return out.reshape((freqs.size,) + wall_xy.shape[:-1])
 
     @property
     def n_parameters(self) -> int:
-        return 0 if self._values is None else int(self._values.size * 2)
+        return 0 if self._samples is None else int(self._samples.values.size * 2)
 
     def save(self, path: str | Path) -> None:
-        if self._values is None:
+        if self._samples is None:
             raise FitError("nearest: nothing to save before fit")
+        known = self._samples
         header = json.dumps({"format": _FORMAT, "config": config_to_dict(self.config)})
         with open(path, "wb") as f:
-            np.savez(f, header=np.array(header), xy=self._xy, freqs=self._freqs,
-                     values=self._values)
+            np.savez(f, header=np.array(header), xy=known.xy, freqs=known.freqs,
+                     values=known.values)
 
     @classmethod
     def load(cls, path: str | Path) -> NearestFieldModel:
@@ -96,5 +105,5 @@ class NearestFieldModel(FieldModel):
         if header.get("format") != _FORMAT:
             raise DataError(f"{path}: holds {header.get('format')!r}, not a nearest model")
         model = cls(config_from_mapping(NearestConfig, header["config"]))
-        model._xy, model._freqs, model._values = arrays["xy"], arrays["freqs"], arrays["values"]
+        model._samples = _Samples(xy=arrays["xy"], freqs=arrays["freqs"], values=arrays["values"])
         return model
