@@ -92,6 +92,15 @@ class NeuralFieldConfig(FieldModelConfig):
     (a common path delay) before fitting, and undo it on prediction: the field then turns
     far fewer times across the band (a normalisation of the targets; exact, no information
     lost)."""
+    frequency_smoothness: float = 0.0
+    """Weight of the regularisation across frequency (0: off): the mean squared second
+    difference of the normalised field between neighbouring frequencies (at the mean
+    training spacing), at random wall points, added to the loss. The field is smooth
+    in frequency; this keeps a network from wiggling between training frequencies
+    (:mod:`nlosfw.model.smoothness`). Needs 3 or more training frequencies."""
+    smoothness_points: int = 64
+    """Random wall points of that penalty per step (multi mode: each at its own random
+    frequency of the band; single mode: every network at the same points)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -115,6 +124,11 @@ class NeuralFieldConfig(FieldModelConfig):
         require(self.divergence_factor > 1, "divergence_factor",
                 f"must be > 1, got {self.divergence_factor}")
         require(self.threads >= 0, "threads", f"must be >= 0, got {self.threads}")
+        require(self.frequency_smoothness >= 0 and math.isfinite(self.frequency_smoothness),
+                "frequency_smoothness", f"must be >= 0 (0: off), got "
+                f"{self.frequency_smoothness}")
+        require(self.smoothness_points >= 1, "smoothness_points",
+                f"must be >= 1, got {self.smoothness_points}")
 
 
 @dataclass(frozen=True)
