@@ -59,14 +59,12 @@ TARGET_FIT_S = 60.0
 #: Candidate options per grid (each tried on both tuning scenes, torch engine).
 GRIDS: dict[str, list[tuple[str, dict[str, Any]]]] = {
     "baselines": [("siren_torch", {})],
-    "fourier": [("fourier_torch", {"sigma": s}) for s in (1.0, 2.0, 4.0, 8.0)],
+    "fourier": [("fourier_torch", {"sigma": s}) for s in (1.0, 2.0, 4.0)],
     "wire": [("wire_torch", {"omega0": w, "scale0": s}) for w, s in
-             ((5.0, 2.0), (10.0, 5.0), (20.0, 10.0), (10.0, 2.0))],
-    "finer": [("finer_torch", {"omega0_first": w, "first_bias_scale": k}) for w, k in
-              ((15.0, 1.0), (30.0, 1.0), (15.0, 5.0), (5.0, 1.0))],
+             ((5.0, 2.0), (10.0, 5.0), (20.0, 10.0))],
+    "finer": [("finer_torch", {"omega0_first": w}) for w in (5.0, 15.0, 30.0)],
     "hashgrid": [("hashgrid_torch", o) for o in (
-        {}, {"finest_resolution": 32}, {"encode_frequency": False},
-        {"levels": 4, "base_resolution": 2})],
+        {}, {"finest_resolution": 8}, {"encode_frequency": False})],
 }
 
 

@@ -196,7 +196,7 @@ class FourierFeatures(eqx.Module):
 
     def __call__(self, v: jax.Array) -> jax.Array:
         angle = 2 * jnp.pi * (v @ self.B.value)
-        return jnp.concatenate([jnp.cos(angle), jnp.sin(angle)], axis=-1)
+        return jnp.concatenate([fast_sin(angle + np.pi / 2), fast_sin(angle)], axis=-1)
 
 
 class Finer(eqx.Module):
@@ -208,13 +208,13 @@ class Finer(eqx.Module):
 
     def __call__(self, z: jax.Array) -> jax.Array:
         scale = jnp.abs(z) + 1
-        return jnp.sin(self.omega0 * (scale if self.scale_gradient
-                                      else jax.lax.stop_gradient(scale)) * z)
+        return fast_sin(self.omega0 * (scale if self.scale_gradient
+                                       else jax.lax.stop_gradient(scale)) * z)
 
 
 class ComplexLinear(eqx.Module):
-    """z W + b, complex W = weight[0] + i weight[1] (fan_in, fan_out) and b = bias[0] + i bias[1]
-    stored as real arrays."""
+    """The complex map z W + b on real pairs: [Re z, Im z] (N, 2 fan_in) -> [Re, Im]
+    (N, 2 fan_out), with W = weight[0] + i weight[1] (fan_in, fan_out), b = bias[0] + i bias[1]."""
 
     weight: jax.Array
     bias: jax.Array
@@ -223,19 +223,25 @@ class ComplexLinear(eqx.Module):
         self.weight = jnp.zeros((2, fan_in, fan_out))
         self.bias = jnp.zeros((2, fan_out))
 
-    def __call__(self, z: jax.Array) -> jax.Array:
-        w = jax.lax.complex(self.weight[0], self.weight[1])
-        return z.astype(w.dtype) @ w + jax.lax.complex(self.bias[0], self.bias[1])
+    def __call__(self, h: jax.Array) -> jax.Array:
+        re, im = self.weight[0], self.weight[1]
+        matrix = jnp.concatenate([jnp.concatenate([re, im], 1), jnp.concatenate([-im, re], 1)])
+        return h @ matrix + self.bias.reshape(-1)
 
 
 class Gabor(eqx.Module):
-    """WIRE's complex Gabor wavelet psi(z) = exp(i omega0 z - |s0 z|^2), z real or complex."""
+    """WIRE's complex Gabor wavelet psi(z) = exp(i omega0 z - |s0 z|^2) of z = re + i im
+    (im None: z real), as real pairs [Re psi, Im psi]."""
 
     omega0: float = eqx.field(static=True)
     scale0: float = eqx.field(static=True)
 
-    def __call__(self, z: jax.Array) -> jax.Array:
-        return jnp.exp(1j * self.omega0 * z - jnp.square(self.scale0 * jnp.abs(z)))
+    def __call__(self, re: jax.Array, im: jax.Array | None = None) -> jax.Array:
+        size = jnp.square(re) if im is None else jnp.square(re) + jnp.square(im)
+        log_envelope = -self.scale0 ** 2 * size - (0 if im is None else self.omega0 * im)
+        envelope, phase = jnp.exp(log_envelope), self.omega0 * re
+        return jnp.concatenate([envelope * fast_sin(phase + np.pi / 2),
+                                envelope * fast_sin(phase)], axis=-1)
 
 
 class HashGridEncoding(eqx.Module):
@@ -320,7 +326,7 @@ class FinerNetwork(MLP):
 
 class WireNetwork(_FromNumpy):
     """A real :class:`Linear`, then :class:`ComplexLinear` layers, :class:`Gabor` after each
-    but the last; returns the complex field (N,)."""
+    but the last; returns the complex field (N,) itself."""
 
     layers: list[Any]
     gabor: Gabor
@@ -333,9 +339,12 @@ class WireNetwork(_FromNumpy):
         self.gabor = Gabor(config.omega0, config.scale0)
 
     def __call__(self, v: jax.Array) -> jax.Array:
-        for layer in self.layers[:-1]:
-            v = self.gabor(layer(v))
-        return self.layers[-1](v)[:, 0]
+        h = self.gabor(self.layers[0](v))                  # real first layer
+        for layer in self.layers[1:-1]:
+            re, im = jnp.split(layer(h), 2, axis=-1)
+            h = self.gabor(re, im)
+        out = self.layers[-1](h)                           # [Re, Im] of the one output
+        return jax.lax.complex(out[:, 0], out[:, 1])
 
 
 class HashGridNetwork(_FromNumpy):

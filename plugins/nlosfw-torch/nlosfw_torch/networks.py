@@ -173,28 +173,34 @@ class Finer(nn.Module):
 
 
 class ComplexLinear(nn.Module):
-    """z W + b, complex W = weight[0] + i weight[1] (fan_in, fan_out) and b = bias[0] + i bias[1]
-    stored as real arrays."""
+    """The complex map z W + b on real pairs: [Re z, Im z] (N, 2 fan_in) -> [Re, Im]
+    (N, 2 fan_out), with W = weight[0] + i weight[1] (fan_in, fan_out), b = bias[0] + i bias[1]
+    (a real matrix product: torch's complex kernels are several times slower on CPU)."""
 
     def __init__(self, fan_in: int, fan_out: int) -> None:
         super().__init__()
         self.weight = nn.Parameter(torch.zeros(2, fan_in, fan_out))
         self.bias = nn.Parameter(torch.zeros(2, fan_out))
 
-    def forward(self, z: torch.Tensor) -> torch.Tensor:
-        w = torch.complex(self.weight[0], self.weight[1])
-        return z.to(w.dtype) @ w + torch.complex(self.bias[0], self.bias[1])
+    def forward(self, h: torch.Tensor) -> torch.Tensor:
+        re, im = self.weight[0], self.weight[1]
+        matrix = torch.cat([torch.cat([re, im], 1), torch.cat([-im, re], 1)], 0)
+        return h @ matrix + self.bias.reshape(-1)
 
 
 class Gabor(nn.Module):
-    """WIRE's complex Gabor wavelet psi(z) = exp(i omega0 z - |s0 z|^2), z real or complex."""
+    """WIRE's complex Gabor wavelet psi(z) = exp(i omega0 z - |s0 z|^2) of z = re + i im
+    (im None: z real), as real pairs [Re psi, Im psi]."""
 
     def __init__(self, omega0: float, scale0: float) -> None:
         super().__init__()
         self.omega0, self.scale0 = float(omega0), float(scale0)
 
-    def forward(self, z: torch.Tensor) -> torch.Tensor:
-        return torch.exp(1j * self.omega0 * z - torch.square(self.scale0 * torch.abs(z)))
+    def forward(self, re: torch.Tensor, im: torch.Tensor | None = None) -> torch.Tensor:
+        size = torch.square(re) if im is None else torch.square(re) + torch.square(im)
+        log_envelope = -self.scale0 ** 2 * size - (0 if im is None else self.omega0 * im)
+        envelope, phase = torch.exp(log_envelope), self.omega0 * re
+        return torch.cat([envelope * torch.cos(phase), envelope * torch.sin(phase)], dim=-1)
 
 
 class HashGridEncoding(nn.Module):
@@ -271,7 +277,7 @@ class FinerNetwork(_FromNumpy, MLP):
 
 class WireNetwork(_FromNumpy, nn.Module):
     """A real :class:`Linear`, then :class:`ComplexLinear` layers, :class:`Gabor` after each
-    but the last; returns the complex field (N,)."""
+    but the last; returns the complex field (N,) itself."""
 
     def __init__(self, config: WireFieldConfig, shape: FieldShape) -> None:
         super().__init__()
@@ -282,9 +288,12 @@ class WireNetwork(_FromNumpy, nn.Module):
         self.gabor = Gabor(config.omega0, config.scale0)
 
     def forward(self, v: torch.Tensor) -> torch.Tensor:
-        for layer in self.layers[:-1]:
-            v = self.gabor(layer(v))
-        return self.layers[-1](v)[:, 0]
+        h = self.gabor(self.layers[0](v))                  # real first layer
+        for layer in self.layers[1:-1]:
+            re, im = layer(h).chunk(2, dim=-1)
+            h = self.gabor(re, im)
+        out = self.layers[-1](h)                           # [Re, Im] of the one output
+        return torch.complex(out[:, 0], out[:, 1])
 
 
 class HashGridNetwork(_FromNumpy, nn.Module):
