@@ -10,7 +10,8 @@ tensorstore and a dozen more packages for the same.
 The module (``factory(config, shape, key)``) maps normalised inputs (N, in_dim)
 float32 to (N, 2) = (Re, Im) or to a complex (N,). Its floating-point arrays are
 trained, except those wrapped in :class:`Fixed` (e.g. a random Fourier matrix);
-array names are their dotted paths (``layers.0.weight``). Step functions are
+array names are their dotted paths (``layers.0.weight``; a Fixed array: its wrapper's
+path, ``features.B``, as torch names a buffer). Step functions are
 jitted once per network structure and reused across model instances. JAX picks
 its own CPU thread count (``threads`` is ignored).
 """

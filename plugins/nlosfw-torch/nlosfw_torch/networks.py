@@ -207,6 +207,8 @@ class HashGridEncoding(nn.Module):
     """Multiresolution hash-grid features of the first ``layout.dims`` input columns (in
     (-1, 1), clamped), d-linearly interpolated per level; other columns are appended."""
 
+    corners: torch.Tensor
+
     def __init__(self, layout: HashGridLayout) -> None:
         super().__init__()
         self.layout = layout
