@@ -231,9 +231,14 @@ def main() -> None:
                     row = run_model(tuning_data(scene), name, options, seed)
                     row["label"] = args.label or args.grid
                     runs.append(row)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(results, indent=1, default=float))
-    print(f"wrote {args.out}")
+                    write(args.out, results)            # after every fit: runs are long
+    write(args.out, results)
+
+
+def write(path: Path, results: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=1, default=float))
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":
