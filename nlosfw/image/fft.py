@@ -8,9 +8,11 @@ every voxel-sample offset. Both are zero-padded to (n_v + n_s - 1) per axis
 frequencies at once, and transformed back: O(N^2 log N) per plane and
 frequency instead of O(N^4). A volume is a stack of planes.
 
-Voxel spacing may equal the wall spacing Δ or be a finer Δ/k (k an integer):
-the wall field is then zero-interleaved onto the voxel lattice, which gives the
-same sum exactly. Voxel planes need not be aligned with or as large as the
+Voxel spacing may equal the wall spacing Δ, be a finer Δ/k or a coarser kΔ (k an
+integer): the convolution then runs on the finer of the two lattices, the wall field
+zero-interleaved onto it or the voxels read every k-th point, which gives the same sum
+exactly (the layout is :mod:`nlosfw.image.plane_convolution`, shared with the
+``rsd_prior`` field model). Voxel planes need not be aligned with or as large as the
 wall grid. The single-spot laser leg is a per-voxel phase applied after the
 convolution; confocal fields use the doubled path (and, for coherent images,
 sum the frequencies before a single inverse FFT).
@@ -27,9 +29,18 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
+from nlosfw.image.plane_convolution import (
+    GridLayout,
+    LatticeAxis,
+    PlaneConvolution,
+    from_canonical,
+    grid_layout,
+    lattice_axis,
+    to_canonical,
+)
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
 from nlosfw.image.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
-from nlosfw.transform.field import PhasorField, regular_grid_spacing
+from nlosfw.transform.field import PhasorField
 
 #: Relative tolerance on "voxel spacing = wall spacing / k" and on plane flatness.
 _RTOL = 1e-6
@@ -61,29 +72,6 @@ class FFTImagerConfig(PropagationConfig):
         require(self.chunk_mb > 0, "chunk_mb", f"must be > 0 MiB, got {self.chunk_mb}")
 
 
-@dataclass(frozen=True)
-class _Axis:
-    """One axis of a voxel plane against the wall grid."""
-
-    n_wall: int
-    n_vox: int
-    ratio: int            # k: wall spacing / voxel spacing
-    step: float           # voxel spacing
-    offset: float         # first voxel coordinate - first wall coordinate
-
-    @property
-    def n_interleaved(self) -> int:
-        return self.ratio * (self.n_wall - 1) + 1
-
-    @property
-    def n_linear(self) -> int:
-        return self.n_vox + self.n_interleaved - 1
-
-    def offsets(self) -> np.ndarray:
-        """Voxel - wall coordinate differences sampled by the linear convolution."""
-        return self.offset + self.step * (np.arange(self.n_linear) - (self.n_interleaved - 1))
-
-
 class FFTImager(PropagationImager):
     """Fast RSD for planes parallel to the wall on a regular grid (both capture kinds)."""
 
@@ -106,168 +94,102 @@ class FFTImager(PropagationImager):
                    coeffs: np.ndarray) -> np.ndarray:
         cfg = self.config
         cdtype = np.complex64 if cfg.precision == "single" else np.complex128
-        ops, (wy0, wx0), (dy, dx) = _wall_grid(field)
-        values = _apply(wall_field(field, cdtype), ops, axes=(1, 2))
+        wall = _wall_grid(field)
+        values = to_canonical(wall_field(field, cdtype), wall.order, axes=(1, 2))
         geometry = field.geometry
         m = path_multiplier(geometry)
         planes = voxels.reshape((-1,) + voxels.shape[-3:])
         out = np.empty((coeffs.shape[0],) + planes.shape[:-1], dtype=np.float64)
         cache: dict[tuple[int, ...], np.ndarray] = {}
         for i, plane in enumerate(planes):
-            pops, (vy0, vx0), (vdy, vdx), z = _plane_grid(plane, i)
-            canon = _apply(plane, pops, axes=(0, 1))
-            ay = _axis(values.shape[1], canon.shape[0], dy, vdy, vy0 - wy0, "y")
-            ax = _axis(values.shape[2], canon.shape[1], dx, vdx, vx0 - wx0, "x")
-            image = self._plane(values, field.frequencies, canon, z, ay, ax, m, geometry,
+            grid, z = _plane_grid(plane, i)
+            canon = to_canonical(plane, grid.order, axes=(0, 1))
+            conv = PlaneConvolution(
+                _axis(wall.shape[0], wall.spacing[0], grid.shape[0], grid.spacing[0],
+                      grid.origin[0] - wall.origin[0], "y"),
+                _axis(wall.shape[1], wall.spacing[1], grid.shape[1], grid.spacing[1],
+                      grid.origin[1] - wall.origin[1], "x"),
+                cfg.workers)
+            image = self._plane(values, field.frequencies, canon, z, conv, m, geometry,
                                 coeffs, cache, cdtype)
-            out[:, i] = _undo(image, pops, axes=(1, 2))
+            out[:, i] = from_canonical(image, grid.order, axes=(1, 2))
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
 
     def _plane(self, values: np.ndarray, freqs: np.ndarray, plane: np.ndarray, z: float,
-               ay: _Axis, ax: _Axis, m: int, geometry: CaptureGeometry, coeffs: np.ndarray,
+               conv: PlaneConvolution, m: int, geometry: CaptureGeometry, coeffs: np.ndarray,
                cache: dict, cdtype: type) -> np.ndarray:
         cfg = self.config
         n_f = freqs.size
-        shape = (scipy.fft.next_fast_len(ay.n_linear), scipy.fft.next_fast_len(ax.n_linear))
+        shape = conv.shape
+        n_lin = (conv.ay.n_linear, conv.ax.n_linear)
         itemsize = np.dtype(cdtype).itemsize
         plane_bytes = shape[0] * shape[1] * itemsize
         budget = cfg.chunk_mb * 2**20
-        key = (ay.ratio, ax.ratio) + shape
+        key = conv.input_key
         spectrum = cache.get(key)
         if spectrum is None and n_f * plane_bytes <= budget / 2:
-            spectrum = cache[key] = self._spectrum(values, ay, ax, shape, slice(None))
-        batch = int(max(1, budget // (4 * plane_bytes + 12 * ay.n_linear * ax.n_linear)))
-        r = np.sqrt(ay.offsets()[:, None] ** 2 + ax.offsets()[None, :] ** 2 + z * z)
-        crop = (slice(ay.n_interleaved - 1, ay.n_interleaved - 1 + ay.n_vox),
-                slice(ax.n_interleaved - 1, ax.n_interleaved - 1 + ax.n_vox))
+            spectrum = cache[key] = conv.input_spectrum(values)
+        batch = int(max(1, budget // (4 * plane_bytes + 12 * n_lin[0] * n_lin[1])))
+        r = conv.distances(z)
         coherent = cfg.combine == "coherent"
         fold = coherent and geometry.kind is CaptureKind.CONFOCAL   # no voxel phase: sum first
-        acc = FrequencySum(coeffs, cfg.combine, (ay.n_vox, ax.n_vox))
+        acc = FrequencySum(coeffs, cfg.combine, (conv.ay.n_out, conv.ax.n_out))
         folded = np.zeros((coeffs.shape[0],) + shape, dtype=np.complex128) if fold else None
         for start in range(0, n_f, batch):
             sel = slice(start, min(n_f, start + batch))
-            spec = spectrum[sel] if spectrum is not None else self._spectrum(
-                values, ay, ax, shape, sel)
-            work = np.zeros((spec.shape[0],) + shape, dtype=cdtype)
-            kernel(freqs[sel], r, m, cdtype, out=work[:, :ay.n_linear, :ax.n_linear])
+            spec = spectrum[sel] if spectrum is not None else conv.input_spectrum(values[sel])
+            work = conv.padded(spec.shape[0], cdtype)
+            kernel(freqs[sel], r, m, cdtype, out=work[(slice(None),) + conv.kernel_region])
             work = scipy.fft.fft2(work, overwrite_x=True, workers=cfg.workers)
             work *= spec
             if folded is not None:
                 folded += np.einsum("tf,fyx->tyx", coeffs[:, sel], work)
                 continue
-            fields = scipy.fft.ifft2(work, overwrite_x=True, workers=cfg.workers)[
-                (slice(None),) + crop]
+            fields = conv.read_outputs(work)
             phase = laser_phase(freqs[sel], plane, geometry, cdtype)
             if phase is not None:
                 fields *= phase
             acc.add(fields, sel)
         if folded is not None:
-            amp = scipy.fft.ifft2(folded, overwrite_x=True, workers=cfg.workers)
-            acc.add_amplitude(amp[(slice(None),) + crop])
+            acc.add_amplitude(conv.read_outputs(folded))
         return acc.intensity()
-
-    def _spectrum(self, values: np.ndarray, ay: _Axis, ax: _Axis, shape: tuple[int, int],
-                  sel: slice) -> np.ndarray:
-        """FFT of the wall field, zero-interleaved by the voxel/wall spacing ratio."""
-        v = values[sel]
-        grid = np.zeros((v.shape[0], ay.n_interleaved, ax.n_interleaved), dtype=v.dtype)
-        grid[:, ::ay.ratio, ::ax.ratio] = v
-        return scipy.fft.fft2(grid, s=shape, workers=self.config.workers)
 
 
 # ---------------------------------------------------------------------- grids
-def _grid_ops(points: np.ndarray) -> tuple[bool, bool, bool]:
-    """(transpose, flip rows, flip columns) that make x run along axis 1 and y along axis 0,
-    both increasing (a single row or column is oriented by its one varying coordinate)."""
-    p = points
-    transpose = False
-    if p.shape[0] > 1 and p.shape[1] > 1:
-        along0 = np.abs(p[1, 0, :2] - p[0, 0, :2])
-        transpose = bool(along0[0] > along0[1])
-    elif p.shape[0] > 1:
-        transpose = bool(abs(p[1, 0, 0] - p[0, 0, 0]) > abs(p[1, 0, 1] - p[0, 0, 1]))
-    elif p.shape[1] > 1:
-        transpose = bool(abs(p[0, 1, 1] - p[0, 0, 1]) > abs(p[0, 1, 0] - p[0, 0, 0]))
-    q = p.transpose(1, 0, 2) if transpose else p
-    flip_rows = q.shape[0] > 1 and q[-1, 0, 1] < q[0, 0, 1]
-    flip_cols = q.shape[1] > 1 and q[0, -1, 0] < q[0, 0, 0]
-    return transpose, bool(flip_rows), bool(flip_cols)
-
-
-def _apply(a: np.ndarray, ops: tuple[bool, bool, bool], axes: tuple[int, int]) -> np.ndarray:
-    """Bring an array laid out like the grid into canonical order."""
-    transpose, flip_rows, flip_cols = ops
-    if transpose:
-        a = np.swapaxes(a, *axes)
-    if flip_rows:
-        a = np.flip(a, axis=axes[0])
-    if flip_cols:
-        a = np.flip(a, axis=axes[1])
-    return a
-
-
-def _undo(a: np.ndarray, ops: tuple[bool, bool, bool], axes: tuple[int, int]) -> np.ndarray:
-    """Inverse of :func:`_apply`."""
-    transpose, flip_rows, flip_cols = ops
-    if flip_cols:
-        a = np.flip(a, axis=axes[1])
-    if flip_rows:
-        a = np.flip(a, axis=axes[0])
-    if transpose:
-        a = np.swapaxes(a, *axes)
-    return a
-
-
-def _wall_grid(field: PhasorField) -> tuple[tuple[bool, bool, bool], tuple[float, float],
-                                            tuple[float, float]]:
-    """(ops, (y0, x0), (dy, dx)) of the field's wall in canonical order; DataError if irregular."""
-    wall = field.wall_xyz
-    ops = _grid_ops(wall)
-    canon = _apply(wall, ops, axes=(0, 1))
-    spacing = regular_grid_spacing(canon)
-    if spacing is None:
+def _wall_grid(field: PhasorField) -> GridLayout:
+    """The canonical layout of the field's wall; DataError if it is not a regular grid."""
+    layout = grid_layout(field.wall_xyz)
+    if layout is None:
         raise DataError("field.wall_xyz: the fft imager needs the field on a regular, "
                         "axis-aligned wall grid in the plane z = 0; use the rsd imager for "
                         "other walls")
-    return ops, (float(canon[0, 0, 1]), float(canon[0, 0, 0])), spacing
+    return layout
 
 
-def _plane_grid(plane: np.ndarray, index: int) -> tuple[tuple[bool, bool, bool],
-                                                         tuple[float, float],
-                                                         tuple[float, float], float]:
-    """(ops, (y0, x0), (dy, dx), z) of one voxel plane; DataError unless it is a regular grid
-    parallel to the wall."""
+def _plane_grid(plane: np.ndarray, index: int) -> tuple[GridLayout, float]:
+    """(layout, z) of one voxel plane; DataError unless it is a regular grid parallel to
+    the wall."""
     z = plane[..., 2]
     scale = max(1.0, float(np.abs(z).max()), float(np.ptp(plane[..., :2])))
     if np.ptp(z) > _RTOL * scale:
         raise DataError(f"voxels: plane {index} is not parallel to the wall (z from "
                         f"{z.min():.6g} to {z.max():.6g} m); the fft imager needs planes of "
                         "constant z on a regular x-y grid; use the rsd imager for other voxels")
-    flat = plane.copy()
-    flat[..., 2] = 0.0
-    ops = _grid_ops(flat)
-    canon = _apply(flat, ops, axes=(0, 1))
-    spacing = regular_grid_spacing(canon)
-    if spacing is None:
+    layout = grid_layout(plane[..., :2])
+    if layout is None:
         raise DataError(f"voxels: plane {index} is not a regular axis-aligned x-y grid; the fft "
                         "imager needs regularly spaced planes parallel to the wall; use the rsd "
                         "imager for other voxels")
-    return ops, (float(canon[0, 0, 1]), float(canon[0, 0, 0])), spacing, float(z.mean())
+    return layout, float(z.mean())
 
 
-def _axis(n_wall: int, n_vox: int, wall_step: float, vox_step: float, offset: float,
-          name: str) -> _Axis:
-    """The convolution geometry along one axis; DataError unless vox_step = wall_step / k."""
-    if n_wall == 1 and n_vox == 1:
-        return _Axis(1, 1, 1, 1.0, offset)
-    if n_wall == 1:
-        return _Axis(1, n_vox, 1, vox_step, offset)
-    if n_vox == 1:
-        return _Axis(n_wall, 1, 1, wall_step, offset)
-    ratio = wall_step / vox_step
-    k = int(round(ratio))
-    if k < 1 or abs(ratio - k) > 1e-3 * ratio:
+def _axis(n_wall: int, wall_step: float, n_vox: int, vox_step: float, offset: float,
+          name: str) -> LatticeAxis:
+    """The convolution from the wall to the voxels along one axis; DataError unless one
+    spacing is a whole multiple of the other."""
+    axis = lattice_axis(n_wall, wall_step, n_vox, vox_step, offset)
+    if axis is None:
         raise DataError(f"voxels: {name} spacing {vox_step:.6g} m must be the wall spacing "
-                        f"{wall_step:.6g} m divided by a whole number k >= 1 (got ratio "
-                        f"{ratio:.6g}); use the rsd imager for other spacings")
-    return _Axis(n_wall, n_vox, k, wall_step / k, offset)
+                        f"{wall_step:.6g} m divided or multiplied by a whole number (got ratio "
+                        f"{wall_step / vox_step:.6g}); use the rsd imager for other spacings")
+    return axis
