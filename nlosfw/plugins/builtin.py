@@ -57,6 +57,20 @@ def register_field_models(register: Any) -> None:
         description="Cubic interpolation of the complex field in x, y and frequency (baseline)",
         capabilities=[C.MULTI_FREQUENCY, C.SINGLE_FREQUENCY, C.SAVE_LOAD],
     )
+    register(
+        "rsd_prior",
+        "nlosfw.model.rsd_prior:RSDPriorFieldModel",
+        config="nlosfw.model.rsd_prior:RSDPriorConfig",
+        description="Non-negative hidden albedo fitted by FISTA, propagated to the wall (RSD)",
+        test_config={"iterations": 150, "amplitude": "point", "l1_weight": 0.001,
+                     "workers": 1},
+        # physical_prior: it fits only fields a hidden scene can produce, so the kit fits
+        # it on a point scatterer's field (the kit's point fixture has no surface normal:
+        # amplitude "point"). No single_frequency: one frequency cannot place the scene in
+        # depth. Not neural: the fit is deterministic (the seed only starts the power
+        # iteration).
+        capabilities=[C.MULTI_FREQUENCY, C.SAVE_LOAD, C.PHYSICAL_PRIOR],
+    )
 
 
 @hookimpl

@@ -41,6 +41,7 @@ class Capability(str, Enum):
     SINGLE_FREQUENCY = "single_frequency"
     SAVE_LOAD = "save_load"
     NEURAL = "neural"
+    PHYSICAL_PRIOR = "physical_prior"
     # imagers
     PLANE_VOXELS = "plane_voxels"
     POINT_VOXELS = "point_voxels"
@@ -84,6 +85,10 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
                             "the wall",
         C.SAVE_LOAD: "save() writes one file that load() restores exactly",
         C.NEURAL: "trained from a random initialisation: the seed changes the fitted model",
+        C.PHYSICAL_PRIOR: "represents only fields a hidden scene can produce through the "
+                          "field's capture geometry (not any smooth function): the kit fits "
+                          "it on a point scatterer's exact field instead of a sum of plane "
+                          "waves",
         C.GPU: "can train on a GPU with device=auto (descriptive: no check needs it)",
     }),
     "imager": MappingProxyType({
