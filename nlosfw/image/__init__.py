@@ -19,10 +19,21 @@ from nlosfw.image.rsd_kernel import (
     phasor_steps,
     wall_field,
 )
-from nlosfw.image.scores import image_metrics, normalise, psnr, rmse, ssim
+from nlosfw.image.scores import (
+    amplitude,
+    depth_rmse,
+    image_metrics,
+    normalise,
+    psnr,
+    reconstruction_scores,
+    rmse,
+    ssim,
+)
 
 __all__ = [
+    "amplitude",
     "cell_centres",
+    "depth_rmse",
     "FFTImager",
     "FFTImagerConfig",
     "image_metrics",
@@ -39,6 +50,7 @@ __all__ = [
     "PropagationImager",
     "psnr",
     "read_reconstruction",
+    "reconstruction_scores",
     "Reconstruction",
     "rmse",
     "RSDImager",
