@@ -190,3 +190,29 @@ def test_corrupt_cache_entries_are_recomputed(tmp_path):
     healed, hit = cache.get_or_compute("captures", "k", compute, write_capture, read_capture)
     assert not hit and len(calls) == 2
     np.testing.assert_array_equal(healed.H, capture.H)
+
+
+def test_a_random_scan_end_to_end(tmp_path, cache_dir):
+    """``split.pattern=random``: models fit the scattered samples, raw images the kept points
+    (the full grid with zeros elsewhere), and the split is recorded."""
+    from nlosfw.transform.field_io import read_phasor_field
+
+    host = load_plugins()
+    overrides = [*TINY[:-1], "reconstruction.n_depths=8", "split.pattern=random",
+                 "split.spatial_fraction=0.25", "split.seed=7"]
+    Pipeline(tmp_path / "run", compose(overrides, host), host).run()
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert metrics["split"] == {"pattern": "random", "spatial_step": 2, "spatial_fraction": 0.25,
+                                "seed": 7, "wall_samples": 256, "train_samples": 64,
+                                "undersampling": 4.0, "train_frequencies": 18,
+                                "heldout_frequencies": 3}
+    raw = read_phasor_field(tmp_path / "run" / "fields" / "raw.hdf5")
+    true = read_phasor_field(tmp_path / "run" / "fields" / "true.hdf5")
+    kept = np.any(raw.values != 0, axis=0)
+    assert kept.sum() == 64
+    np.testing.assert_array_equal(raw.values[:, kept], true.values[:, kept])
+    scores = metrics["reconstruction"]["sources"]
+    assert set(scores) == {"true", "raw", "interp"}
+    # a quarter of the tiny scene's samples: Clough-Tocher fills the gaps better than
+    # imaging the kept samples alone (32.2 against 24.1 dB when written)
+    assert scores["raw"]["psnr"] > 20 and scores["interp"]["psnr"] > scores["raw"]["psnr"] + 4

@@ -2,8 +2,9 @@
 
 ``fields_f<k>.png``  amplitude, phase and amplitude error of each field at one
                      training and one held-out frequency (as in thesis figs. 4.2-5.5)
-``reconstructions.png``  max-intensity images of every source, their depth maps
-                     and their error against the reconstruction of the true field
+``reconstructions.png``  front views (amplitude, the maximum over depth: what the scores
+                     compare) of every source, their depth maps and their error
+                     against the reconstruction of the true field
 ``reconstructions_f<k>.png``  the same from frequency k alone (thesis figs. 5.1-5.5)
 ``loss.png``         training (and validation) loss of each field model
 """
@@ -22,10 +23,10 @@ from nlosfw.app.metrics import ImageScores, ReconstructionMetrics
 from nlosfw.app.results import RunResults
 from nlosfw.app.run_dir import RunContext
 from nlosfw.image.reconstruction import Reconstruction
-from nlosfw.image.scores import normalise
+from nlosfw.image.scores import amplitude, normalise
 from nlosfw.transform.field import PhasorField
 
-_SOURCE_TITLES = {"true": "true field", "raw": "raw (training grid)", "model": "model",
+_SOURCE_TITLES = {"true": "true field", "raw": "raw (training samples)", "model": "model",
                   "interp": "interp baseline"}
 
 
@@ -114,8 +115,8 @@ def _field_figure(fields: Mapping[str, PhasorField], index: int, label: str) -> 
 def _recon_figure(recons: Mapping[str, Reconstruction], scores: Mapping[str, ImageScores],
                   truth_depth: np.ndarray | None, title: str) -> Any:
     sources = list(recons)
-    reference = normalise(recons["true"].max_intensity_image())
-    images = {s: normalise(recons[s].max_intensity_image()) for s in sources}
+    images = {s: normalise(amplitude(recons[s].max_intensity_image())) for s in sources}
+    reference = images["true"]
     errors = {s: np.abs(images[s] - reference) for s in sources if s != "true"}
     err_max = _shared_scale(errors.values())
     fig = Figure(figsize=(3.3 * len(sources), 9.5))
@@ -124,12 +125,11 @@ def _recon_figure(recons: Mapping[str, Reconstruction], scores: Mapping[str, Ima
     ext = [vox[0, 0, 0, 0], vox[0, 0, -1, 0], vox[0, 0, 0, 1], vox[0, -1, 0, 1]]
     depths = recons["true"].depths
     for col, source in enumerate(sources):
-        ssim = None if source not in scores else scores[source].ssim
-        label = "" if ssim is None or source == "true" else f"  (SSIM {ssim:.3f})"
         axes[0, col].imshow(images[source], origin="lower", extent=ext, cmap="hot", vmin=0,
                             vmax=1)
-        axes[0, col].set_title(f"{_SOURCE_TITLES.get(source, source)}{label}\n"
-                               "max intensity over depth")
+        axes[0, col].set_title(f"{_SOURCE_TITLES.get(source, source)}\n"
+                               f"{_score_label(scores.get(source), source)}"
+                               "amplitude, max over depth", fontsize=10)
         depth = recons[source].depth_map(threshold=0.1)
         im = axes[1, col].imshow(depth, origin="lower", extent=ext, cmap="viridis",
                                  vmin=depths.min(), vmax=depths.max())
@@ -148,6 +148,17 @@ def _recon_figure(recons: Mapping[str, Reconstruction], scores: Mapping[str, Ima
     fig.suptitle(f"reconstructions from {title}")
     fig.tight_layout()
     return fig
+
+
+def _score_label(scores: ImageScores | None, source: str) -> str:
+    """'PSNR 31.2 dB, SSIM 0.812' and a line break, for a scored source other than the
+    reference (nothing otherwise)."""
+    if scores is None or source == "true":
+        return ""
+    parts = [f"PSNR {scores.psnr:.1f} dB" if scores.psnr is not None else "",
+             f"SSIM {scores.ssim:.3f}" if scores.ssim is not None else ""]
+    shown = ", ".join(p for p in parts if p)
+    return f"{shown}\n" if shown else ""
 
 
 def _truth_panel(fig: Any, ax: Any, truth_depth: np.ndarray | None, depths: np.ndarray,

@@ -29,7 +29,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, NoReturn
 
-from nlosfw.app.settings import SELECTOR_GROUPS, RunConfig, run_settings
+from nlosfw.app.settings import OPTIONAL_GROUPS, SELECTOR_GROUPS, RunConfig, run_settings
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem, schema_class
 from nlosfw.plugins import PluginHost
@@ -319,7 +319,7 @@ def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
         return
     options = loader.get_group_options(key)
     for value in values:
-        if value in ("null", "None") and key == "experiment":
+        if value in ("null", "None") and key in OPTIONAL_GROUPS:
             continue
         if value not in options:
             raise _unknown_choice(key, value, sorted(options))

@@ -23,9 +23,9 @@ from nlosfw.common.errors import DataError
 from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[1]
+SchemaVersion = Literal[2]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 1
+SCHEMA_VERSION: Final[SchemaVersion] = 2
 
 Status = Literal["running", "completed", "stopped", "failed"]
 """``running`` only while the run is in progress: metrics.json is written when it ends."""
@@ -73,6 +73,22 @@ class TransformMetrics:
     n_frequencies: int
     frequency_band: tuple[float, float] = documented("lowest and highest frequency (cycles/m)")
     grid: tuple[int, int] = documented("wall grid (ny, nx)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class SplitMetrics:
+    """Which samples the field models trained on (the run's ``split``)."""
+
+    pattern: Literal["grid", "random"]
+    spatial_step: int = documented("grid: every k-th wall sample in x and y")
+    spatial_fraction: float | None = optional("random: the fraction of wall samples kept")
+    seed: int | None = optional("random: the seed that drew the samples")
+    wall_samples: int = documented("wall samples of the full capture")
+    train_samples: int = documented("wall samples the models trained on (and raw images)")
+    undersampling: float = documented("wall_samples / train_samples (4, 16, 64 for steps "
+                                      "2, 4, 8)")
+    train_frequencies: int
+    heldout_frequencies: int
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -141,6 +157,8 @@ class FieldMetrics:
     """One field model of the run (``model``, ``interp`` or a ``compare`` label)."""
 
     plugin: str
+    seed: int | None = optional("the model's seed option (neural models: initialisation and "
+                                "batches)")
     n_parameters: int
     training_values: int = documented("real values trained on (2 per complex sample)")
     parameters_per_value: float
@@ -152,12 +170,19 @@ class FieldMetrics:
 
 @dataclass(frozen=True, kw_only=True)
 class ImageScores:
-    """A reconstruction's max-intensity image against the true field's, both normalised
-    to 1 (null where undefined: PSNR of identical images, SSIM of tiny ones)."""
+    """A reconstruction against the full capture's (source ``true``), on amplitudes (the
+    square root of the intensity) each normalised to its maximum, with scikit-image's
+    PSNR and SSIM at their defaults (null where undefined: PSNR of identical images,
+    SSIM of images under 7 pixels a side)."""
 
-    rmse: float | None
-    psnr: float | None
-    ssim: float | None
+    rmse: float | None = documented("of the front view: the maximum over depth")
+    psnr: float | None = documented("dB, of the front view")
+    ssim: float | None = documented("of the front view")
+    volume_psnr: float | None = documented("dB, of the whole (z, y, x) volume")
+    volume_ssim: float | None = documented("of the whole (z, y, x) volume")
+    depth_rmse_m: float | None = optional(
+        "RMS error (m) of the depth of each column's brightest voxel against the scene's "
+        "true depth, over the pixels with a surface (scenes with ground truth)")
     seconds: float | None = optional("time to reconstruct")
 
 
@@ -205,6 +230,7 @@ class RunMetrics:
     run: RunInfo
     capture: CaptureMetrics | None = optional()
     transform: TransformMetrics | None = optional()
+    split: SplitMetrics | None = optional()
     field: dict[str, FieldMetrics] | None = optional(
         "by source: model, interp and every compare label", key="source")
     reconstruction: ReconstructionMetrics | None = optional()

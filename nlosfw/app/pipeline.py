@@ -1,11 +1,12 @@
 """The end-to-end run: capture -> transform -> split -> fit -> predict -> reconstruct -> report.
 
-Four fields are imaged side by side: the true full-resolution field, the raw
-subsampled field the model trains on, the model's prediction and the ``interp``
-baseline's, all on the same voxels; every reconstruction is compared with the
-one from the true field. The stages hand each other the typed results of
-:mod:`nlosfw.app.results` and record their numbers in the run's
-:class:`~nlosfw.app.metrics.RunMetrics`.
+The fields imaged side by side, all with the same imager on the same voxels: the
+true full-resolution field (the reference), the raw samples the models train on
+(a sub-grid, or scattered points), the ``interp`` baseline's prediction, and the
+prediction of every field model of the run (``model`` and each ``compare`` label);
+every reconstruction is scored against the one from the true field. The stages hand
+each other the typed results of :mod:`nlosfw.app.results` and record their numbers in
+the run's :class:`~nlosfw.app.metrics.RunMetrics`.
 """
 
 from __future__ import annotations
@@ -29,7 +30,9 @@ from nlosfw.app.measure import (
     denoising_metrics,
     fit_metrics,
     reconstruction_metrics,
+    split_metrics,
     transform_metrics,
+    truth_depth_image,
 )
 from nlosfw.app.metrics import FieldMetrics, RunInfo, RunMetrics, SplitErrors
 from nlosfw.app.results import (
@@ -202,10 +205,10 @@ class Pipeline:
         from nlosfw.model.protocol import split_field
 
         s = self.settings.split
-        split = split_field(field, spatial_step=s.spatial_step, spectral=s.spectral,
+        split = split_field(field, s.sampling, spectral=s.spectral,
                             spectral_fraction=s.spectral_fraction)
         name, options = self._plugin_options("model")
-        self.ctx.metrics = replace(self.metrics, field={})
+        self.ctx.metrics = replace(self.metrics, split=split_metrics(split), field={})
         models = []
         for source, (plugin, opts) in self._field_models(name, options).items():
             model = self.host.registry.create("model", plugin, opts)
@@ -218,11 +221,10 @@ class Pipeline:
         return FitResult(split=split, models=tuple(models))
 
     def predict(self, transformed: TransformResult, fitted: FitResult) -> ImagedFields:
-        """The fields to image: true, raw (training grid, all frequencies), every model's."""
+        """The fields to image: true, raw (training samples, all frequencies), every model's."""
         from nlosfw.model.protocol import field_metrics
 
         field, split = transformed.field, fitted.split
-        step = split.spatial_step
         predicted = {}
         for fm in fitted.models:
             start = time.perf_counter()
@@ -239,9 +241,7 @@ class Pipeline:
                 entry, predict_seconds=round(seconds, 4),
                 splits=SplitErrors.of(field_metrics(field, prediction, split)),
                 denoising=denoising))
-        fields = ImagedFields(true=field, raw=field.select(y=slice(None, None, step),
-                                                           x=slice(None, None, step)),
-                              predicted=predicted)
+        fields = ImagedFields(true=field, raw=split.raw_field(field), predicted=predicted)
         for source, f in fields.items():
             self.ctx.write(f"fields/{source}.hdf5", partial(write_phasor_field, field=f),
                            kind="phasor_field")
@@ -263,8 +263,9 @@ class Pipeline:
                            partial(write_reconstruction, recon=by_source[source]),
                            kind="reconstruction")
         recons = Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds)
+        truth = truth_depth_image(capture)
         self.ctx.metrics = replace(self.metrics,
-                                   reconstruction=reconstruction_metrics(name, recons))
+                                   reconstruction=reconstruction_metrics(name, recons, truth))
         # as in the thesis figures: images from one frequency at a time
         chosen = chosen_frequencies(split, self.settings.reconstruction.single_frequency_images)
         singles = tuple(
@@ -276,7 +277,7 @@ class Pipeline:
             for label, index in chosen.items())
         recons = replace(recons, single_frequency=singles)
         self.ctx.metrics = replace(self.metrics,
-                                   reconstruction=reconstruction_metrics(name, recons))
+                                   reconstruction=reconstruction_metrics(name, recons, truth))
         return recons
 
     def report(self, results: RunResults) -> None:

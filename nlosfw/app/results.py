@@ -7,8 +7,9 @@ fit -> :class:`FitResult` (the :class:`~nlosfw.model.FieldSplit` and one
 run's numbers are :class:`nlosfw.app.metrics.RunMetrics`.
 
 A *source* is a field's role in the run: ``true`` (the full field), ``raw`` (its
-training-grid samples at every frequency), ``model``, ``interp`` and the ``compare``
-labels. Mappings by source keep that order and are read-only.
+training samples at every frequency, :meth:`~nlosfw.model.FieldSplit.raw_field`),
+``model``, ``interp`` and the ``compare`` labels. Mappings by source keep that order
+and are read-only.
 """
 
 from __future__ import annotations

@@ -15,11 +15,15 @@ from omegaconf import MISSING
 
 from nlosfw.common.config import Choice, config_from_mapping, require
 from nlosfw.common.schema import is_schema_node
-from nlosfw.model.protocol import SpectralSplit
+from nlosfw.model.protocol import SpatialPattern, SpatialSampling, SpectralSplit
 from nlosfw.simulate.scene import Scene
 
-#: The config groups that select a scene or a plugin (plus presets).
-SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment")
+#: The config groups that select a scene or a plugin (plus presets and acquisitions).
+SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment",
+                   "acquisition")
+
+#: The selector groups whose choice may be null (nothing selected).
+OPTIONAL_GROUPS = ("experiment", "acquisition")
 
 #: Pipeline stages in order; ``stop_after`` accepts any of them (``simulate`` = ``capture``).
 STAGES = ("capture", "transform", "fit", "predict", "reconstruct", "report")
@@ -49,15 +53,34 @@ class SplitSettings:
     """Which samples the field model trains on (thesis: 32x32 of 64x64, 90% of frequencies)."""
 
     spatial_step: int = 2
-    """Keep every k-th wall sample in x and y for training."""
+    """Keep every k-th wall sample in x and y for training (pattern grid)."""
+    pattern: SpatialPattern = SpatialPattern.grid
+    """``grid``: every ``spatial_step``-th sample; ``random``: a random ``spatial_fraction``
+    of the wall samples."""
+    spatial_fraction: float | None = None
+    """Pattern random: the fraction of wall samples kept; null: 1 / spatial_step^2 (as many
+    as the grid pattern keeps)."""
+    seed: int = 0
+    """Pattern random: the seed that draws the samples."""
     spectral: SpectralSplit = SpectralSplit.interleaved
     """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
     spectral_fraction: float = 0.1
 
     def __post_init__(self) -> None:
         require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
+        require(self.spatial_fraction is None or 0 < self.spatial_fraction <= 1,
+                "spatial_fraction", f"must be in (0, 1] or null, got {self.spatial_fraction}")
+        require(self.spatial_fraction is None or self.pattern == SpatialPattern.random,
+                "spatial_fraction", "applies to pattern random only (the grid pattern keeps "
+                "every spatial_step-th sample); set split.pattern=random or leave it null")
         require(0 < self.spectral_fraction < 1, "spectral_fraction",
                 f"must be in (0, 1), got {self.spectral_fraction}")
+
+    @property
+    def sampling(self) -> SpatialSampling:
+        """The spatial pattern as the protocol takes it."""
+        return SpatialSampling(pattern=self.pattern, step=self.spatial_step,
+                               fraction=self.spatial_fraction, seed=self.seed)
 
 
 @dataclass(frozen=True)
