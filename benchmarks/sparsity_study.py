@@ -3,7 +3,8 @@
 Runs the sweep of ``conf/experiment/sparsity.yaml`` (scenes x acquisitions x
 sparsities x field models x seeds), or collects one that ran, and writes
 ``benchmarks/results/sparsity_study.json`` and the markdown of the README's
-"Results" section (printed; ``--readme`` rewrites that section in place).
+"Results" section (printed; ``--readme`` rewrites that section in place and writes
+its figure, ``docs/images/sparsity_study.png``).
 
     python benchmarks/sparsity_study.py run [--dir DIR] [--capture FILE] [OVERRIDE ...]
     python benchmarks/sparsity_study.py collect DIR [DIR ...] [--readme]
@@ -38,12 +39,14 @@ from pathlib import Path
 from typing import Any
 
 from nlosfw.app.records import RunRecord, find_runs, read_run
-from nlosfw.app.study import Stat, StudyRow, study_rows
+from nlosfw.app.study import Stat, StudyRow, study_figure, study_rows
 from nlosfw.app.tables import markdown_table
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results" / "sparsity_study.json"
 README = ROOT / "README.md"
+#: The study's figure as the README shows it (written with ``--readme``).
+FIGURE = ROOT / "docs" / "images" / "sparsity_study.png"
 MARKERS = ("<!-- sparsity-results -->", "<!-- /sparsity-results -->")
 TUNING_SCENES = ("thesis_planes", "thesis_concave")
 JUDGED_SCENES = ("letter_t", "thesis_two_planes", "thesis_occluded")
@@ -82,7 +85,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(text)
     if args.readme:
         write_readme_section(text)
-        print(f"README.md: Results section rewritten ({MARKERS[0]})")
+        FIGURE.parent.mkdir(parents=True, exist_ok=True)
+        study_figure(_rows(results), FIGURE, dpi=80)
+        print(f"README.md: Results section rewritten ({MARKERS[0]}), figure {FIGURE}")
     print(f"results written to {out}")
     return 0
 
@@ -190,6 +195,19 @@ def quality_table(rows: Sequence[StudyRow]) -> str:
     return markdown_table(header, lines)
 
 
+def _margin(best: StudyRow, baselines: Sequence[StudyRow], score: str,
+            lower_is_better: bool = False) -> dict[str, Any] | None:
+    """``best``'s mean ``score`` against the better baseline's (gain > 0: ``best`` is better)."""
+    ours = best.scores[score].mean
+    theirs: list[tuple[float, str]] = [(mean, b.series) for b in baselines
+                                       if (mean := b.scores[score].mean) is not None]
+    if ours is None or not theirs:
+        return None
+    value, name = min(theirs) if lower_is_better else max(theirs)
+    gain = (value - ours) if lower_is_better else (ours - value)
+    return {"model": ours, "baseline": name, "baseline_value": value, "gain": gain}
+
+
 def verdicts(rows: Sequence[StudyRow]) -> list[dict[str, Any]]:
     """Per condition and sparsity: the best field model (mean PSNR) against the better
     baseline on each score (raw or interp), with the margins."""
@@ -203,22 +221,19 @@ def verdicts(rows: Sequence[StudyRow]) -> list[dict[str, Any]]:
         if not models or not baselines:
             continue
         best = max(models, key=lambda r: r.scores["psnr"].mean or -1e9)
-
-        def margin(score: str, lower_is_better: bool = False) -> dict[str, Any] | None:
-            ours = best.scores[score].mean
-            theirs = [(b.scores[score].mean, b.series) for b in baselines
-                      if b.scores[score].mean is not None]
-            if ours is None or not theirs:
-                return None
-            value, name = (min if lower_is_better else max)(theirs)
-            gain = (value - ours) if lower_is_better else (ours - value)
-            return {"model": ours, "baseline": name, "baseline_value": value, "gain": gain}
-
         out.append({"condition": condition, "role": _role(condition), "pattern": pattern,
                     "undersampling": under, "model": best.series,
-                    "psnr": margin("psnr"), "ssim": margin("ssim"),
-                    "depth_rmse_m": margin("depth_rmse_m", lower_is_better=True)})
+                    "psnr": _margin(best, baselines, "psnr"),
+                    "ssim": _margin(best, baselines, "ssim"),
+                    "depth_rmse_m": _margin(best, baselines, "depth_rmse_m",
+                                            lower_is_better=True)})
     return out
+
+
+def _gain(margin: dict[str, Any] | None, fmt: str, scale: float = 1.0) -> str:
+    if margin is None:
+        return "-"
+    return f"{scale * margin['gain']:+{fmt}} vs {margin['baseline']}"
 
 
 def verdict_table(found: Sequence[dict[str, Any]]) -> str:
@@ -226,19 +241,13 @@ def verdict_table(found: Sequence[dict[str, Any]]) -> str:
               "SSIM gain", "depth RMSE gain (mm)", "verdict"]
     lines = []
     for v in found:
-        def gain(key: str, fmt: str, scale: float = 1.0) -> str:
-            m = v[key]
-            if m is None:
-                return "-"
-            return f"{scale * m['gain']:+{fmt}} vs {m['baseline']}"
-
         wins = [v[k]["gain"] > 0 for k in ("psnr", "ssim") if v[k] is not None]
         verdict = ("wins" if wins and all(wins) else "loses" if wins and not any(wins)
                    else "mixed")
         lines.append([v["condition"], v["role"],
                       f"{v['undersampling']:.3g}×{' random' if v['pattern'] == 'random' else ''}",
-                      v["model"], gain("psnr", ".1f"), gain("ssim", ".3f"),
-                      gain("depth_rmse_m", ".1f", 1000.0), verdict])
+                      v["model"], _gain(v["psnr"], ".1f"), _gain(v["ssim"], ".3f"),
+                      _gain(v["depth_rmse_m"], ".1f", 1000.0), verdict])
     return markdown_table(header, lines)
 
 
@@ -277,6 +286,9 @@ def results_markdown(results: dict[str, Any]) -> str:
         f"loses on both in {n_lose}.",
         "",
         verdict_table(found),
+        "",
+        f"![PSNR, SSIM and depth RMSE against undersampling]"
+        f"({FIGURE.relative_to(ROOT).as_posix()})",
     ]) + "\n"
 
 
