@@ -6,8 +6,8 @@ sparsities x field models x seeds), or collects one that ran, and writes
 "Results" section (printed; ``--readme`` rewrites that section in place and writes
 its figure, ``docs/images/sparsity_study.png``).
 
-    python benchmarks/sparsity_study.py run [--dir DIR] [--capture FILE] [OVERRIDE ...]
-    python benchmarks/sparsity_study.py collect DIR [DIR ...] [--readme]
+    python benchmarks/sparsity_study.py run [--dir DIR] [--capture FILE] [--readme] [OVERRIDE ...]
+    python benchmarks/sparsity_study.py collect DIR [DIR ...] [--readme] [--out JSON]
 
 ``run`` is ``python -m nlosfw -m experiment=sparsity hydra.sweep.dir=DIR OVERRIDE...``
 followed by ``collect DIR``: with no override it runs the whole study (every model
@@ -62,22 +62,23 @@ def main(argv: Sequence[str] | None = None) -> int:
                      help="sweep directory (default: multirun/sparsity-<date>)")
     run.add_argument("--capture", type=Path, default=None,
                      help="run the study on this capture file (no scene axis)")
-    run.add_argument("--readme", action="store_true", help="rewrite the README's Results")
     run.add_argument("overrides", nargs="*", help="Hydra overrides for the sweep")
     collect = sub.add_parser("collect", help="collect finished sweeps")
     collect.add_argument("dirs", type=Path, nargs="+")
-    collect.add_argument("--readme", action="store_true", help="rewrite the README's Results")
-    collect.add_argument("--out", type=Path, default=RESULTS)
+    for command in (run, collect):
+        command.add_argument("--readme", action="store_true",
+                             help="rewrite the README's Results section and its figure")
+        command.add_argument("--out", type=Path, default=RESULTS, help="the JSON written")
     args = parser.parse_args(argv)
     if args.command == "run":
         sweep = args.dir or ROOT / "multirun" / f"sparsity-{time.strftime('%Y%m%d-%H%M%S')}"
-        command = sweep_command(sweep, args.capture, args.overrides)
+        command = sweep_command(sweep.resolve(), args.capture, args.overrides)
         print("$ " + shlex.join(command), flush=True)
         subprocess.run(command, check=True, cwd=ROOT)
         dirs = [sweep]
-        out = RESULTS
     else:
-        dirs, out = args.dirs, args.out
+        dirs = args.dirs
+    out = args.out
     results = collect_study(dirs)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1) + "\n", encoding="utf-8")

@@ -65,6 +65,13 @@ def set_nan(f):
          "error: simulator.patch_size: must be > 0 metres, got -1.0"),
         (["+simulator.bogus=1"], "error: simulator.bogus: unknown option; valid options: "),
         (["model=interp", "split.spatial_step=0"], "error: split.spatial_step: must be >= 1"),
+        (["model=interp", "split.spatial_fraction=0.3"],
+         "error: split.spatial_fraction: applies to pattern random only"),
+        (["model=interp", "split.pattern=random", "split.spatial_fraction=1.5"],
+         "error: split.spatial_fraction: must be in (0, 1] or null, got 1.5"),
+        (["split.pattern=spiral"], "error: split.pattern: must be one of 'grid', 'random', "
+                                   "got 'spiral'"),
+        (["acquisition=dirty"], "error: unknown acquisition 'dirty'; valid: clean, noisy"),
         (["scene.time.bins=0"], "error: scene.time.bins: must be a positive number of bins, "
                                 "got 0"),
         (["scene.time.bin_width=-0.01"], "error: scene.time.bin_width: must be a positive"),

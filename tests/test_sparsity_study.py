@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
+import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The study at its smallest: the tiny scene (16 x 16 wall), two sparsities, one neural model
@@ -115,3 +115,34 @@ def test_the_benchmark_script_collects_the_study(tiny_study, tmp_path):
     assert data["overrides"]["model.seed"] == ["0", "1"]
     assert len(data["rows"]) == 8 and data["fit_seconds"]["siren_torch"]["runs"] == 4
     assert "| tiny, analytic" in result.stdout and "PSNR gain (dB)" in result.stdout
+
+
+def test_the_preset_declares_the_study_and_the_acquisitions_pair_simulator_and_noise(tmp_path):
+    job = yaml.safe_load(_run("-m", "nlosfw", "experiment=sparsity", "acquisition=noisy",
+                              "--cfg", "job", cwd=tmp_path).stdout)
+    assert job["simulator"]["name"] == "embree" and job["scene"]["noise"]["model"] == "poisson"
+    assert job["model"]["name"] == "siren_torch" and job["figures"]["enabled"] is False
+    job = yaml.safe_load(_run("-m", "nlosfw", "experiment=sparsity", "acquisition=clean",
+                              "scene.noise.photons=10", "--cfg", "job", cwd=tmp_path).stdout)
+    assert job["simulator"]["name"] == "analytic" and job["scene"]["noise"]["model"] == "none"
+    hydra = yaml.safe_load(_run("-m", "nlosfw", "experiment=sparsity", "--cfg", "hydra",
+                                cwd=tmp_path).stdout)["hydra"]
+    assert hydra["sweeper"]["params"] == {
+        "scene": "thesis_planes,thesis_concave,letter_t,thesis_two_planes,thesis_occluded",
+        "acquisition": "clean,noisy", "split.spatial_step": "2,4,8",
+        "model": "siren_torch,pe_torch", "model.seed": "0,1,2"}
+
+
+def test_the_study_on_a_capture_file_drops_the_scene_axes(tmp_path):
+    _run("-m", "nlosfw", "scene=tiny", "stop_after=capture", "hydra.run.dir=made", cwd=tmp_path)
+    capture = tmp_path / "made" / "capture.hdf5"
+    sweep, out = tmp_path / "sweep", tmp_path / "study.json"
+    _run(str(ROOT / "benchmarks" / "sparsity_study.py"), "run", "--dir", str(sweep),
+         "--capture", str(capture), "--out", str(out), "split.spatial_step=2", "model=siren_torch",
+         "model.seed=0,1", "model.steps=10", "transform.n_frequencies=21",
+         "reconstruction.n_depths=8", cwd=tmp_path)
+    runs = _metrics(sweep)
+    assert len(runs) == 2                                  # one per seed: no scene axis
+    assert {m["capture"]["source"] for m in runs} == {"file"}
+    conditions = {row["condition"] for row in json.loads(out.read_text())["rows"]}
+    assert conditions == {"capture.hdf5 reconstruction.n_depths=8 transform.n_frequencies=21"}
