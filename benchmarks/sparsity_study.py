@@ -222,8 +222,12 @@ def verdicts(rows: Sequence[StudyRow]) -> list[dict[str, Any]]:
         if not models or not baselines:
             continue
         best = max(models, key=lambda r: r.scores["psnr"].mean or -1e9)
+        true = next((r.scores["depth_rmse_m"].mean for r in mine if r.kind == "reference"),
+                    None)
+        depth = best.scores["depth_rmse_m"].mean
         out.append({"condition": condition, "role": _role(condition), "pattern": pattern,
                     "undersampling": under, "model": best.series,
+                    "depth_over_true": depth / true if depth is not None and true else None,
                     "psnr": _margin(best, baselines, "psnr"),
                     "ssim": _margin(best, baselines, "ssim"),
                     "depth_rmse_m": _margin(best, baselines, "depth_rmse_m",
@@ -239,7 +243,7 @@ def _gain(margin: dict[str, Any] | None, fmt: str, scale: float = 1.0) -> str:
 
 def verdict_table(found: Sequence[dict[str, Any]]) -> str:
     header = ["scene, capture", "role", "sparsity", "best model (PSNR)", "PSNR gain (dB)",
-              "SSIM gain", "depth RMSE gain (mm)", "verdict"]
+              "SSIM gain", "depth RMSE gain (mm)", "depth RMSE / true's", "verdict"]
     lines = []
     for v in found:
         wins = [v[k]["gain"] > 0 for k in ("psnr", "ssim") if v[k] is not None]
@@ -248,7 +252,9 @@ def verdict_table(found: Sequence[dict[str, Any]]) -> str:
         lines.append([v["condition"], v["role"],
                       f"{v['undersampling']:.3g}×{' random' if v['pattern'] == 'random' else ''}",
                       v["model"], _gain(v["psnr"], ".1f"), _gain(v["ssim"], ".3f"),
-                      _gain(v["depth_rmse_m"], ".1f", 1000.0), verdict])
+                      _gain(v["depth_rmse_m"], ".1f", 1000.0),
+                      "-" if v["depth_over_true"] is None else f"{v['depth_over_true']:.2f}",
+                      verdict])
     return markdown_table(header, lines)
 
 
