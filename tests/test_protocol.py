@@ -202,3 +202,26 @@ def test_raw_of_a_random_scan_images_exactly_the_kept_points():
     naive = reference.naive_rsd(scattered, voxels[:, ::4, ::4])
     np.testing.assert_allclose(by_rsd.intensity[:, ::4, ::4], naive, rtol=1e-9,
                                atol=1e-12 * naive.max())
+
+
+@pytest.mark.parametrize("step", [2, 4, 8])
+def test_raw_of_a_coarse_grid_is_the_zero_filled_full_grid(step):
+    """The fft imager images a 1/step sub-grid (voxel spacing = wall spacing / step) exactly
+    as the full grid with zeros between the kept samples, and as the rsd imager's sum."""
+    from nlosfw.image.fft import FFTImager
+    from nlosfw.image.rsd import RSDImager
+
+    field = fixtures.point_phasor_field((0.1, -0.05, 0.5), n=16,
+                                        frequencies=np.linspace(4.0, 6.0, 4))
+    split = split_field(field, spatial_step=step, spectral="none")
+    raw = split.raw_field(field)
+    assert raw.grid_shape == (16 // step, 16 // step)
+    zero_filled = field.replace(values=np.where(split.spatial_mask, field.values, 0))
+    voxels = fixtures.tiny_voxels(depths=(0.45, 0.5), n=16)
+    imager = FFTImager({"precision": "double"})
+    coarse = imager.reconstruct(raw, voxels).intensity
+    scale = coarse.max()
+    np.testing.assert_allclose(coarse, imager.reconstruct(zero_filled, voxels).intensity,
+                               rtol=1e-9, atol=1e-12 * scale)
+    np.testing.assert_allclose(coarse, RSDImager().reconstruct(raw, voxels).intensity,
+                               rtol=1e-9, atol=1e-12 * scale)
