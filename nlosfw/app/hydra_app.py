@@ -331,3 +331,52 @@ def _unknown_choice(group: str, value: str, options: list[str]) -> ConfigError:
         group in _PLUGIN_GROUPS) else ""
     valid = ", ".join(options) or "(none)"
     return ConfigError("", f"unknown {noun} '{value}'; valid: {valid}{hint}")
+
+
+def compose_run_config(overrides: Sequence[str], host: PluginHost,
+                       config_name: str = "config") -> dict[str, Any]:
+    """The resolved configuration of one run, checked as the command line checks it.
+
+    ``overrides`` are the command line's (``+group=name`` included); a sweep, a flag or
+    a ``hydra.*`` setting is refused with a one-line :class:`ConfigError`.
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    overrides = normalise_overrides([str(o) for o in overrides])
+    for text in overrides:
+        if text.startswith("-"):
+            raise ConfigError("overrides", f"{text!r} is a command-line flag; give only "
+                              "overrides such as 'model=interp'")
+    try:
+        parsed = OverridesParser.create().parse_overrides(overrides)
+    except HydraException as err:
+        raise ConfigError("overrides", f"cannot parse: {one_line(err, whole=True)}") from None
+    for ov, text in zip(parsed, overrides, strict=True):
+        if ov.is_sweep_override():
+            raise ConfigError("overrides", f"{text!r} is a sweep; one call runs one "
+                              "configuration: call it once per value, or sweep with "
+                              "python -m nlosfw -m ...")
+        if ov.key_or_group.split("/")[0].split(".")[0] == "hydra":
+            raise ConfigError("overrides", f"{text!r}: Hydra's own settings do not apply here "
+                              "(choose the run directory with output_dir=)")
+    register_configs(host)
+    ensure_resolvers()
+    preflight(overrides, host, config_name)
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3",
+                                   job_name="nlosfw"):
+            try:
+                cfg = compose(config_name=config_name, overrides=list(overrides))
+            except (HydraException, OmegaConfBaseException) as err:
+                raise composition_error(err) from None
+    finally:
+        GlobalHydra.instance().clear()
+    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    assert isinstance(plain, dict)  # a composed config is a mapping
+    return {str(k): v for k, v in plain.items()}

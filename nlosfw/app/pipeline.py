@@ -41,17 +41,19 @@ from nlosfw.app.results import (
     Reconstructions,
     RunResults,
     SingleFrequencyImages,
+    StageResults,
     TransformResult,
 )
 from nlosfw.app.run_dir import RunContext
 from nlosfw.app.settings import RunSettings, run_settings
 from nlosfw.capture.data import Capture
+from nlosfw.capture.extent import hidden_depth_range
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.version import __version__
-from nlosfw.image.reconstruction import Reconstruction, volume_voxels
+from nlosfw.image.reconstruction import Reconstruction, wall_voxels
 from nlosfw.image.reconstruction_io import write_reconstruction
 from nlosfw.model.interface import FieldModel, FitReport, TrainingStep
 from nlosfw.model.protocol import FieldSplit
@@ -88,6 +90,8 @@ class Pipeline:
         self.console = Console(stderr=False)
         self.ctx = RunContext(self.run_dir, host, self._run_info())
         self.cache = Cache(self.settings.cache.dir, self.settings.cache.enabled)
+        self.stage_results = StageResults()
+        """What the stages produced so far (all of it once :meth:`run` has returned)."""
 
     @property
     def metrics(self) -> RunMetrics:
@@ -134,22 +138,27 @@ class Pipeline:
         s = self.settings
         with self.ctx.stage("capture"):
             capture = self.capture()
+        self.stage_results = replace(self.stage_results, capture=capture)
         if not s.runs("transform"):
             return None
         with self.ctx.stage("transform"):
             transformed = self.transform(capture)
+        self.stage_results = replace(self.stage_results, transform=transformed)
         if not s.runs("fit"):
             return None
         with self.ctx.stage("fit"):
             fitted = self.fit(transformed.field)
+        self.stage_results = replace(self.stage_results, fit=fitted)
         if not s.runs("predict"):
             return None
         with self.ctx.stage("predict"):
             fields = self.predict(transformed, fitted)
+        self.stage_results = replace(self.stage_results, fields=fields)
         if not s.runs("reconstruct"):
             return None
         with self.ctx.stage("reconstruct"):
             recons = self.reconstruct(capture.capture, fitted.split, fields)
+        self.stage_results = replace(self.stage_results, reconstructions=recons)
         if s.runs("report"):
             with self.ctx.stage("report"):
                 self.report(RunResults(capture=capture, transform=transformed, fit=fitted,
@@ -397,17 +406,9 @@ class Pipeline:
         if r.depths:
             depths = np.asarray(r.depths, dtype=float)
         else:
-            near, far = r.depth_range or _depth_span(capture)
+            near, far = r.depth_range or hidden_depth_range(capture)
             depths = np.linspace(near, far, r.n_depths)
-        wall = field.wall_xyz
-        spacing = field.grid_spacing()
-        if spacing is None:
-            raise ConfigError("reconstruction", "the field's wall samples are not a regular "
-                              "grid; give explicit voxels through an imager that accepts points")
-        dy, dx = spacing
-        ny, nx = field.grid_shape
-        x0, y0 = wall[0, 0, 0] - dx / 2, wall[0, 0, 1] - dy / 2
-        return volume_voxels(depths, (x0, x0 + nx * dx), (y0, y0 + ny * dy), (ny, nx))
+        return wall_voxels(field, depths)
 
     def _run_info(self) -> RunInfo:
         def selected(group: str) -> str | None:
@@ -458,30 +459,3 @@ def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, in
         chosen["held-out"] = int(held[held.size // 2])
     return dict(list(chosen.items())[:count])
 
-
-def _depth_span(capture: Capture) -> tuple[float, float]:
-    """Depths covering the hidden scene: from the ground truth, else the hidden volume a
-    Zaragoza file declares, else the span of the signal in time (device legs removed)."""
-    truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
-    if truth is not None:
-        depth = np.asarray(truth, dtype=float)
-        hit = depth[depth > 0]
-        if hit.size:
-            lo, hi = float(hit.min()), float(hit.max())
-            margin = max(0.15, 0.25 * (hi - lo))
-            return max(0.05, lo - margin), hi + margin
-    volume = capture.scene_info.get("volume") or {}
-    if volume.get("center") is not None and volume.get("size") is not None:
-        centre = float(np.asarray(volume["center"], dtype=float).reshape(-1)[2])
-        half = float(np.asarray(volume["size"], dtype=float).reshape(-1)[-1]) / 2
-        if centre - half > 0:
-            return centre - half, centre + half
-    profile = capture.H.reshape(capture.n_bins, -1).sum(axis=1)
-    nonzero = (np.flatnonzero(profile > 1e-3 * profile.max()) if profile.max() > 0
-               else np.zeros(0, dtype=np.int64))
-    if len(nonzero) == 0:
-        return 0.3, 2.0
-    legs = float(np.mean(capture.geometry.device_path(capture.sensor_points)))
-    first, last = capture.bin_centers[[nonzero[0], nonzero[-1]]] - legs
-    # a path of length t reaches at most t/2 deep (wall -> point -> wall)
-    return max(0.05, 0.8 * float(first) / 2), max(0.3, float(last) / 2)

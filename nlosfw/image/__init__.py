@@ -8,7 +8,13 @@ import only these."""
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.propagation import PropagationConfig, PropagationImager
-from nlosfw.image.reconstruction import Reconstruction, cell_centres, plane_voxels, volume_voxels
+from nlosfw.image.reconstruction import (
+    Reconstruction,
+    cell_centres,
+    plane_voxels,
+    volume_voxels,
+    wall_voxels,
+)
 from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
 from nlosfw.image.rsd import RSDImager, RSDImagerConfig
 from nlosfw.image.rsd_kernel import (
@@ -46,5 +52,6 @@ __all__ = [
     "ssim",
     "volume_voxels",
     "wall_field",
+    "wall_voxels",
     "write_reconstruction",
 ]
