@@ -143,7 +143,8 @@ def test_stage_functions_check_options_like_the_command_line():
 
 def test_importing_nlosfw_loads_no_hydra_matplotlib_or_backend():
     heavy = ("hydra", "omegaconf", "matplotlib", "rich", "torch", "jax", "mitsuba", "embreex")
-    code = f"import json, sys, nlosfw; print(json.dumps([m for m in {heavy!r} if m in sys.modules]))"
+    code = ("import json, sys, nlosfw\n"
+            f"print(json.dumps([m for m in {heavy!r} if m in sys.modules]))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=120)
     assert json.loads(out.stdout) == []

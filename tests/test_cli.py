@@ -190,7 +190,7 @@ def test_full_run_writes_documented_artefacts(workdir):
     expected = {"config.yaml", "run.log", "metrics.json", "capture.hdf5", "phasor_field.hdf5",
                 "fields/true.hdf5", "fields/raw.hdf5", "fields/interp.hdf5",
                 "reconstructions/true.hdf5", "reconstructions/raw.hdf5",
-                "reconstructions/interp.hdf5", "figures/reconstructions.png"}
+                "reconstructions/interp.hdf5", "figures/reconstructions.png", "report.html"}
     assert expected <= names, expected - names
     assert any(n.startswith("figures/fields_f") for n in names)
     metrics = json.loads((run / "metrics.json").read_text())
@@ -251,6 +251,8 @@ def test_sweep_report_and_resume(workdir):
     csv = (sweep / "report" / "report.csv").read_text().splitlines()
     assert len(csv) == 3 and csv[0].startswith("run,status,scene")
     assert (sweep / "report" / "report.png").stat().st_size > 1000
+    assert "## Quality against model" in (sweep / "report" / "report.md").read_text()
+    assert "<a href=\"../0/report.html\">0</a>" in (sweep / "report" / "report.html").read_text()
     nlosfw("report", str(sweep), cwd=workdir)
     assert (sweep / "report-2" / "report.md").exists()  # the first report is kept
 

@@ -117,6 +117,7 @@ class Pipeline:
             run = replace(self.metrics.run, stopped_after=self.settings.last_stage)
             self.ctx.metrics = replace(self.metrics, run=run)
         self.ctx.finish(status)
+        self._write_html_report()
         self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics.to_json(),
                                   status=status)
         from nlosfw.app.summary import summary_table
@@ -124,6 +125,17 @@ class Pipeline:
         self.console.print(summary_table(self.metrics))
         self.console.print(f"[bold green]done[/] ({status}): {self.run_dir}")
         return objective
+
+    def _write_html_report(self) -> None:
+        """report.html: the run's figures, metrics, timings and configuration in one page."""
+        from nlosfw.app.html_report import run_report
+
+        overrides = []
+        path = self.run_dir / ".hydra" / "overrides.yaml"
+        if path.is_file():
+            overrides = [str(o) for o in yaml_safe.load(path.read_text(encoding="utf-8")) or []]
+        self.ctx.write_text("report.html", run_report(self.run_dir, self.metrics, self.config,
+                                                      overrides), kind="report")
 
     def _record_failure(self) -> None:
         """metrics.json with status failed and the on_run_end hook, never masking the error."""

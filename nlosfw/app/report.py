@@ -1,10 +1,12 @@
 """``python -m nlosfw report DIR``: aggregate every run under DIR (a sweep) into one report.
 
-Writes ``report.csv`` (one row per run), ``report.md`` (the same as a markdown
-table, plus thesis comparison tables when presets carry reference numbers) and
-``report.png`` (held-out field error and reconstruction SSIM per run, model
-against the interp baseline) into ``DIR/report/`` (or ``report-2``, ... if that
-exists: earlier reports are never overwritten).
+Writes ``report.csv`` (one row per run), ``report.png`` (quality against the swept
+parameter: reconstruction SSIM and PSNR and the held-out field error, one line per
+model with ``interp`` and ``raw`` on every panel, :mod:`nlosfw.app.quality`) and
+``report.md`` (the plot's numbers and the runs' table in markdown, plus thesis
+comparison tables when presets carry reference numbers) and ``report.html`` (all of
+it in one self-contained page, linking each run's own ``report.html``) into ``DIR/report/`` (or
+``report-2``, ... if that exists: earlier reports are never overwritten).
 """
 
 from __future__ import annotations
@@ -20,7 +22,15 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from nlosfw.app.html_report import sweep_report
 from nlosfw.app.metrics import ErrorMetrics, FieldMetrics, ImageScores, SplitErrors
+from nlosfw.app.quality import (
+    quality_figure,
+    quality_points,
+    quality_table,
+    quality_tables,
+    sweep_layout,
+)
 from nlosfw.app.records import RunRecord, find_runs, read_run
 from nlosfw.app.tables import markdown_table
 from nlosfw.app.thesis import thesis_comparison
@@ -112,35 +122,6 @@ def to_markdown(rows: list[dict[str, str]], columns: Sequence[str] | None = None
     return markdown_table(columns, [[row.get(c, "") for c in columns] for row in rows])
 
 
-def comparison_figure(records: Sequence[RunRecord], path: Path) -> None:
-    """Held-out NMSE (model vs interp) and reconstruction SSIM per run, as a PNG."""
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    labels = [f"{r.name}\n{r.metrics.run.model or ''}" for r in records]
-    x = np.arange(len(records))
-
-    def series(column: Column) -> np.ndarray:
-        return np.array([np.nan if (v := column(r)) is None else v for r in records],
-                        dtype=float)
-
-    fig = Figure(figsize=(max(8, 1.2 * len(records) + 4), 4.5))
-    axes = fig.subplots(1, 2)
-    width = 0.38
-    for offset, source in ((-width / 2, "model"), (width / 2, "interp")):
-        axes[0].bar(x + offset, series(_nmse(source, lambda s: s.heldout_pixels)), width,
-                    label=source)
-        axes[1].bar(x + offset, series(_image(source, lambda s: s.ssim)), width, label=source)
-    axes[0].set_ylabel("held-out pixels NMSE (dB, lower is better)")
-    axes[1].set_ylabel("reconstruction SSIM vs true field (higher is better)")
-    for ax in axes:
-        ax.set_xticks(x, labels, rotation=45, ha="right", fontsize=8)
-        ax.legend()
-        ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
-
-
 def _free_dir(root: Path) -> Path:
     target = root / "report"
     n = 2
@@ -150,23 +131,34 @@ def _free_dir(root: Path) -> Path:
     return target
 
 
-def write_report(root: Path) -> tuple[Path, list[dict[str, str]]]:
-    """Write report.csv, report.md, report.png for the runs under ``root``; return the dir."""
+def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str, str]]]:
+    """Write report.csv, report.md, report.png and report.html for the runs under ``root``
+    into a new
+    report directory (returned, with the table's rows); ``x`` is the override key on the
+    quality plot's x axis (default: chosen by :func:`nlosfw.app.quality.sweep_layout`)."""
     runs = find_runs(root)
     if not runs:
         raise DataError(f"{root}: holds no run (no metrics.json below it)")
     records = [read_run(r, root) for r in runs]
     rows = report_rows(records)
+    layout = sweep_layout(records, x)
+    points = quality_points(records, layout)
     out = _free_dir(root)
     out.mkdir(parents=True)
     write_text(out / "report.csv", to_csv(rows))
-    markdown = f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n" + to_markdown(rows)
+    markdown = (f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n"
+                f"## Quality against {layout.x_label}\n\n![quality against "
+                f"{layout.x_label}](report.png)\n\n{quality_table(points, layout)}\n"
+                f"## Every run\n\n{to_markdown(rows)}")
     tables = thesis_comparison(records)
     if tables:
         markdown += "\n## Next to the thesis\n\n" + tables
     write_text(out / "report.md", markdown)
     with atomic_path(out / "report.png") as tmp:
-        comparison_figure(records, tmp)
+        quality_figure(points, layout).savefig(tmp, dpi=110, format="png")
+    write_text(out / "report.html", sweep_report(root, out, records, rows,
+                                                 (out / "report.png").read_bytes(),
+                                                 quality_tables(points, layout)))
     return out, rows
 
 
@@ -174,11 +166,14 @@ def report_command(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m nlosfw report",
                                      description="Aggregate the runs of a sweep directory.")
     parser.add_argument("directory", help="a sweep (multirun) directory or any parent of runs")
+    parser.add_argument("--x", metavar="KEY", default=None,
+                        help="the swept override on the quality plot's x axis (default: the "
+                             "numeric swept key with the most values, else another swept key)")
     args = parser.parse_args(list(argv))
     root = Path(args.directory).expanduser()
     if not root.is_dir():
         raise ConfigError("directory", f"{root} is not a directory")
-    out, rows = write_report(root)
+    out, rows = write_report(root, args.x)
     console = Console()
     table = Table(title=f"{len(rows)} runs under {root}", title_justify="left")
     shown = ("run", "status", "scene", "model", "model_heldout_pixels_nmse_db",
