@@ -83,15 +83,18 @@ def predict_field(model: FieldModel, like: PhasorField) -> PhasorField:
 
 
 def reconstruct(field: PhasorField, depths: Sequence[float] | np.ndarray,
-                imager: str = "fft", **options: Any) -> Reconstruction:
-    """Image ``field`` with imager plugin ``imager`` on planes at ``depths`` (m) that face
-    the field's wall samples, as a run does (see :func:`nlosfw.image.wall_voxels`).
+                imager: str = "fft", *, grid: PhasorField | None = None,
+                **options: Any) -> Reconstruction:
+    """Image ``field`` with imager plugin ``imager`` (and its ``options``) on planes at
+    ``depths`` (m) facing the wall samples of ``grid`` (default: the field's own), as a
+    run does (see :func:`nlosfw.image.wall_voxels`).
 
-    :func:`nlosfw.capture.hidden_depth_range` gives the depths a capture's hidden scene
-    spans; for other voxels call the imager itself
-    (``load_plugins().registry.create("imager", "rsd").reconstruct(field, voxels)``).
+    Pass the full field as ``grid`` to image a subsampled field on the full field's
+    voxels, so that their images compare pixel by pixel. :func:`nlosfw.hidden_depth_range`
+    gives the depths a capture's hidden scene spans; for other voxels call the imager
+    itself (``load_plugins().registry.create("imager", "rsd").reconstruct(field, voxels)``).
     """
-    voxels = wall_voxels(field, depths)
+    voxels = wall_voxels(field if grid is None else grid, depths)
     image: Reconstruction = _host().registry.create("imager", imager, options).reconstruct(
         field, voxels)
     return image

@@ -65,6 +65,10 @@ def test_stage_functions_reproduce_the_run(tiny_run, workdir):
     np.testing.assert_array_equal(image.voxels, run.reconstructions.voxels)
     np.testing.assert_allclose(image.intensity, run.reconstructions.by_source["interp"].intensity,
                                rtol=1e-12, atol=0)
+    raw = field.select(y=slice(None, None, 2), x=slice(None, None, 2))   # on the full grid
+    image = nlosfw.reconstruct(raw, depths, "fft", grid=field)
+    np.testing.assert_allclose(image.intensity, run.reconstructions.by_source["raw"].intensity,
+                               rtol=1e-12, atol=0)
 
 
 def test_depths_of_a_run_cover_the_hidden_scene(tiny_run):
