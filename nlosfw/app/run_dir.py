@@ -13,6 +13,7 @@ Artefact names (relative to the run directory; see the README):
 ``fields/<source>.hdf5``  the fields imaged: true, raw, model, interp
 ``reconstructions/<source>.hdf5``  their reconstructions
 ``figures/*.png``         figures
+``report.html``           all of it in one self-contained page
 ========================  ================================================
 """
 
