@@ -25,6 +25,7 @@ def test_workflow_notebook_runs(tmp_path, monkeypatch):
     nbformat = pytest.importorskip("nbformat", reason="in the test extra: pip install '.[test]'")
     nbclient = pytest.importorskip("nbclient", reason="in the test extra: pip install '.[test]'")
     monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.setenv("TMPDIR", str(tmp_path))      # the notebook's temporary files go here
     nb = nbformat.read(NOTEBOOK, as_version=4)
     client = nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
                                      resources={"metadata": {"path": str(tmp_path)}})
