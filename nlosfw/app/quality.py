@@ -8,8 +8,9 @@ and range, and any other swept key as one row of panels per value. Every run con
 one point per source it imaged: its model (by plugin), each ``compare`` label, ``interp``
 and ``raw``, so the baselines are on every panel.
 
-:data:`QUALITY_METRICS` are the panels' columns; a metric no run has is left out. Add a
-:class:`QualityMetric` there for a new score of :class:`~nlosfw.app.metrics.RunMetrics`.
+:data:`QUALITY_METRICS` are the panels' columns; a metric no run has is left out. A new
+score of :class:`~nlosfw.app.metrics.RunMetrics` is one more :class:`QualityMetric` there
+(``image_score("volume_psnr")`` reads a reconstruction score by name).
 """
 
 from __future__ import annotations
@@ -46,19 +47,25 @@ class QualityMetric:
         return f"{self.label}\n({self.better} is better)"
 
 
-def _heldout_nmse(metrics: RunMetrics, source: str) -> float | None:
-    entry = metrics.field_entry(source)
-    return None if entry is None or entry.splits is None else entry.splits.heldout_pixels.nmse_db
+def image_score(name: str) -> Callable[[RunMetrics, str], float | None]:
+    """A source's reconstruction score ``name`` (an :class:`~nlosfw.app.metrics.ImageScores`
+    field: ``ssim``, ``psnr``, ...)."""
+    def value(metrics: RunMetrics, source: str) -> float | None:
+        scores = metrics.image_scores(source)
+        return None if scores is None else getattr(scores, name)
+
+    return value
 
 
-def _ssim(metrics: RunMetrics, source: str) -> float | None:
-    scores = metrics.image_scores(source)
-    return None if scores is None else scores.ssim
+def field_error(split: str, name: str = "nmse_db") -> Callable[[RunMetrics, str], float | None]:
+    """A field model's error ``name`` on one set of the protocol (``heldout_pixels``, ...)."""
+    def value(metrics: RunMetrics, source: str) -> float | None:
+        entry = metrics.field_entry(source)
+        if entry is None or entry.splits is None:
+            return None
+        return getattr(entry.splits.by_set()[split], name)
 
-
-def _psnr(metrics: RunMetrics, source: str) -> float | None:
-    scores = metrics.image_scores(source)
-    return None if scores is None else scores.psnr
+    return value
 
 
 def _denoising_gain(metrics: RunMetrics, source: str) -> float | None:
@@ -67,11 +74,12 @@ def _denoising_gain(metrics: RunMetrics, source: str) -> float | None:
 
 
 QUALITY_METRICS: tuple[QualityMetric, ...] = (
-    QualityMetric("ssim", "reconstruction SSIM\nagainst the full capture's", "higher", _ssim),
+    QualityMetric("ssim", "reconstruction SSIM\nagainst the full capture's", "higher",
+                  image_score("ssim")),
     QualityMetric("psnr", "reconstruction PSNR (dB)\nagainst the full capture's", "higher",
-                  _psnr),
+                  image_score("psnr")),
     QualityMetric("heldout_nmse_db", "field error on held-out\nwall samples, NMSE (dB)", "lower",
-                  _heldout_nmse),
+                  field_error("heldout_pixels")),
     QualityMetric("denoising_gain_db", "noise removed from\nthe field (dB)", "higher",
                   _denoising_gain),
 )
