@@ -6,18 +6,18 @@ import sys
 
 import numpy as np
 
-import nlosfw
+from nlosfw import hidden_depth_range, reconstruct, simulate_scene, transform_capture
 from nlosfw.image import volume_voxels
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 
 
 def test_same_image_as_the_rsd_imager_on_a_simulated_capture():
-    capture = nlosfw.simulate_scene("tiny")
-    field = nlosfw.transform_capture(capture, "fft", n_frequencies=15)
-    depths = np.linspace(*nlosfw.hidden_depth_range(capture), 5)
-    ours = nlosfw.reconstruct(field, depths, "example_backprojection", block=50)
-    reference = nlosfw.reconstruct(field, depths, "rsd")
+    capture = simulate_scene("tiny")
+    field = transform_capture(capture, "fft", n_frequencies=15)
+    depths = np.linspace(*hidden_depth_range(capture), 5)
+    ours = reconstruct(field, depths, "example_backprojection", block=50)
+    reference = reconstruct(field, depths, "rsd")
     np.testing.assert_allclose(ours.intensity, reference.intensity, rtol=1e-9,
                                atol=1e-12 * reference.intensity.max())
 
