@@ -26,6 +26,8 @@ def test_workflow_notebook_runs(tmp_path, monkeypatch):
     nbclient = pytest.importorskip("nbclient", reason="in the test extra: pip install '.[test]'")
     monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.setenv("TMPDIR", str(tmp_path))      # the notebook's temporary files go here
+    # figures inline, as in Jupyter, whatever backend the tests run with (MPLBACKEND=Agg)
+    monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
     nb = nbformat.read(NOTEBOOK, as_version=4)
     client = nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
                                      resources={"metadata": {"path": str(tmp_path)}})

@@ -17,11 +17,10 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from nlosfw.app.metrics import RunMetrics
 from nlosfw.app.quality import QualityTable, parse_overrides
 from nlosfw.app.records import RunRecord
+from nlosfw.common import yaml_safe
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1400px;
@@ -114,8 +113,8 @@ def run_report(run_dir: Path, metrics: RunMetrics, config: Mapping[str, Any],
                 _section("Timings (s)", table(["stage", "seconds"], list(_timings(metrics)
                                                                          .items()))),
                 _run_inputs(metrics),
-                _section("Configuration", preformatted(yaml.safe_dump(
-                    dict(config), sort_keys=False), "the resolved configuration (config.yaml)")),
+                _section("Configuration", preformatted(
+                    yaml_safe.dump(dict(config)), "the resolved configuration (config.yaml)")),
                 _section("Files", _files(run_dir))]
     return page(title, sections)
 
