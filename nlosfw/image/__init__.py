@@ -5,6 +5,7 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these."""
 
 
+from nlosfw.image.depths import automatic_depths, depth_span, depth_step
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.propagation import PropagationConfig, PropagationImager
@@ -22,7 +23,10 @@ from nlosfw.image.rsd_kernel import (
 from nlosfw.image.scores import image_metrics, normalise, psnr, rmse, ssim
 
 __all__ = [
+    "automatic_depths",
     "cell_centres",
+    "depth_span",
+    "depth_step",
     "FFTImager",
     "FFTImagerConfig",
     "image_metrics",
