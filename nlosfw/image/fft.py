@@ -82,6 +82,26 @@ class _Axis:
         return self.offset + self.step * (np.arange(self.n_linear) - (self.n_interleaved - 1))
 
 
+@dataclass(frozen=True, eq=False)
+class _PlaneJob:
+    """One voxel plane to image: the wall field (F, Y, X) in canonical order, its
+    frequencies, the plane's voxels and depth, its convolution geometry, the path
+    multiplier, the field's geometry, the coefficient rows, the shared spectrum cache and
+    the FFT dtype."""
+
+    values: np.ndarray
+    freqs: np.ndarray
+    plane: np.ndarray
+    z: float
+    ay: _Axis
+    ax: _Axis
+    m: int
+    geometry: CaptureGeometry
+    coeffs: np.ndarray
+    cache: dict[tuple[int, ...], np.ndarray]
+    cdtype: type
+
+
 class FFTImager(PropagationImager):
     """Fast RSD for planes parallel to the wall on a regular grid (both capture kinds)."""
 
@@ -116,15 +136,16 @@ class FFTImager(PropagationImager):
             canon = apply_ops(plane, pops, axes=(0, 1))
             ay = _axis(values.shape[1], canon.shape[0], dy, vdy, vy0 - wy0, "y")
             ax = _axis(values.shape[2], canon.shape[1], dx, vdx, vx0 - wx0, "x")
-            image = self._plane(values, field.frequencies, canon, z, ay, ax, m, geometry,
-                                coeffs, cache, cdtype)
+            image = self._plane(_PlaneJob(values, field.frequencies, canon, z, ay, ax, m,
+                                          geometry, coeffs, cache, cdtype))
             out[:, i] = undo_ops(image, pops, axes=(1, 2))
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
 
-    def _plane(self, values: np.ndarray, freqs: np.ndarray, plane: np.ndarray, z: float,
-               ay: _Axis, ax: _Axis, m: int, geometry: CaptureGeometry, coeffs: np.ndarray,
-               cache: dict, cdtype: type) -> np.ndarray:
+    def _plane(self, job: _PlaneJob) -> np.ndarray:
         cfg = self.config
+        values, freqs, plane, z = job.values, job.freqs, job.plane, job.z
+        ay, ax, m, geometry = job.ay, job.ax, job.m, job.geometry
+        coeffs, cache, cdtype = job.coeffs, job.cache, job.cdtype
         n_f = freqs.size
         shape = (scipy.fft.next_fast_len(ay.n_linear), scipy.fft.next_fast_len(ax.n_linear))
         itemsize = np.dtype(cdtype).itemsize
