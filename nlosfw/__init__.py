@@ -36,7 +36,6 @@ from nlosfw.capture import (
     GridFormat,
     HFormat,
     VolumeFormat,
-    hidden_depth_range,
     read_capture,
     write_capture,
 )
@@ -49,7 +48,7 @@ from nlosfw.common import (
     __version__,
     require,
 )
-from nlosfw.image import Imager, ImagerConfig, Reconstruction
+from nlosfw.image import Imager, ImagerConfig, Reconstruction, depth_span
 from nlosfw.model import (
     FieldModel,
     FieldModelConfig,
@@ -69,6 +68,6 @@ __all__ = [
     "PluginError", "PluginKind", "Reconstruction", "Scene", "Simulator", "SimulatorConfig",
     "TrainingStep", "VolumeFormat", "__version__", "hookimpl", "require",
     # the Python API (nlosfw.api): one function per stage, and a whole run
-    "field_metrics", "fit_model", "hidden_depth_range", "predict_field", "read_capture",
+    "depth_span", "field_metrics", "fit_model", "predict_field", "read_capture",
     "reconstruct", "run", "simulate_scene", "split_field", "transform_capture", "write_capture",
 ]

@@ -12,7 +12,7 @@ as the command line checks them (an unknown option or a bad value is a one-line
     split = nlosfw.split_field(field, spatial_step=2)
     model = nlosfw.fit_model(split.train_field, "siren_torch", steps=500)
     predicted = nlosfw.predict_field(model, field)
-    depths = np.linspace(*nlosfw.hidden_depth_range(capture), 16)
+    depths = np.linspace(*nlosfw.depth_span(capture), 16)
     image = nlosfw.reconstruct(predicted, depths, "fft")             # a Reconstruction
 
     out = nlosfw.run(["model=interp", "scene=letter_t"])            # the whole pipeline
@@ -90,9 +90,11 @@ def reconstruct(field: PhasorField, depths: Sequence[float] | np.ndarray,
     run does (see :func:`nlosfw.image.wall_voxels`).
 
     Pass the full field as ``grid`` to image a subsampled field on the full field's
-    voxels, so that their images compare pixel by pixel. :func:`nlosfw.hidden_depth_range`
-    gives the depths a capture's hidden scene spans; for other voxels call the imager
-    itself (``load_plugins().registry.create("imager", "rsd").reconstruct(field, voxels)``).
+    voxels, so that their images compare pixel by pixel. :func:`nlosfw.image.depth_span`
+    gives the depths a capture's hidden scene spans, and
+    :func:`nlosfw.image.automatic_depths` the planes a run images there by default; for
+    other voxels call the imager itself
+    (``load_plugins().registry.create("imager", "rsd").reconstruct(field, voxels)``).
     """
     voxels = wall_voxels(field if grid is None else grid, depths)
     image: Reconstruction = _host().registry.create("imager", imager, options).reconstruct(

@@ -72,7 +72,7 @@ def test_stage_functions_reproduce_the_run(tiny_run, workdir):
 
 
 def test_depths_of_a_run_cover_the_hidden_scene(tiny_run):
-    near, far = nlosfw.hidden_depth_range(tiny_run.results.capture.capture)
+    near, far = nlosfw.depth_span(tiny_run.results.capture.capture)
     np.testing.assert_allclose(tiny_run.metrics.reconstruction.depths,
                                np.linspace(near, far, 4))
 

@@ -35,6 +35,6 @@ def test_the_python_api_is_documented_from_its_docstrings(reference):
                  "reconstruct"):
         assert re.search(rf'id="{name}"', page), f"nlosfw.api.{name} is not documented"
     assert "exactly as" in page and "python -m nlosfw OVERRIDES" in page   # run's docstring
-    stage = (out / "nlosfw" / "capture.html").read_text()
-    assert 'id="read_capture"' in stage and 'id="hidden_depth_range"' in stage
+    assert 'id="read_capture"' in (out / "nlosfw" / "capture.html").read_text()
+    assert 'id="depth_span"' in (out / "nlosfw" / "image.html").read_text()
     assert not re.search(r"<(script|link)[^>]+(src|href)=\"https?://", page)   # nothing fetched

@@ -14,7 +14,8 @@ import json
 import logging
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
@@ -47,19 +48,21 @@ from nlosfw.app.results import (
 from nlosfw.app.run_dir import RunContext
 from nlosfw.app.settings import RunSettings, run_settings
 from nlosfw.capture.data import Capture
-from nlosfw.capture.extent import hidden_depth_range
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.version import __version__
+from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.reconstruction import Reconstruction, wall_voxels
 from nlosfw.image.reconstruction_io import write_reconstruction
 from nlosfw.model.interface import FieldModel, FitReport, TrainingStep
 from nlosfw.model.protocol import FieldSplit
 from nlosfw.plugins import PluginHost, load_plugins
+from nlosfw.transform import frequencies as frequencies_module
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
+from nlosfw.transform.frequencies import warn_aliasing
 
 log = logging.getLogger(__name__)
 
@@ -209,10 +212,16 @@ class Pipeline:
                 "fields", key, lambda: transform.transform(source),
                 lambda p, f: write_phasor_field(p, f), read_phasor_field)
 
-        field, hit = cached_field(capture.capture, capture.key)
-        clean = None
-        if capture.clean is not None and capture.clean_key is not None:
-            clean = cached_field(capture.clean, capture.clean_key)[0]
+        with _once_per_message(logging.getLogger(frequencies_module.__name__)):
+            field, hit = cached_field(capture.capture, capture.key)
+            clean = None
+            if capture.clean is not None and capture.clean_key is not None:
+                clean = cached_field(capture.clean, capture.clean_key)[0]
+            # also from a cached field: the band's aliasing warning once per run
+            band = field.metadata.get("band") or {}
+            if band.get("aliases") and band.get("grid_spacing") is not None:
+                warn_aliasing(float(field.frequencies.max()), float(band["grid_spacing"]),
+                              field.geometry.kind, str(band.get("option", "transform")))
         self.ctx.write("phasor_field", lambda p: write_phasor_field(p, field))
         result = TransformResult(field=field, cache_hit=hit, clean=clean)
         self.ctx.metrics = replace(self.metrics, transform=transform_metrics(name, result))
@@ -414,12 +423,17 @@ class Pipeline:
         return report
 
     def _voxels(self, capture: Capture, field: PhasorField) -> np.ndarray:
+        """Planes on the wall's grid at the configured depths, or at ``n_depths`` planes, or
+        (the default) at the band's depth resolution (:mod:`nlosfw.image.depths`), over
+        ``depth_range`` or the depths that hold signal."""
         r = self.settings.reconstruction
         if r.depths:
             depths = np.asarray(r.depths, dtype=float)
         else:
-            near, far = r.depth_range or hidden_depth_range(capture)
-            depths = np.linspace(near, far, r.n_depths)
+            span = r.depth_range or depth_span(capture)
+            depths = (np.linspace(span[0], span[1], r.n_depths) if r.n_depths is not None
+                      else automatic_depths(span, float(field.frequencies.max()),
+                                            field.geometry.kind))
         return wall_voxels(field, depths)
 
     def _run_info(self) -> RunInfo:
@@ -461,6 +475,32 @@ class Pipeline:
         log.warning("moved %d files of an earlier unfinished run to %s", len(leftovers), aside)
 
 
+class _OnceFilter(logging.Filter):
+    """Lets each distinct message through once."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: set[str] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if message in self.seen:
+            return False
+        self.seen.add(message)
+        return True
+
+
+@contextmanager
+def _once_per_message(logger: logging.Logger) -> Iterator[None]:
+    """Within the block, ``logger`` logs each distinct message once."""
+    once = _OnceFilter()
+    logger.addFilter(once)
+    try:
+        yield
+    finally:
+        logger.removeFilter(once)
+
+
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:
     """Up to ``count`` frequency indices to show alone: a training one near the top of the
     band, then a held-out one (if any), by label."""
@@ -470,4 +510,3 @@ def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, in
     if held.size:
         chosen["held-out"] = int(held[held.size // 2])
     return dict(list(chosen.items())[:count])
-

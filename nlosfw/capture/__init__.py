@@ -6,7 +6,6 @@ import only these."""
 
 from nlosfw.capture.data import YTAL_FIELDS, Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat, VolumeFormat
-from nlosfw.capture.extent import hidden_depth_range
 from nlosfw.capture.geometry import SPEED_OF_LIGHT, CaptureGeometry, device_legs
 from nlosfw.capture.hdf5 import read_capture, write_capture
 
@@ -17,7 +16,6 @@ __all__ = [
     "device_legs",
     "GridFormat",
     "HFormat",
-    "hidden_depth_range",
     "read_capture",
     "SPEED_OF_LIGHT",
     "VolumeFormat",

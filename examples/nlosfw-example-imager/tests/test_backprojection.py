@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 
-from nlosfw import hidden_depth_range, reconstruct, simulate_scene, transform_capture
+from nlosfw import depth_span, reconstruct, simulate_scene, transform_capture
 from nlosfw.image import volume_voxels
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
@@ -15,7 +15,7 @@ from nlosfw.testing import fixtures
 def test_same_image_as_the_rsd_imager_on_a_simulated_capture():
     capture = simulate_scene("tiny")
     field = transform_capture(capture, "fft", n_frequencies=15)
-    depths = np.linspace(*hidden_depth_range(capture), 5)
+    depths = np.linspace(*depth_span(capture), 5)
     ours = reconstruct(field, depths, "example_backprojection", block=50)
     reference = reconstruct(field, depths, "rsd")
     np.testing.assert_allclose(ours.intensity, reference.intensity, rtol=1e-9,
