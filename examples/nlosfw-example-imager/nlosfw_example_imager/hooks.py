@@ -25,6 +25,7 @@ def register_imagers(register: Any) -> None:
         config=BackprojectionConfig,
         description="Phasor-field backprojection, voxel by voxel (example third-party plugin)",
         test_config={"block": 64},                              # small, fast options for the kit
-        # what the conformance kit checks (nlosfw.plugins.CAPABILITIES["imager"])
-        capabilities=["single_spot", "confocal", "plane_voxels", "point_voxels"],
+        # what the conformance kit checks (nlosfw.plugins.CAPABILITIES["imager"]); "rsd":
+        # its image is the Rayleigh-Sommerfeld one, compared with the kit's reference
+        capabilities=["single_spot", "confocal", "plane_voxels", "point_voxels", "rsd"],
     )
