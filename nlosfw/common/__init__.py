@@ -22,10 +22,12 @@ from nlosfw.common.errors import (
     one_line,
 )
 from nlosfw.common.files import atomic_path, write_text
+from nlosfw.common.progress import ProgressCallback, accepts_progress
 from nlosfw.common.version import __version__
 
 __all__ = [
     "__version__",
+    "accepts_progress",
     "atomic_path",
     "available_cores",
     "Choice",
@@ -38,6 +40,7 @@ __all__ = [
     "NlosfwError",
     "one_line",
     "PluginError",
+    "ProgressCallback",
     "require",
     "USER_ERROR_EXIT_STATUS",
     "write_text",

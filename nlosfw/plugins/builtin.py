@@ -67,7 +67,7 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.rsd:RSDImagerConfig",
         description="Direct Rayleigh-Sommerfeld sum over any voxel set",
         test_config={"chunk_mb": 1.0},
-        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.POINT_VOXELS],
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.POINT_VOXELS, C.PROGRESS],
     )
     register(
         "fft",
@@ -75,5 +75,5 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.fft:FFTImagerConfig",
         description="Fast RSD: per-plane FFT convolution (Liu 2020)",
         test_config={"workers": 2},
-        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS],
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
     )

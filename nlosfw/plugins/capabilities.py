@@ -44,6 +44,7 @@ class Capability(str, Enum):
     # imagers
     PLANE_VOXELS = "plane_voxels"
     POINT_VOXELS = "point_voxels"
+    PROGRESS = "progress"
     # capture formats
     READABLE = "readable"
     WRITABLE = "writable"
@@ -92,6 +93,8 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
         C.PLANE_VOXELS: "voxels in planes parallel to the wall on the wall's grid, "
                         "(Y, X, 3) or (Z, Y, X, 3)",
         C.POINT_VOXELS: "any voxel list (N, 3)",
+        C.PROGRESS: "reconstruct(..., on_progress=callback) reports (done, total) as blocks of "
+                    "voxels finish, the last time with done == total",
     }),
     "capture_format": MappingProxyType({
         C.READABLE: "reads captures of this format",
