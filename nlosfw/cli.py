@@ -1,4 +1,5 @@
-"""Command line: ``python -m nlosfw [plugins | report DIR | --debug | Hydra overrides...]``."""
+"""Command line: ``python -m nlosfw [--help | plugins [NAME] | report DIR | --debug | Hydra
+overrides...]``."""
 
 from __future__ import annotations
 
@@ -19,11 +20,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     from nlosfw.app.errors import report_user_error
 
     try:
+        if args[:1] not in (["plugins"], ["report"]) and ("--help" in args or "-h" in args):
+            from nlosfw.app.help import help_text
+            from nlosfw.app.hydra_app import config_dir
+            from nlosfw.plugins import load_plugins
+
+            sys.stdout.write(help_text(load_plugins(), config_dir()) + "\n")
+            return 0
         if args[:1] == ["plugins"]:
             from nlosfw.app.plugins_command import plugins_command
             from nlosfw.plugins import load_plugins
 
-            return plugins_command(load_plugins())
+            return plugins_command(load_plugins(), args=args[1:])
         if args[:1] == ["report"]:
             from nlosfw.app.report import report_command
 

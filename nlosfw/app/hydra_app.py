@@ -32,7 +32,7 @@ from typing import Any, NoReturn
 from nlosfw.app.settings import SELECTOR_GROUPS, RunConfig, run_settings
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem, schema_class
-from nlosfw.plugins import PluginHost
+from nlosfw.plugins import PluginHost, PluginSpec
 from nlosfw.plugins.kinds import PluginKind
 
 log = logging.getLogger(__name__)
@@ -165,7 +165,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                                    job_name="nlosfw"):
             loader = GlobalHydra.instance().config_loader()
             for key, values in [(o.key_or_group, _values(o)) for o in parsed]:
-                _check_group_choice(key, values, loader)
+                _check_group_choice(key, values, loader, host)
 
             def composed(combo: list[str], with_hydra: bool = False) -> Any:
                 try:
@@ -182,7 +182,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                     if key in given:
                         continue
                     (ov,) = OverridesParser.create().parse_overrides([f"{key}={value}"])
-                    _check_group_choice(ov.key_or_group, _values(ov), loader)
+                    _check_group_choice(ov.key_or_group, _values(ov), loader, host)
                     sweeps.append((key, _values(ov)))
             combos = itertools.product(*[[f"{key}={v}" for v in values]
                                          for key, values in sweeps])
@@ -233,6 +233,7 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         if command:
             raise PluginError(f"{group} plugin '{spec.name}' needs packages that are not "
                               f"installed; run: {command}")
+        _check_imports(spec)
         spec.make_config(_plugin_options(node, spec.config_class()))
     for label, options in settings.compare.items():
         node = dict(options)
@@ -241,6 +242,7 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         if command:
             raise PluginError(f"compare.{label}: model plugin '{spec.name}' needs packages that "
                               f"are not installed; run: {command}")
+        _check_imports(spec)
         try:
             spec.make_config(node)
         except ConfigError as err:
@@ -291,11 +293,20 @@ def _task(cfg: Any) -> float | None:
     from nlosfw.app.errors import report_user_error
     from nlosfw.app.pipeline import run_pipeline
 
+    logging.captureWarnings(True)  # library warnings go to run.log, not the console
     try:
         return run_pipeline(cfg)
     except NlosfwError as err:
         report_user_error(err)
         raise SystemExit(2) from None
+
+
+def _check_imports(spec: PluginSpec) -> None:
+    """A one-line PluginError when a selected plugin's code cannot be imported (a typo in its
+    factory path, an import error, a missing dependency), before the run starts."""
+    problem = spec.import_problem()
+    if problem:
+        raise PluginError(f"{problem} (see: python -m nlosfw plugins {spec.qualified_name})")
 
 
 def _plugin_options(node: Any, config_class: type) -> Any:
@@ -313,8 +324,9 @@ def _values(override: Any) -> list[str]:
     return [] if value is None else [str(value)]
 
 
-def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
-    """Refuse an unknown scene, plugin or preset name (``loader``: Hydra's ConfigLoader)."""
+def _check_group_choice(key: str, values: list[str], loader: Any, host: PluginHost) -> None:
+    """Refuse an unknown scene, plugin or preset name (``loader``: Hydra's ConfigLoader),
+    and a registered plugin whose config could not be stored because it is broken."""
     if key not in SELECTOR_GROUPS:
         return
     options = loader.get_group_options(key)
@@ -322,6 +334,8 @@ def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
         if value in ("null", "None") and key == "experiment":
             continue
         if value not in options:
+            if key in _PLUGIN_GROUPS and (key, value) in host.registry:
+                _check_imports(host.registry.get(key, value))
             raise _unknown_choice(key, value, sorted(options))
 
 

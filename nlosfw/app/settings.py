@@ -53,6 +53,7 @@ class SplitSettings:
     spectral: SpectralSplit = SpectralSplit.interleaved
     """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
     spectral_fraction: float = 0.1
+    """The fraction of the frequencies held out (``interleaved``: every 1/fraction-th)."""
 
     def __post_init__(self) -> None:
         require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
@@ -65,10 +66,12 @@ class ReconstructionSettings:
     """The voxels imaged from every field."""
 
     depths: tuple[float, ...] = ()
-    """Depth planes (m); empty: ``n_depths`` planes spanning the scene's ground truth or
+    """[m] Depth planes; empty: ``n_depths`` planes spanning the scene's ground truth or
     ``depth_range``."""
     depth_range: tuple[float, float] | None = None
+    """[m] Near and far depth of the planes when the capture has no ground truth."""
     n_depths: int = 24
+    """Number of depth planes when ``depths`` is empty."""
     single_frequency_images: int = 2
     """How many single-frequency images (as in the thesis figures) to add per field."""
 
@@ -85,8 +88,12 @@ class ReconstructionSettings:
 
 @dataclass(frozen=True)
 class FigureSettings:
+    """The PNG figures of a run (``figures/``)."""
+
     enabled: bool = True
+    """Draw the figures (false: metrics and files only)."""
     dpi: int = 110
+    """Resolution of the PNG files (dots per inch)."""
 
     def __post_init__(self) -> None:
         require(self.dpi >= 30, "dpi", f"must be >= 30, got {self.dpi}")
@@ -97,16 +104,42 @@ class CacheSettings:
     """Captures and phasor fields are cached by a hash of the config that produced them."""
 
     enabled: bool = True
+    """Read and write the cache (false: compute everything again)."""
     dir: str = "~/.cache/nlosfw"
+    """Where the cache lives (``$NLOSFW_CACHE_DIR`` when set)."""
+
+
+class Artefact(Choice):
+    """The large files a run can keep (``output.keep``); metrics, config, log and figures are
+    always written."""
+
+    capture = "capture"
+    """``capture.hdf5``: the transient (y-tal's layout)."""
+    phasor_field = "phasor_field"
+    """``phasor_field.hdf5``: the phasor field of the capture."""
+    fields = "fields"
+    """``fields/<source>.hdf5``: every field that is imaged."""
+    model = "model"
+    """``field_model.npz``: the trained field model."""
+    reconstructions = "reconstructions"
+    """``reconstructions/<source>.hdf5``: the reconstruction of every field."""
 
 
 @dataclass(frozen=True)
 class OutputSettings:
+    """What a run writes besides its metrics, config, log and figures."""
+
+    keep: tuple[Artefact, ...] = (Artefact.capture, Artefact.model)
+    """The large files to write: by default the capture (the run's input, slow to simulate
+    with a ray tracer) and the trained model (slow to train); the phasor field, the imaged
+    fields and the reconstructions follow from them quickly and are left out."""
     compression: int = 4
     """gzip level (0-9) for the transient in capture.hdf5."""
 
     def __post_init__(self) -> None:
         require(0 <= self.compression <= 9, "compression", f"must be 0-9, got {self.compression}")
+        require(len(set(self.keep)) == len(self.keep), "keep",
+                f"lists an artefact twice: {[str(a) for a in self.keep]}")
 
 
 @dataclass(frozen=True)
@@ -114,12 +147,19 @@ class RunSettings:
     """Everything in a run's config except the selected scene and plugins."""
 
     stop_after: StopAfter | None = None
+    """The last stage to run (null: every stage)."""
     capture: CaptureSource = field(default_factory=CaptureSource)
+    """Where the capture comes from (default: simulate the scene)."""
     split: SplitSettings = field(default_factory=SplitSettings)
+    """Which wall samples and frequencies the field models train on."""
     reconstruction: ReconstructionSettings = field(default_factory=ReconstructionSettings)
+    """The voxels every field is imaged on."""
     figures: FigureSettings = field(default_factory=FigureSettings)
+    """The PNG figures."""
     cache: CacheSettings = field(default_factory=CacheSettings)
+    """The cache of captures and phasor fields."""
     output: OutputSettings = field(default_factory=OutputSettings)
+    """Which large files the run writes."""
     compare: dict[str, dict[str, Any]] = field(default_factory=dict)
     """More field models fitted and imaged beside ``model`` and interp: label -> options with
     the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""
