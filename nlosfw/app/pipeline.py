@@ -21,9 +21,10 @@ from pathlib import Path
 from typing import Any, Literal, cast
 
 import numpy as np
+from rich.progress import Progress
 
 from nlosfw.app.cache import Cache, cache_key, file_digest
-from nlosfw.app.console import config_tree, progress_bar
+from nlosfw.app.console import app_console, progress_bar, step
 from nlosfw.app.measure import (
     capture_metrics,
     denoising_metrics,
@@ -43,13 +44,14 @@ from nlosfw.app.results import (
     SingleFrequencyImages,
     TransformResult,
 )
-from nlosfw.app.run_dir import RunContext
-from nlosfw.app.settings import RunSettings, run_settings
+from nlosfw.app.run_dir import RunContext, format_size
+from nlosfw.app.settings import Artefact, RunSettings, run_settings
 from nlosfw.capture.data import Capture
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.progress import accepts_progress
 from nlosfw.common.version import __version__
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
 from nlosfw.image.reconstruction_io import write_reconstruction
@@ -79,14 +81,13 @@ class Pipeline:
     """One run of every stage up to ``stop_after``, writing into ``run_dir``."""
 
     def __init__(self, run_dir: Path, config: dict[str, Any], host: PluginHost) -> None:
-        from rich.console import Console
-
         self.config = config
         self.settings: RunSettings = run_settings(config)
         self.host = host
         self.run_dir = Path(run_dir)
-        self.console = Console(stderr=False)
-        self.ctx = RunContext(self.run_dir, host, self._run_info())
+        self.console = app_console()
+        self.ctx = RunContext(self.run_dir, host, self._run_info(),
+                              keep=frozenset(self.settings.output.keep))
         self.cache = Cache(self.settings.cache.dir, self.settings.cache.enabled)
 
     @property
@@ -99,9 +100,15 @@ class Pipeline:
         if self._already_completed():
             return None
         self._set_aside_leftovers()
-        self.console.print(config_tree(self.config, title=f"nlosfw run → {self.run_dir}"))
+        from nlosfw.app.overview import overview_lines
+
+        self.console.print(f"[bold]nlosfw run[/] → {self.run_dir}", highlight=False)
+        for line in overview_lines(self.config, self.host, self.settings):
+            self.console.print(line, highlight=False)
         self.host.hook.on_run_start(run_dir=str(self.run_dir), config=self.config)
         self.ctx.write_text("config", yaml_safe.dump(self.config))
+        self.console.print("  full configuration: config.yaml and .hydra/ in the run directory",
+                           highlight=False)
         try:
             objective = self._stages()
         except BaseException:  # any failure, ours or a bug: record it, then re-raise
@@ -118,8 +125,16 @@ class Pipeline:
         from nlosfw.app.summary import summary_table
 
         self.console.print(summary_table(self.metrics))
-        self.console.print(f"[bold green]done[/] ({status}): {self.run_dir}")
+        self.console.print(f"[bold green]done[/] ({status}): {self.run_dir}, "
+                           f"{format_size(self.ctx.size())} {self._kept_text()}", highlight=False)
         return objective
+
+    def _kept_text(self) -> str:
+        """Which large files the run kept and which output.keep left out."""
+        kept = ", ".join(str(a) for a in self.settings.output.keep) or "none"
+        left = ", ".join(str(a) for a in Artefact if a not in self.settings.output.keep)
+        return (f"(large files kept: {kept}" + (f"; not written: {left}, see output.keep)"
+                                                 if left else ")"))
 
     def _record_failure(self) -> None:
         """metrics.json with status failed and the on_run_end hook, never masking the error."""
@@ -170,7 +185,8 @@ class Pipeline:
         else:
             result = self._simulated_capture()
         self.ctx.write("capture", lambda p: write_capture(
-            p, result.capture, compression=self.settings.output.compression))
+            p, result.capture, compression=self.settings.output.compression),
+            keep_as=Artefact.capture)
         self.ctx.metrics = replace(self.metrics, capture=capture_metrics(result))
         return result
 
@@ -188,11 +204,14 @@ class Pipeline:
                 "fields", key, lambda: transform.transform(source),
                 lambda p, f: write_phasor_field(p, f), read_phasor_field)
 
-        field, hit = cached_field(capture.capture, capture.key)
-        clean = None
-        if capture.clean is not None and capture.clean_key is not None:
-            clean = cached_field(capture.clean, capture.clean_key)[0]
-        self.ctx.write("phasor_field", lambda p: write_phasor_field(p, field))
+        with step(f"phasor field ({name})", self.console) as set_info:
+            field, hit = cached_field(capture.capture, capture.key)
+            clean = None
+            if capture.clean is not None and capture.clean_key is not None:
+                clean = cached_field(capture.clean, capture.clean_key)[0]
+            set_info(f"{field.n_frequencies} frequencies" + (" (cached)" if hit else ""))
+        self.ctx.write("phasor_field", lambda p: write_phasor_field(p, field),
+                       keep_as=Artefact.phasor_field)
         result = TransformResult(field=field, cache_hit=hit, clean=clean)
         self.ctx.metrics = replace(self.metrics, transform=transform_metrics(name, result))
         return result
@@ -214,38 +233,49 @@ class Pipeline:
             models.append(fitted)
             self._record_field(source, fit_metrics(fitted, split))
             if source == "model":
-                self.ctx.write("field_model", model.save, kind="field_model")
+                self.ctx.write("field_model", model.save, kind="field_model",
+                               keep_as=Artefact.model)
         return FitResult(split=split, models=tuple(models))
 
     def predict(self, transformed: TransformResult, fitted: FitResult) -> ImagedFields:
         """The fields to image: true, raw (training grid, all frequencies), every model's."""
-        from nlosfw.model.protocol import field_metrics
-
         field, split = transformed.field, fitted.split
-        step = split.spatial_step
+        spatial_step = split.spatial_step
         predicted = {}
-        for fm in fitted.models:
-            start = time.perf_counter()
-            prediction = fm.model.predict_field(field.wall_xyz, field.frequencies,
-                                                field.geometry, field.weights,
-                                                metadata={"source": fm.source})
-            seconds = time.perf_counter() - start
-            predicted[fm.source] = prediction
-            denoising = (None if transformed.clean is None
-                         else denoising_metrics(transformed.clean, field, prediction))
-            entry = self.metrics.field_entry(fm.source)
-            assert entry is not None  # recorded by fit
-            self._record_field(fm.source, replace(
-                entry, predict_seconds=round(seconds, 4),
-                splits=SplitErrors.of(field_metrics(field, prediction, split)),
-                denoising=denoising))
-        fields = ImagedFields(true=field, raw=field.select(y=slice(None, None, step),
-                                                           x=slice(None, None, step)),
+        with progress_bar(self.console) as progress:
+            task = progress.add_task("predict", total=len(fitted.models), info="")
+            for fm in fitted.models:
+                progress.update(task, info=f"{fm.source} ({fm.plugin})")
+                start = time.perf_counter()
+                predicted[fm.source] = fm.model.predict_field(
+                    field.wall_xyz, field.frequencies, field.geometry, field.weights,
+                    metadata={"source": fm.source})
+                seconds = time.perf_counter() - start
+                self._record_prediction(fm.source, transformed, predicted[fm.source], split,
+                                        seconds)
+                progress.update(task, advance=1)
+        fields = ImagedFields(true=field, raw=field.select(y=slice(None, None, spatial_step),
+                                                           x=slice(None, None, spatial_step)),
                               predicted=predicted)
         for source, f in fields.items():
             self.ctx.write(f"fields/{source}.hdf5", partial(write_phasor_field, field=f),
-                           kind="phasor_field")
+                           kind="phasor_field", keep_as=Artefact.fields)
         return fields
+
+    def _record_prediction(self, source: str, transformed: TransformResult,
+                           prediction: PhasorField, split: FieldSplit, seconds: float) -> None:
+        """The field errors (and denoising gains) of one model's prediction."""
+        from nlosfw.model.protocol import field_metrics
+
+        field = transformed.field
+        denoising = (None if transformed.clean is None
+                     else denoising_metrics(transformed.clean, field, prediction))
+        entry = self.metrics.field_entry(source)
+        assert entry is not None  # recorded by fit
+        self._record_field(source, replace(
+            entry, predict_seconds=round(seconds, 4),
+            splits=SplitErrors.of(field_metrics(field, prediction, split)),
+            denoising=denoising))
 
     def reconstruct(self, capture: Capture, split: FieldSplit,
                     fields: ImagedFields) -> Reconstructions:
@@ -253,28 +283,41 @@ class Pipeline:
         name, options = self._plugin_options("imager")
         imager = self.host.registry.create("imager", name, options)
         voxels = self._voxels(capture, fields.true)
+        # as in the thesis figures: images from one frequency at a time, too
+        chosen = chosen_frequencies(split, self.settings.reconstruction.single_frequency_images)
+        sources = fields.by_source()
+        log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
+                 len(sources) * (1 + len(chosen)), name, len(sources), ", ".join(sources),
+                 fields.true.n_frequencies,
+                 "".join(f" and from f = {fields.true.frequencies[i]:.4g} /m ({label})"
+                         for label, i in chosen.items()))
         by_source: dict[str, Reconstruction] = {}
         seconds: dict[str, float] = {}
-        for source, field in fields.items():
-            start = time.perf_counter()
-            by_source[source] = imager.reconstruct(field, voxels)
-            seconds[source] = round(time.perf_counter() - start, 4)
+        with progress_bar(self.console) as progress:
+            for source, field in fields.items():
+                start = time.perf_counter()
+                by_source[source] = self._image(imager, field, voxels, progress,
+                                                f"image {source}")
+                seconds[source] = round(time.perf_counter() - start, 4)
+            task = progress.add_task("single-frequency images",
+                                     total=len(chosen) * len(sources), info="")
+            singles = []
+            for label, index in chosen.items():
+                images = {}
+                for source, field in fields.items():
+                    progress.update(task, info=f"{source} at {label}")
+                    images[source] = imager.reconstruct(field.select(frequency_index=[index]),
+                                                        voxels)
+                    progress.update(task, advance=1)
+                singles.append(SingleFrequencyImages(
+                    index=index, frequency=float(fields.true.frequencies[index]), split=label,
+                    by_source=images))
+        for source, recon in by_source.items():
             self.ctx.write(f"reconstructions/{source}.hdf5",
-                           partial(write_reconstruction, recon=by_source[source]),
-                           kind="reconstruction")
-        recons = Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds)
-        self.ctx.metrics = replace(self.metrics,
-                                   reconstruction=reconstruction_metrics(name, recons))
-        # as in the thesis figures: images from one frequency at a time
-        chosen = chosen_frequencies(split, self.settings.reconstruction.single_frequency_images)
-        singles = tuple(
-            SingleFrequencyImages(
-                index=index, frequency=float(fields.true.frequencies[index]), split=label,
-                by_source={source: imager.reconstruct(field.select(frequency_index=[index]),
-                                                      voxels)
-                           for source, field in fields.items()})
-            for label, index in chosen.items())
-        recons = replace(recons, single_frequency=singles)
+                           partial(write_reconstruction, recon=recon),
+                           kind="reconstruction", keep_as=Artefact.reconstructions)
+        recons = Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds,
+                                 single_frequency=tuple(singles))
         self.ctx.metrics = replace(self.metrics,
                                    reconstruction=reconstruction_metrics(name, recons))
         return recons
@@ -295,7 +338,8 @@ class Pipeline:
 
             scores = self.metrics.reconstruction
             assert scores is not None  # recorded by reconstruct
-            write_figures(self.ctx, results, scores, self.settings.figures.dpi)
+            with step("figures", self.console):
+                write_figures(self.ctx, results, scores, self.settings.figures.dpi)
 
     # ------------------------------------------------------------------ helpers
     def _simulated_capture(self) -> CaptureResult:
@@ -314,9 +358,10 @@ class Pipeline:
         simulator = self.host.registry.create("simulator", name, options)
         clean_scene = dataclasses.replace(scene, noise=NoiseConfig())
         clean_key = self._capture_key(name, simulator, clean_scene)
-        with self.console.status(f"simulating {scene.name} with {name}…"):
+        with step(f"simulate {scene.name} ({name})", self.console) as set_info:
             clean, hit = self._cached_capture(clean_key,
                                               lambda: simulator.simulate_clean(clean_scene))
+            set_info("(cached)" if hit else "")
             if scene.noise == NoiseConfig():
                 return CaptureResult(capture=clean, key=clean_key, source="simulated",
                                      simulator=name, cache_hit=hit)
@@ -391,6 +436,22 @@ class Pipeline:
             report = model.fit(train, on_step=on_step)
             progress.update(task, completed=report.steps, total=max(report.steps, 1))
         return report
+
+    def _image(self, imager: Any, field: PhasorField, voxels: np.ndarray,
+               progress: Progress, description: str) -> Reconstruction:
+        """One reconstruction with a progress bar of its blocks (when the imager reports
+        them through ``on_progress``; else a bar that completes when it returns)."""
+        task = progress.add_task(description, total=None, info="")
+        if accepts_progress(imager.reconstruct):
+            def on_progress(done: int, total: int) -> None:
+                progress.update(task, completed=done, total=total)
+
+            recon = imager.reconstruct(field, voxels, on_progress=on_progress)
+        else:
+            recon = imager.reconstruct(field, voxels)
+        total = next(t.total for t in progress.tasks if t.id == task) or 1
+        progress.update(task, completed=total, total=total)
+        return recon
 
     def _voxels(self, capture: Capture, field: PhasorField) -> np.ndarray:
         r = self.settings.reconstruction
