@@ -254,6 +254,7 @@ class Pipeline:
                 self._record_prediction(fm.source, transformed, predicted[fm.source], split,
                                         seconds)
                 progress.update(task, advance=1)
+            progress.update(task, info=", ".join(fm.plugin for fm in fitted.models))
         fields = ImagedFields(true=field, raw=field.select(y=slice(None, None, spatial_step),
                                                            x=slice(None, None, spatial_step)),
                               predicted=predicted)
@@ -312,6 +313,8 @@ class Pipeline:
                 singles.append(SingleFrequencyImages(
                     index=index, frequency=float(fields.true.frequencies[index]), split=label,
                     by_source=images))
+            progress.update(task, info=", ".join(f"f = {s.frequency:.4g} /m ({s.split})"
+                                                 for s in singles))
         for source, recon in by_source.items():
             self.ctx.write(f"reconstructions/{source}.hdf5",
                            partial(write_reconstruction, recon=recon),
