@@ -300,21 +300,7 @@ class Pipeline:
                 by_source[source] = self._image(imager, field, voxels, progress,
                                                 f"image {source}")
                 seconds[source] = round(time.perf_counter() - start, 4)
-            task = progress.add_task("single-frequency images",
-                                     total=len(chosen) * len(sources), info="")
-            singles = []
-            for label, index in chosen.items():
-                images = {}
-                for source, field in fields.items():
-                    progress.update(task, info=f"{source} at {label}")
-                    images[source] = imager.reconstruct(field.select(frequency_index=[index]),
-                                                        voxels)
-                    progress.update(task, advance=1)
-                singles.append(SingleFrequencyImages(
-                    index=index, frequency=float(fields.true.frequencies[index]), split=label,
-                    by_source=images))
-            progress.update(task, info=", ".join(f"f = {s.frequency:.4g} /m ({s.split})"
-                                                 for s in singles))
+            singles = self._single_frequency_images(imager, fields, voxels, chosen, progress)
         for source, recon in by_source.items():
             self.ctx.write(f"reconstructions/{source}.hdf5",
                            partial(write_reconstruction, recon=recon),
@@ -324,6 +310,30 @@ class Pipeline:
         self.ctx.metrics = replace(self.metrics,
                                    reconstruction=reconstruction_metrics(name, recons))
         return recons
+
+    def _single_frequency_images(self, imager: Any, fields: ImagedFields, voxels: np.ndarray,
+                                 chosen: dict[FrequencySplit, int],
+                                 progress: Progress) -> list[SingleFrequencyImages]:
+        """Every field imaged from each chosen frequency alone, with a progress bar."""
+        if not chosen:
+            return []
+        sources = fields.by_source()
+        task = progress.add_task("single-frequency images", total=len(chosen) * len(sources),
+                                 info="")
+        singles = []
+        for label, index in chosen.items():
+            images = {}
+            for source, field in sources.items():
+                progress.update(task, info=f"{source} at {label}")
+                images[source] = imager.reconstruct(field.select(frequency_index=[index]),
+                                                    voxels)
+                progress.update(task, advance=1)
+            singles.append(SingleFrequencyImages(
+                index=index, frequency=float(fields.true.frequencies[index]), split=label,
+                by_source=images))
+        progress.update(task, info=", ".join(f"f = {s.frequency:.4g} /m ({s.split})"
+                                             for s in singles))
+        return singles
 
     def report(self, results: RunResults) -> None:
         """The thesis comparison table (for thesis presets) and the figures."""
