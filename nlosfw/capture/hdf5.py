@@ -20,7 +20,7 @@ from nlosfw.capture.data import YTAL_FIELDS, Capture
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError, one_line
-from nlosfw.common.files import atomic_path
+from nlosfw.common.hdf5 import new_file
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +48,7 @@ def write_capture(path: str | Path, capture: Capture, compression: int = 0,
     """
     if not 0 <= compression <= 9:
         raise DataError(f"compression: must be a gzip level 0-9, got {compression}")
-    with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
+    with new_file(path, overwrite=overwrite) as f:
         for key in YTAL_FIELDS:
             _write_field(f, key, getattr(capture, key), compression)
     return Path(path)
@@ -161,6 +161,8 @@ def _scene_info(value: Any, path: Path) -> dict:
     if isinstance(value, (bytes, str)):
         try:
             value = yaml_safe.load(value)
+        except yaml_safe.LimitExceeded as err:
+            raise DataError(f"{path}: field 'scene_info' is refused: {err}") from None
         except Exception as err:  # yaml raises many error types
             raise DataError(f"{path}: field 'scene_info' is not valid YAML ({one_line(err)})"
                             ) from None
