@@ -10,8 +10,11 @@ Three things happen before Hydra takes over:
    Hydra refuses ``+`` for a group that already has a default, so the ``+`` is
    dropped there and the override selects the option as ``group=name`` does;
 3. the configuration is composed with Hydra's compose API and validated (every group
-   choice, every plugin option, the scene, the run settings; one composition per swept
-   value), so a mistake ends with one line and exit status 2 before any output exists.
+   choice, every plugin option, the scene, the run settings, the memory the run needs;
+   one composition per swept value), and the output directories are checked (writable,
+   no live run or earlier run in the way, a resumed sweep's configuration unchanged: see
+   :mod:`nlosfw.app.output_dirs`), so a mistake ends with one line and exit status 2
+   before any output exists.
 """
 
 from __future__ import annotations
@@ -29,8 +32,10 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, NoReturn
 
+from nlosfw.app.budget import check_memory
+from nlosfw.app.output_dirs import check_output_dirs
 from nlosfw.app.settings import SELECTOR_GROUPS, RunConfig, run_settings
-from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
+from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, StorageError, one_line
 from nlosfw.common.schema import is_schema_node, problem, schema_class
 from nlosfw.plugins import PluginHost
 from nlosfw.plugins.kinds import PluginKind
@@ -174,10 +179,11 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                 except (HydraException, OmegaConfBaseException) as err:
                     raise composition_error(err) from None
 
+            first = fixed + [f"{key}={values[0]}" for key, values in sweeps if values]
+            declared: dict[str, Any] = {}
             if multirun:
                 given = {o.get_key_element() for o in parsed}
-                first = fixed + [f"{key}={values[0]}" for key, values in sweeps]
-                declared = composed(first, with_hydra=True).hydra.sweeper.params or {}
+                declared = dict(composed(first, with_hydra=True).hydra.sweeper.params or {})
                 for key, value in declared.items():
                     if key in given:
                         continue
@@ -193,6 +199,8 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                 log.warning("checked the first %d of %d sweep combinations before starting; "
                             "the others are checked when their run starts",
                             _MAX_PREFLIGHT_COMPOSITIONS, total)
+            check_output_dirs(composed, list(overrides), first,
+                              [f"{k}={v}" for k, v in declared.items()], multirun)
     finally:
         GlobalHydra.instance().clear()
 
@@ -253,10 +261,12 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         simulator = host.registry.get("simulator", str(cfg.simulator.name))
         simulator.create(_plugin_options(cfg.simulator, simulator.config_class())
                          ).check_scene(scene)
+        check_memory(cfg)
         return
     path = Path(settings.capture.path).expanduser()
     if not path.is_file():
         raise ConfigError("capture.path", f"file not found: {settings.capture.path}")
+    check_memory(cfg)  # from the file's header, before reading it
     from nlosfw.capture.hdf5 import read_capture
 
     read_capture(path)  # a malformed file must fail here, before any output exists
@@ -295,7 +305,11 @@ def _task(cfg: Any) -> float | None:
         return run_pipeline(cfg)
     except NlosfwError as err:
         report_user_error(err)
-        raise SystemExit(2) from None
+        raise SystemExit(err.exit_status) from None
+    except MemoryError as err:  # the estimate let it through: still one line
+        report_user_error(StorageError(f"out of memory ({one_line(err)}); make the run "
+                                       "smaller (the sizes, or fewer sweep jobs at once)"))
+        raise SystemExit(StorageError.exit_status) from None
 
 
 def _plugin_options(node: Any, config_class: type) -> Any:

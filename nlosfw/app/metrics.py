@@ -7,6 +7,10 @@ README are generated from these classes (:mod:`nlosfw.common.typed_json`).
 
 Every change to the layout (a key added, removed, renamed or retyped) is made here and
 bumps :data:`SCHEMA_VERSION`; ``tests/test_metrics_schema.py`` fails until it is bumped.
+
+Two runs of the same configuration and seed on the CPU write the same metrics.json except
+for the fields listed in :data:`TIMING_FIELDS` (wall-clock times and the start time); every
+other artefact of a run is byte-identical (``tests/hostile/test_determinism.py``).
 """
 
 from __future__ import annotations
@@ -23,13 +27,24 @@ from nlosfw.common.errors import DataError
 from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[1]
+SchemaVersion = Literal[2]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 1
+SCHEMA_VERSION: Final[SchemaVersion] = 2
 
-Status = Literal["running", "completed", "stopped", "failed"]
-"""``running`` only while the run is in progress: metrics.json is written when it ends."""
+Status = Literal["running", "completed", "stopped", "failed", "interrupted"]
+"""``running`` only while the run is in progress: metrics.json is written when it ends.
+``failed`` and ``interrupted`` (SIGINT, SIGTERM) runs say where and why in ``error``."""
 
+#: The fields of metrics.json that differ between two runs of the same configuration and
+#: seed (dotted paths; ``*`` stands for any key): wall-clock times and the start time.
+TIMING_FIELDS: Final = (
+    "run.started",
+    "timings",
+    "field.*.fit.seconds",
+    "field.*.predict_seconds",
+    "reconstruction.sources.*.seconds",
+    "reconstruction.single_frequency.*.sources.*.seconds",
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -38,7 +53,10 @@ class RunInfo:
 
     dir: str
     nlosfw_version: str
-    started: str = documented("local start time, ISO 8601 (%Y-%m-%dT%H:%M:%S%z)")
+    started: str = documented("local start time, ISO 8601 (%Y-%m-%dT%H:%M:%S%z); a timing")
+    config_hash: str = documented("SHA-256 of the configuration without the run-control "
+                                  "options (cache, limits, output.overwrite): a resumed "
+                                  "sweep skips a finished run only when it matches")
     scene: str | None
     simulator: str | None
     transform: str | None
@@ -80,7 +98,7 @@ class FitMetrics:
     """How a field model's fit went."""
 
     steps: int
-    seconds: float
+    seconds: float = documented("wall-clock time of the fit; a timing")
     final_loss: float | None
     best_val_loss: float | None
     stopped_early: bool
@@ -144,7 +162,7 @@ class FieldMetrics:
     n_parameters: int
     training_values: int = documented("real values trained on (2 per complex sample)")
     parameters_per_value: float
-    predict_seconds: float | None = optional()
+    predict_seconds: float | None = optional("wall-clock time of the prediction; a timing")
     fit: FitMetrics
     splits: SplitErrors | None = optional()
     denoising: DenoisingMetrics | None = optional()
@@ -158,7 +176,7 @@ class ImageScores:
     rmse: float | None
     psnr: float | None
     ssim: float | None
-    seconds: float | None = optional("time to reconstruct")
+    seconds: float | None = optional("time to reconstruct; a timing")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -184,8 +202,17 @@ class ReconstructionMetrics:
 
 
 @dataclass(frozen=True, kw_only=True)
+class RunError:
+    """Why a run did not finish: the stage it was in and the one-line reason."""
+
+    stage: str | None = documented("the stage that was running (null: before the first)")
+    message: str = documented("the one-line error, or the signal that interrupted the run")
+    signal: str | None = optional("SIGINT or SIGTERM, for an interrupted run")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Timings:
-    """Seconds per stage that ran, and in total."""
+    """Seconds per stage that ran, and in total (all timings)."""
 
     capture: float | None = optional()
     transform: float | None = optional()
@@ -208,6 +235,7 @@ class RunMetrics:
     field: dict[str, FieldMetrics] | None = optional(
         "by source: model, interp and every compare label", key="source")
     reconstruction: ReconstructionMetrics | None = optional()
+    error: RunError | None = optional("where and why a failed or interrupted run ended")
     timings: Timings = dataclasses.field(default_factory=Timings)
 
     def to_json(self) -> dict[str, Any]:

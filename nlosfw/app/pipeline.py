@@ -10,9 +10,7 @@ one from the true field. The stages hand each other the typed results of
 
 from __future__ import annotations
 
-import json
 import logging
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -22,8 +20,11 @@ from typing import Any, Literal, cast
 
 import numpy as np
 
+from nlosfw.app import lifecycle
+from nlosfw.app.budget import check_memory, memory_summary
 from nlosfw.app.cache import Cache, cache_key, file_digest
 from nlosfw.app.console import config_tree, progress_bar
+from nlosfw.app.interrupts import as_interruption, signals_raise
 from nlosfw.app.measure import (
     capture_metrics,
     denoising_metrics,
@@ -31,7 +32,7 @@ from nlosfw.app.measure import (
     reconstruction_metrics,
     transform_metrics,
 )
-from nlosfw.app.metrics import FieldMetrics, RunInfo, RunMetrics, SplitErrors
+from nlosfw.app.metrics import FieldMetrics, RunError, RunInfo, RunMetrics, SplitErrors, Status
 from nlosfw.app.results import (
     CaptureResult,
     FitResult,
@@ -43,13 +44,13 @@ from nlosfw.app.results import (
     SingleFrequencyImages,
     TransformResult,
 )
-from nlosfw.app.run_dir import RunContext
+from nlosfw.app.run_dir import PLANNED_NAMES, RunContext
 from nlosfw.app.settings import RunSettings, run_settings
 from nlosfw.capture.data import Capture
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import config_to_dict
-from nlosfw.common.errors import ConfigError
+from nlosfw.common.errors import ConfigError, NlosfwError, one_line
 from nlosfw.common.version import __version__
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
 from nlosfw.image.reconstruction_io import write_reconstruction
@@ -61,33 +62,43 @@ from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 
 log = logging.getLogger(__name__)
 
-#: Files Hydra itself puts in a run directory before the job starts.
-_HYDRA_FILES = {".hydra", "run.log"}
-
 
 def run_pipeline(cfg: Any) -> float | None:
-    """Hydra task: run the pipeline in Hydra's output directory; returns the held-out NMSE (dB)."""
+    """Hydra task: run the pipeline in Hydra's output directory; returns the held-out NMSE (dB).
+
+    A job of a multirun may resume its sweep directory (see :mod:`nlosfw.app.lifecycle`).
+    """
     from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
     from omegaconf import OmegaConf
 
-    run_dir = Path(HydraConfig.get().runtime.output_dir)
+    hydra = HydraConfig.get()
+    run_dir = Path(hydra.runtime.output_dir)
     plain = cast("dict[str, Any]", OmegaConf.to_container(cfg, resolve=True, enum_to_str=True))
-    return Pipeline(run_dir, plain, load_plugins()).run()
+    return Pipeline(run_dir, plain, load_plugins(),
+                    resume=hydra.mode == RunMode.MULTIRUN).run()
 
 
 class Pipeline:
-    """One run of every stage up to ``stop_after``, writing into ``run_dir``."""
+    """One run of every stage up to ``stop_after``, writing into ``run_dir``.
 
-    def __init__(self, run_dir: Path, config: dict[str, Any], host: PluginHost) -> None:
+    ``resume``: the run is a job of a sweep that may be resumed in its directory (a
+    finished job of the same configuration is then skipped).
+    """
+
+    def __init__(self, run_dir: Path, config: dict[str, Any], host: PluginHost,
+                 resume: bool = False) -> None:
         from rich.console import Console
 
         self.config = config
         self.settings: RunSettings = run_settings(config)
         self.host = host
         self.run_dir = Path(run_dir)
+        self.resume = resume
         self.console = Console(stderr=False)
         self.ctx = RunContext(self.run_dir, host, self._run_info())
-        self.cache = Cache(self.settings.cache.dir, self.settings.cache.enabled)
+        self.cache = Cache(self.settings.cache.dir, self.settings.cache.enabled,
+                           max_gb=self.settings.cache.max_gb)
 
     @property
     def metrics(self) -> RunMetrics:
@@ -96,16 +107,30 @@ class Pipeline:
 
     # ------------------------------------------------------------------ driver
     def run(self) -> float | None:
-        if self._already_completed():
-            return None
-        self._set_aside_leftovers()
+        """Run the stages; returns the held-out NMSE (dB) of the model, None when stopped
+        early or skipped. Everything that can be checked is checked before the first byte
+        is written; a failed or interrupted (SIGINT, SIGTERM) run leaves metrics.json
+        saying where and why, and no temporary file."""
+        check_memory(self.config)
+        log.info(memory_summary(self.config))
+        with signals_raise(), lifecycle.held(
+                self.run_dir, self.config, PLANNED_NAMES, overwrite=self.settings.output.overwrite,
+                resume=self.resume) as hold:
+            if hold is None:
+                self.console.print(f"[yellow]skipping[/]: {self.run_dir} already holds a "
+                                   "finished run of this configuration")
+                return None
+            self.ctx.hold = hold
+            return self._run_held()
+
+    def _run_held(self) -> float | None:
         self.console.print(config_tree(self.config, title=f"nlosfw run → {self.run_dir}"))
-        self.host.hook.on_run_start(run_dir=str(self.run_dir), config=self.config)
-        self.ctx.write_text("config", yaml_safe.dump(self.config))
         try:
+            self.host.hook.on_run_start(run_dir=str(self.run_dir), config=self.config)
+            self.ctx.write_text("config", yaml_safe.dump(self.config))
             objective = self._stages()
-        except BaseException:  # any failure, ours or a bug: record it, then re-raise
-            self._record_failure()
+        except BaseException as err:  # any failure, ours or a bug: record it, then re-raise
+            self._record_end(err)
             raise
         status: Literal["completed", "stopped"] = (
             "completed" if self.settings.stop_after is None else "stopped")
@@ -121,14 +146,25 @@ class Pipeline:
         self.console.print(f"[bold green]done[/] ({status}): {self.run_dir}")
         return objective
 
-    def _record_failure(self) -> None:
-        """metrics.json with status failed and the on_run_end hook, never masking the error."""
+    def _record_end(self, err: BaseException) -> None:
+        """metrics.json with status failed or interrupted, the stage and the one-line reason,
+        and the on_run_end hook, never masking the error."""
+        interruption = as_interruption(err)
+        status: Status = "failed" if interruption is None else "interrupted"
+        if interruption is not None:
+            error = RunError(stage=self.ctx.stage_reached, message=str(interruption),
+                             signal=interruption.signal_name)
+        else:
+            message = (one_line(err, whole=True) if isinstance(err, NlosfwError)
+                       else f"{type(err).__name__}: {one_line(err, whole=True)}")
+            error = RunError(stage=self.ctx.stage_reached, message=message)
         try:
-            self.ctx.finish("failed")
+            self.ctx.finish(status, error)
             self.host.hook.on_run_end(run_dir=str(self.run_dir), metrics=self.metrics.to_json(),
-                                      status="failed")
-        except Exception as err:  # the original failure is what the user must see
-            log.error("could not record the failed run in %s: %s", self.run_dir, err)
+                                      status=status)
+        except Exception as failure:  # the original failure is what the user must see
+            log.error("could not record the %s run in %s: %s", status, self.run_dir,
+                      one_line(failure))
 
     def _stages(self) -> float | None:
         s = self.settings
@@ -415,37 +451,10 @@ class Pipeline:
             return None if name is None else str(name)
 
         return RunInfo(dir=str(self.run_dir), nlosfw_version=__version__,
-                       started=time.strftime("%Y-%m-%dT%H:%M:%S%z"), scene=selected("scene"),
+                       started=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                       config_hash=lifecycle.config_hash(self.config), scene=selected("scene"),
                        simulator=selected("simulator"), transform=selected("transform"),
                        model=selected("model"), imager=selected("imager"))
-
-    def _already_completed(self) -> bool:
-        path = self.run_dir / "metrics.json"
-        if not path.exists():
-            return False
-        try:
-            status = json.loads(path.read_text()).get("status")
-        except (OSError, ValueError):
-            status = None
-        if status in ("completed", "stopped"):
-            self.console.print(f"[yellow]skipping[/]: {self.run_dir} already holds a "
-                               f"{status} run")
-            return True
-        return False
-
-    def _set_aside_leftovers(self) -> None:
-        """Move the files of an interrupted or failed earlier run out of the way (not delete)."""
-        if not self.run_dir.exists():
-            return
-        leftovers = [p for p in self.run_dir.iterdir()
-                     if p.name not in _HYDRA_FILES and not p.name.startswith("interrupted-")]
-        if not leftovers:
-            return
-        aside = self.run_dir / f"interrupted-{time.strftime('%Y%m%d-%H%M%S')}"
-        aside.mkdir()
-        for p in leftovers:
-            shutil.move(str(p), aside / p.name)
-        log.warning("moved %d files of an earlier unfinished run to %s", len(leftovers), aside)
 
 
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:

@@ -98,15 +98,34 @@ class CacheSettings:
 
     enabled: bool = True
     dir: str = "~/.cache/nlosfw"
+    max_gb: float | None = 20.0
+    """Size limit: beyond it the least recently used entries are evicted (never one a
+    running process is using); null: no limit."""
+
+    def __post_init__(self) -> None:
+        require(self.max_gb is None or self.max_gb >= 0, "max_gb",
+                f"must be >= 0 (GB) or null, got {self.max_gb}")
 
 
 @dataclass(frozen=True)
 class OutputSettings:
     compression: int = 4
     """gzip level (0-9) for the transient in capture.hdf5."""
+    overwrite: bool = False
+    """Replace an earlier run's files in the run directory (only files that run wrote);
+    without it a directory holding a run is refused."""
 
     def __post_init__(self) -> None:
         require(0 <= self.compression <= 9, "compression", f"must be 0-9, got {self.compression}")
+
+
+@dataclass(frozen=True)
+class LimitSettings:
+    """Safety limits checked before a run starts."""
+
+    allow_large: bool = False
+    """Run even when the memory the configuration needs (estimated before anything is
+    allocated) exceeds the memory available."""
 
 
 @dataclass(frozen=True)
@@ -120,6 +139,7 @@ class RunSettings:
     figures: FigureSettings = field(default_factory=FigureSettings)
     cache: CacheSettings = field(default_factory=CacheSettings)
     output: OutputSettings = field(default_factory=OutputSettings)
+    limits: LimitSettings = field(default_factory=LimitSettings)
     compare: dict[str, dict[str, Any]] = field(default_factory=dict)
     """More field models fitted and imaged beside ``model`` and interp: label -> options with
     the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""
