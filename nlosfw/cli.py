@@ -31,6 +31,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except NlosfwError as err:
         report_user_error(err)
         return err.exit_status
+    except SystemExit as err:  # a Hydra job's exit status (its error already reported)
+        return err.code if isinstance(err.code, int) else (0 if err.code is None else 1)
     except BaseException as err:  # SIGINT, SIGTERM: one line; anything else goes on
         interruption = as_interruption(err)
         if interruption is None:

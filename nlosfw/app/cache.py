@@ -114,7 +114,7 @@ class CacheEntry:
 
 def cache_entries(root: Path) -> list[CacheEntry]:
     """Every entry under ``root`` (``<kind>/<key>.hdf5``), least recently used first."""
-    out = []
+    out: list[CacheEntry] = []
     if not root.is_dir():
         return out
     for kind in sorted(p for p in root.iterdir() if p.is_dir()):

@@ -46,7 +46,7 @@ def _parser() -> argparse.ArgumentParser:
 def cache_command(argv: Sequence[str], console: Console | None = None) -> int:
     """Run ``cache info`` or ``cache clean``; returns the exit status."""
     args = _parser().parse_args(list(argv))
-    console = console or Console()
+    console = console or Console(soft_wrap=True, highlight=False)
     root = (args.dir or default_cache_dir()).expanduser()
     if root.exists() and not root.is_dir():
         raise ConfigError("--dir", f"{root} is not a directory")

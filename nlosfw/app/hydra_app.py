@@ -122,7 +122,7 @@ def parse_command_line(args: Sequence[str]) -> argparse.Namespace:
     parser.add_argument("--info", "-i", nargs="?", const="all",
                         choices=["all", "config", "defaults", "defaults-tree", "plugins",
                                  "searchpath"])
-    parsed = parser.parse_args(list(args))
+    parsed = parser.parse_intermixed_args(list(args))  # flags anywhere, as Hydra allows
     modes = [flag for flag, given in (("--run", parsed.run), ("--multirun", parsed.multirun),
                                       ("--cfg", parsed.cfg), ("--info", parsed.info),
                                       ("--shell-completion", parsed.shell_completion)) if given]
@@ -254,6 +254,7 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         except ConfigError as err:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
+    check_memory(cfg)  # before anything sized by the configuration is allocated
     if settings.capture.path is None:
         from nlosfw.simulate.geometry import validate_scene
 
@@ -261,12 +262,10 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         simulator = host.registry.get("simulator", str(cfg.simulator.name))
         simulator.create(_plugin_options(cfg.simulator, simulator.config_class())
                          ).check_scene(scene)
-        check_memory(cfg)
         return
     path = Path(settings.capture.path).expanduser()
     if not path.is_file():
         raise ConfigError("capture.path", f"file not found: {settings.capture.path}")
-    check_memory(cfg)  # from the file's header, before reading it
     from nlosfw.capture.hdf5 import read_capture
 
     read_capture(path)  # a malformed file must fail here, before any output exists

@@ -274,6 +274,30 @@ class RunMetrics:
         return None if self.reconstruction is None else self.reconstruction.sources.get(source)
 
 
+def without_timings(data: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of a metrics.json object without the :data:`TIMING_FIELDS`: equal for two runs
+    of the same configuration and seed on the CPU."""
+
+    def drop(node: Any, path: list[str]) -> Any:
+        if not isinstance(node, Mapping):
+            return node
+        head, rest = path[0], path[1:]
+        keys = list(node) if head == "*" else [head]
+        out = dict(node)
+        for key in keys:
+            if key in out:
+                if rest:
+                    out[key] = drop(out[key], rest)
+                else:
+                    del out[key]
+        return out
+
+    result: Any = json.loads(json.dumps(data))
+    for dotted in TIMING_FIELDS:
+        result = drop(result, dotted.split("."))
+    return dict(result)
+
+
 def metrics_schema() -> dict[str, Any]:
     """The JSON Schema of metrics.json (written as metrics.schema.json beside it)."""
     return json_schema(RunMetrics, title=f"nlosfw metrics.json, schema version {SCHEMA_VERSION}",

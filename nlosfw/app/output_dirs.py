@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from nlosfw.app.lifecycle import inspect_run_dir, verdict
+from nlosfw.app.lifecycle import HYDRA_FILES, inspect_run_dir, verdict
 from nlosfw.app.run_dir import PLANNED_NAMES
 from nlosfw.common.errors import ConfigError
 
@@ -51,7 +51,7 @@ def check_output_dirs(compose: Compose, overrides: Sequence[str], first: Sequenc
         plain = OmegaConf.to_container(compose(list(first), False), resolve=True,
                                        enum_to_str=True)
         overwrite = bool(OmegaConf.select(cfg, "output.overwrite", default=False))
-        earlier = inspect_run_dir(where, (*PLANNED_NAMES, ".hydra"))
+        earlier = inspect_run_dir(where, (*PLANNED_NAMES, *HYDRA_FILES))  # Hydra's too
         verdict(where, earlier, plain, overwrite=overwrite, resume=False)  # type: ignore[arg-type]
         return
     subdir = OmegaConf.to_container(cfg.hydra.sweep, resolve=False).get("subdir")  # type: ignore[union-attr]

@@ -23,7 +23,7 @@ _FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
 #: errno values meaning "this place cannot be written".
 _UNWRITABLE = {errno.EROFS, errno.EACCES, errno.EPERM}
 #: Headroom kept free beyond a write's known size (file-system metadata).
-_HEADROOM = 1 << 20
+_HEADROOM = 64 << 10
 
 #: Temporary names of :func:`atomic_path`: ``.<stem>.<pid>.<8 hex>.tmp<suffix>``.
 TEMPORARY_NAME = re.compile(r"^\..+\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp(\.[^.]+)?$")
@@ -102,10 +102,14 @@ def atomic_path(path: str | Path, overwrite: bool = False,
             os.replace(tmp, path)
         else:
             _publish_no_clobber(tmp, path)
+    except StorageError as err:  # from a nested atomic write: name the file being made
+        if str(tmp) not in str(err):
+            raise
+        raise StorageError(str(err).replace(str(tmp), str(path))) from None
     except OSError as err:
         written = tmp.stat().st_size if tmp.exists() else None
         converted = storage_error(path, err, written)
-        if converted is None or converted is err:
+        if converted is None:
             raise
         raise converted from None
     finally:

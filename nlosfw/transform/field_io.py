@@ -38,7 +38,10 @@ def read_phasor_field(path: str | Path) -> PhasorField:
         freqs = read_dataset(f, "frequencies", p)
         wall = read_dataset(f, "wall_xyz", p)
         weights = read_dataset(f, "weights", p) if "weights" in f else None
-        geometry = CaptureGeometry.from_dict(read_yaml(f, "geometry", p))
+        try:
+            geometry = CaptureGeometry.from_dict(read_yaml(f, "geometry", p))
+        except DataError as err:
+            raise DataError(f"{p}: {err}") from None
         metadata = read_yaml(f, "metadata", p)
     try:
         return PhasorField(values=values, frequencies=freqs, wall_xyz=wall, geometry=geometry,

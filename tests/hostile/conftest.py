@@ -162,6 +162,34 @@ def read_only_dir(tmp_path: Path) -> Iterator[Path]:
         yield path
 
 
+@pytest.fixture()
+def read_only_cache(tmp_path: Path) -> Iterator[Path]:
+    """A cache directory holding one entry, that cannot be written (as :func:`read_only_dir`)."""
+    from nlosfw.app.cache import Cache
+
+    path = tmp_path / "ro-cache"
+
+    def fill() -> None:
+        Cache(path).get_or_compute("blobs", "k", lambda: b"x" * 100,
+                                   lambda p, v: p.write_bytes(v), lambda p: p.read_bytes())
+
+    if os.geteuid() != 0:
+        fill()
+        (path / "blobs").chmod(0o555)
+        try:
+            yield path
+        finally:
+            (path / "blobs").chmod(0o755)
+        return
+    if MOUNT_MODE != "direct":
+        pytest.skip("root cannot be denied writing without mounting a read-only file system, "
+                    "and mounting is not possible here")
+    with _mounted(path, "size=1m"):
+        fill()
+        subprocess.run(["mount", "-o", "remount,ro", str(path)], check=True, capture_output=True)
+        yield path
+
+
 # ----------------------------------------------------------------------- signals
 def start_run(*args: str, cwd: Path, env: dict[str, str] | None = None) -> subprocess.Popen:
     """``python -m nlosfw ARGS`` started in the background (its own process group)."""

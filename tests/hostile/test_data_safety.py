@@ -42,8 +42,15 @@ def test_a_users_files_in_the_run_directory_are_never_moved(workdir, tools):
     (workdir / "figures" / "mine.png").unlink()
     (workdir / "figures").rmdir()
     del mine["figures/mine.png"]
+    (workdir / "run.log").write_text("my own log\n")   # Hydra would append to it
+    refused = tools.run(*tools.QUICK, "hydra.run.dir=.")
+    assert tools.one_error_line(refused) == (
+        f"error: {workdir}: holds run.log, which no nlosfw run wrote there; choose another "
+        "directory (nothing was changed)")
+    assert (workdir / "run.log").read_text() == "my own log\n"
+    (workdir / "run.log").unlink()
     before = sorted(p.name for p in workdir.iterdir())
-    assert before == ["data", "notes.txt"]  # nothing was created by the refused run
+    assert before == ["data", "notes.txt"]  # nothing was created by the refused runs
 
     done = tools.run(*tools.QUICK, "hydra.run.dir=.")
     assert done.returncode == 0, done.stderr
