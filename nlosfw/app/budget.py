@@ -12,7 +12,8 @@ the transient      16·B·S·L bytes (float64 histogram while rendering, float32
                    capture, its HDF5 image), and 4·B·S·L more with noise
 the transform      8·B·S·L (the spectrum) + 16·F·S·L per field (2 with noise)
 the fields         16·F·S·(2 + M) (true, raw, each model's prediction)
-the voxels         8·D·S·(3 + (2 + M)·(1 + single-frequency images))
+the voxels         8·D·S·(3 + (2 + M)·(1 + single-frequency images)); D, when it is
+                   automatic, at most the time window over half a wall spacing
 training logs      400 bytes per evaluation (steps / eval_every) of neural models
 =================  ===========================================================
 """
@@ -86,6 +87,23 @@ def _n_frequencies(config: Any, bins: int) -> int:
     return int(count) if count is not None else max(1, bins // 2)  # at most the DFT's bins
 
 
+def _n_depths(config: Any, bins: int) -> int:
+    """Depth planes: as configured, else at most what the automatic rule can choose (planes
+    at least half a wall spacing apart over half the time window, at most its maximum)."""
+    from nlosfw.image.depths import MAX_AUTOMATIC_PLANES
+
+    given = len(_get(config, "reconstruction.depths", ()) or ())
+    count = _get(config, "reconstruction.n_depths")
+    if given or count is not None:
+        return given or int(count)
+    size, res = _get(config, "scene.wall.size"), _get(config, "scene.wall.resolution")
+    width = _get(config, "scene.time.bin_width")
+    if _get(config, "capture.path") is not None or not (size and res and width):
+        return MAX_AUTOMATIC_PLANES
+    spacing = min(float(s) / max(int(r), 1) for s, r in zip(size, res, strict=False))
+    return max(2, min(MAX_AUTOMATIC_PLANES, math.ceil(bins * float(width) / spacing) + 1))
+
+
 def _history(options: Any) -> float:
     steps, every = _get(options, "steps"), _get(options, "eval_every", 1)
     if steps is None:
@@ -105,8 +123,7 @@ def estimate_memory(config: Any) -> list[MemoryPart]:
     freqs = _n_frequencies(config, bins)
     compare = _get(config, "compare", {}) or {}
     models = 2 + len(compare) if _get(config, "model.name") != "interp" else 1 + len(compare)
-    depths = len(_get(config, "reconstruction.depths", ()) or ()) or int(
-        _get(config, "reconstruction.n_depths", 24))
+    depths = _n_depths(config, bins)
     singles = int(_get(config, "reconstruction.single_frequency_images", 2))
     history = _history(_get(config, "model")) + sum(_history(o) for o in compare.values())
     per_field = 16.0 * freqs * sensors * lasers
