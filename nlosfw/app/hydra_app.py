@@ -35,7 +35,7 @@ from typing import Any, NoReturn
 from nlosfw.app.budget import check_memory
 from nlosfw.app.output_dirs import check_output_dirs
 from nlosfw.app.settings import SELECTOR_GROUPS, RunConfig, run_settings
-from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, StorageError, one_line
+from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem, schema_class
 from nlosfw.plugins import PluginHost
 from nlosfw.plugins.kinds import PluginKind
@@ -142,11 +142,12 @@ def ensure_resolvers() -> None:
 
 
 def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "config",
-              multirun: bool = False) -> None:
+              multirun: bool = False, outputs: bool = True) -> None:
     """Compose and validate the config for every swept value; raise a one-line NlosfwError.
 
     Swept values come from the command line and, for multirun, from the
-    ``hydra.sweeper.params`` a preset or primary config declares.
+    ``hydra.sweeper.params`` a preset or primary config declares. With ``outputs`` (a
+    command that runs, not ``--cfg`` or ``--info``) the output directories are checked too.
     """
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
@@ -199,8 +200,9 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                 log.warning("checked the first %d of %d sweep combinations before starting; "
                             "the others are checked when their run starts",
                             _MAX_PREFLIGHT_COMPOSITIONS, total)
-            check_output_dirs(composed, list(overrides), first,
-                              [f"{k}={v}" for k, v in declared.items()], multirun)
+            if outputs:
+                check_output_dirs(composed, list(overrides), first,
+                                  [f"{k}={v}" for k, v in declared.items()], multirun)
     finally:
         GlobalHydra.instance().clear()
 
@@ -283,7 +285,8 @@ def main(argv: Sequence[str]) -> int:
     register_configs(host)
     ensure_resolvers()
     if not (args.help or args.hydra_help or args.shell_completion or args.version):
-        preflight(args.overrides, host, args.config_name or "config", bool(args.multirun))
+        preflight(args.overrides, host, args.config_name or "config", bool(args.multirun),
+                  outputs=not (args.cfg or args.info or args.resolve))
     decorated = hydra.main(config_path=str(config_dir()), config_name="config",
                            version_base="1.3")(_task)
     saved = sys.argv
@@ -306,9 +309,9 @@ def _task(cfg: Any) -> float | None:
         report_user_error(err)
         raise SystemExit(err.exit_status) from None
     except MemoryError as err:  # the estimate let it through: still one line
-        report_user_error(StorageError(f"out of memory ({one_line(err)}); make the run "
-                                       "smaller (the sizes, or fewer sweep jobs at once)"))
-        raise SystemExit(StorageError.exit_status) from None
+        report_user_error(NlosfwError(f"out of memory ({one_line(err)}); make the run "
+                                      "smaller (the sizes, or fewer sweep jobs at once)"))
+        raise SystemExit(1) from None
 
 
 def _plugin_options(node: Any, config_class: type) -> Any:

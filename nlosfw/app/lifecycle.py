@@ -39,7 +39,7 @@ from typing import Any, TextIO
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.common.files import TEMPORARY_NAME, write_text
+from nlosfw.common.files import TEMPORARY_NAME, storage_error, write_text
 
 log = logging.getLogger(__name__)
 
@@ -216,10 +216,13 @@ class RunHold:
         skipped (a finished job of a resumed sweep), else the hold. Raises the refusals of
         :func:`verdict` (the directory unchanged)."""
         run_dir = Path(run_dir)
-        run_dir.mkdir(parents=True, exist_ok=True)
         lock_path = run_dir / LOCK_NAME
-        existed = lock_path.exists()
-        lock = _try_lock(lock_path)
+        try:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            existed = lock_path.exists()
+            lock = _try_lock(lock_path)
+        except OSError as err:
+            raise (storage_error(lock_path, err) or err) from None
         if lock is None:
             holder = _lock_holder(lock_path) or "unknown"
             raise ConfigError("", f"{run_dir}: another nlosfw run (process {holder}) is "
@@ -329,8 +332,10 @@ def _claimed_paths(run_dir: Path, earlier: EarlierRun) -> list[Path]:
         if root in path.resolve().parents and (path.is_file() or path.is_symlink()):
             out.append(path)
     pid = str((earlier.marker or {}).get("pid", ""))
-    dirs = {run_dir, *(p.parent for p in out)}
+    dirs = {run_dir, *((run_dir / name).parent for name in earlier.files)}
     for folder in dirs:
+        if not folder.is_dir() or root not in [folder.resolve(), *folder.resolve().parents]:
+            continue
         for entry in folder.iterdir():
             match = TEMPORARY_NAME.match(entry.name)
             if match and match.group("pid") == pid and entry.is_file():

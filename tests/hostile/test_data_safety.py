@@ -79,6 +79,8 @@ def test_a_second_run_in_a_finished_runs_directory(workdir, tools):
         f"error: output.overwrite: {run} already holds a completed run; choose another "
         "directory, or set output.overwrite=true to replace its files")
     assert snapshot(run, skip=("run.log",)) == before     # .hydra/ included: untouched
+    shown = tools.run("--cfg", "job", *tools.QUICK, "hydra.run.dir=run")  # runs nothing
+    assert shown.returncode == 0 and "name: interp" in shown.stdout
 
     replaced = tools.run(*tools.QUICK, "hydra.run.dir=run", "output.overwrite=true")
     assert replaced.returncode == 0, replaced.stderr
