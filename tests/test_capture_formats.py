@@ -16,10 +16,10 @@ import scipy.io
 from nlosfw import CaptureKind, DataError, GridFormat, HFormat
 from nlosfw.app.capture_source import capture_formats, load_file_capture
 from nlosfw.app.settings import CaptureSource
-from nlosfw.common.config import config_from_mapping
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.hdf5 import write_capture
 from nlosfw.capture.preprocess import as_scan_grid
+from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate.analytic import AnalyticSimulator
