@@ -202,3 +202,13 @@ def test_a_simulated_run_is_preprocessed_too(workdir):
     assert [s["option"] for s in metrics["capture"]["preprocessing"]] == ["gate", "bin"]
     assert metrics["run"]["scene"] == "tiny" and "capture_file" not in metrics["run"]
     assert Path(out / "capture.hdf5").is_file()
+
+
+def test_a_wisconsin_file_runs_on_the_grid_its_points_form(workdir):
+    capture = AnalyticSimulator().simulate(scene_from_config(layouts.wisconsin_scene()))
+    path = layouts.write_wisconsin(workdir / "letter.mat", capture)
+    _, metrics = run(workdir, "wis", f"capture.path={path}", "stop_after=transform", *FAST)
+    assert metrics["capture"]["format"] == "wisconsin"
+    assert [(s["option"], s["source"]) for s in metrics["capture"]["preprocessing"]] == [
+        ("grid", "automatic")]
+    assert metrics["capture"]["shape"] == [400, 8, 8] and metrics["transform"]["grid"] == [8, 8]

@@ -453,13 +453,13 @@ class Pipeline:
             return None if name is None else str(name)
 
         source = self.settings.capture
-        from_file = source.path is not None
+        path = None if source.path is None else Path(source.path).expanduser().resolve()
+        from_file = path is not None
         return RunInfo(dir=str(self.run_dir), nlosfw_version=__version__,
                        started=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
                        scene=None if from_file else selected("scene"),
                        simulator=None if from_file else selected("simulator"),
-                       capture_file=(str(Path(source.path).expanduser().resolve()) if from_file
-                                     else None),
+                       capture_file=None if path is None else str(path),
                        capture_format=source.format if from_file else None,
                        transform=selected("transform"), model=selected("model"),
                        imager=selected("imager"))

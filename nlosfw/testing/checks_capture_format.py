@@ -15,6 +15,7 @@ import tempfile
 import unittest
 from collections.abc import Iterator
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -141,7 +142,7 @@ def check_foreign_file_is_a_one_line_error(spec: PluginSpec) -> None:
     fmt = spec.create(dict(spec.test_config))
     with foreign_files(spec, others=False) as files:
         for path in files:
-            text = one_line_error(spec, f"reading {path.name}", lambda p=path: fmt.read(p),
+            text = one_line_error(spec, f"reading {path.name}", partial(fmt.read, path),
                                   NlosfwError)
             assert path.name in text, f"{spec.qualified_name}: the error must name the file: " \
                                       f"{text!r}"
@@ -168,7 +169,7 @@ def check_round_trip(spec: PluginSpec) -> None:
                     f"{spec.qualified_name}: {field} changed in a round trip")
             before = path.read_bytes()
             one_line_error(spec, "writing over an existing file",
-                           lambda p=path, c=known: fmt.write(p, c), DataError)
+                           partial(fmt.write, path, known), DataError)
             assert path.read_bytes() == before, f"{spec.qualified_name}: overwrote a file"
             assert sorted(p.name for p in Path(tmp).iterdir()) == ["sample.dat"], (
                 f"{spec.qualified_name}: left files behind")
