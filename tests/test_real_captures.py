@@ -184,6 +184,13 @@ def test_bad_files_and_options_one_line_exit_2_nothing_written(workdir, capsys, 
     assert not (workdir / "outputs").exists()
 
 
+def test_a_format_without_a_file_is_refused(workdir, capsys):
+    assert main(["scene=tiny", "capture.format=lct", *FAST]) == 2
+    assert capsys.readouterr().err == ("error: capture.format: forces the format of "
+                                       "capture.path: give capture.path too\n")
+    assert not (workdir / "outputs").exists()
+
+
 def test_tofgrid_of_another_shape_is_refused_before_any_output(workdir, capsys):
     capture = AnalyticSimulator().simulate(scene_from_config(layouts.fk_scene()))
     meas, _ = layouts.write_fk(workdir / "statue", capture)

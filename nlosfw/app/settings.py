@@ -49,6 +49,11 @@ class CaptureSource(Preprocessing):
     """Force a capture format (a ``capture_format`` plugin: nlosfw, ytal, znlos, lct, fk,
     wisconsin, ...); null: the one that recognises the file."""
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require(self.format is None or self.path is not None, "format",
+                "forces the format of capture.path: give capture.path too")
+
 
 @dataclass(frozen=True)
 class SplitSettings:
