@@ -86,9 +86,13 @@ def image_scores(recons: Mapping[str, Reconstruction],
 
 def reconstruction_metrics(imager: str, recons: Reconstructions) -> ReconstructionMetrics:
     """Scores of every reconstruction, whole band and single frequencies."""
+    depths = np.asarray(recons.voxels[:, 0, 0, 2], dtype=float)
+    steps = np.diff(depths)
+    even = steps.size > 0 and bool(np.allclose(steps, steps[0], rtol=1e-6, atol=0))
     return ReconstructionMetrics(
         imager=imager, reference="true",
-        depths=tuple(float(d) for d in recons.voxels[:, 0, 0, 2]),
+        depths=tuple(float(d) for d in depths), depth_planes=int(depths.size),
+        depth_spacing=float(steps[0]) if even else None,
         sources=image_scores(recons.by_source, recons.seconds),
         single_frequency={
             str(single.index): SingleFrequencyMetrics(frequency=single.frequency,

@@ -23,9 +23,9 @@ from nlosfw.common.errors import DataError
 from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[2]
+SchemaVersion = Literal[3]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 2
+SCHEMA_VERSION: Final[SchemaVersion] = 3
 
 Status = Literal["running", "completed", "stopped", "failed"]
 """``running`` only while the run is in progress: metrics.json is written when it ends."""
@@ -196,6 +196,9 @@ class ReconstructionMetrics:
     imager: str
     reference: Literal["true"]
     depths: tuple[float, ...] = documented("depth planes (m)")
+    depth_planes: int = documented("number of depth planes")
+    depth_spacing: float | None = documented(
+        "distance between neighbouring planes (m; null for one plane or uneven planes)")
     sources: dict[str, ImageScores] = documented("true, raw, interp, model and every "
                                                  "compare label", key="source")
     single_frequency: dict[str, SingleFrequencyMetrics] = documented(

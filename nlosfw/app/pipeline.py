@@ -14,7 +14,8 @@ import json
 import logging
 import shutil
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from functools import partial
 from pathlib import Path
@@ -51,13 +52,16 @@ from nlosfw.common import yaml_safe
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.version import __version__
+from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
 from nlosfw.image.reconstruction_io import write_reconstruction
 from nlosfw.model.interface import FieldModel, FitReport, TrainingStep
 from nlosfw.model.protocol import FieldSplit
 from nlosfw.plugins import PluginHost, load_plugins
+from nlosfw.transform import frequencies as frequencies_module
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
+from nlosfw.transform.frequencies import warn_aliasing
 
 log = logging.getLogger(__name__)
 
@@ -194,10 +198,16 @@ class Pipeline:
                 "fields", key, lambda: transform.transform(source),
                 lambda p, f: write_phasor_field(p, f), read_phasor_field)
 
-        field, hit = cached_field(capture.capture, capture.key)
-        clean = None
-        if capture.clean is not None and capture.clean_key is not None:
-            clean = cached_field(capture.clean, capture.clean_key)[0]
+        with _once_per_message(logging.getLogger(frequencies_module.__name__)):
+            field, hit = cached_field(capture.capture, capture.key)
+            clean = None
+            if capture.clean is not None and capture.clean_key is not None:
+                clean = cached_field(capture.clean, capture.clean_key)[0]
+            # also from a cached field: the band's aliasing warning once per run
+            band = field.metadata.get("band") or {}
+            if band.get("aliases") and band.get("grid_spacing") is not None:
+                warn_aliasing(float(field.frequencies.max()), float(band["grid_spacing"]),
+                              field.geometry.kind, str(band.get("option", "transform")))
         self.ctx.write("phasor_field", lambda p: write_phasor_field(p, field))
         result = TransformResult(field=field, cache_hit=hit, clean=clean)
         self.ctx.metrics = replace(self.metrics, transform=transform_metrics(name, result))
@@ -429,12 +439,17 @@ class Pipeline:
         return report
 
     def _voxels(self, capture: Capture, field: PhasorField) -> np.ndarray:
+        """Planes on the wall's grid at the configured depths, or at ``n_depths`` planes, or
+        (the default) at the band's depth resolution (:mod:`nlosfw.image.depths`), over
+        ``depth_range`` or the depths that hold signal."""
         r = self.settings.reconstruction
         if r.depths:
             depths = np.asarray(r.depths, dtype=float)
         else:
-            near, far = r.depth_range or _depth_span(capture)
-            depths = np.linspace(near, far, r.n_depths)
+            span = r.depth_range or depth_span(capture)
+            depths = (np.linspace(span[0], span[1], r.n_depths) if r.n_depths is not None
+                      else automatic_depths(span, float(field.frequencies.max()),
+                                            field.geometry.kind))
         wall = field.wall_xyz
         spacing = field.grid_spacing()
         if spacing is None:
@@ -493,6 +508,32 @@ class Pipeline:
         log.warning("moved %d files of an earlier unfinished run to %s", len(leftovers), aside)
 
 
+class _OnceFilter(logging.Filter):
+    """Lets each distinct message through once."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: set[str] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if message in self.seen:
+            return False
+        self.seen.add(message)
+        return True
+
+
+@contextmanager
+def _once_per_message(logger: logging.Logger) -> Iterator[None]:
+    """Within the block, ``logger`` logs each distinct message once."""
+    once = _OnceFilter()
+    logger.addFilter(once)
+    try:
+        yield
+    finally:
+        logger.removeFilter(once)
+
+
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:
     """Up to ``count`` frequency indices to show alone: a training one near the top of the
     band, then a held-out one (if any), by label."""
@@ -502,31 +543,3 @@ def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, in
     if held.size:
         chosen["held-out"] = int(held[held.size // 2])
     return dict(list(chosen.items())[:count])
-
-
-def _depth_span(capture: Capture) -> tuple[float, float]:
-    """Depths covering the hidden scene: from the ground truth, else the hidden volume a
-    Zaragoza file declares, else the span of the signal in time (device legs removed)."""
-    truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
-    if truth is not None:
-        depth = np.asarray(truth, dtype=float)
-        hit = depth[depth > 0]
-        if hit.size:
-            lo, hi = float(hit.min()), float(hit.max())
-            margin = max(0.15, 0.25 * (hi - lo))
-            return max(0.05, lo - margin), hi + margin
-    volume = capture.scene_info.get("volume") or {}
-    if volume.get("center") is not None and volume.get("size") is not None:
-        centre = float(np.asarray(volume["center"], dtype=float).reshape(-1)[2])
-        half = float(np.asarray(volume["size"], dtype=float).reshape(-1)[-1]) / 2
-        if centre - half > 0:
-            return centre - half, centre + half
-    profile = capture.H.reshape(capture.n_bins, -1).sum(axis=1)
-    nonzero = (np.flatnonzero(profile > 1e-3 * profile.max()) if profile.max() > 0
-               else np.zeros(0, dtype=np.int64))
-    if len(nonzero) == 0:
-        return 0.3, 2.0
-    legs = float(np.mean(capture.geometry.device_path(capture.sensor_points)))
-    first, last = capture.bin_centers[[nonzero[0], nonzero[-1]]] - legs
-    # a path of length t reaches at most t/2 deep (wall -> point -> wall)
-    return max(0.05, 0.8 * float(first) / 2), max(0.3, float(last) / 2)

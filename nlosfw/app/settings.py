@@ -76,17 +76,20 @@ class ReconstructionSettings:
     """The voxels imaged from every field."""
 
     depths: tuple[float, ...] = ()
-    """Depth planes (m); empty: ``n_depths`` planes spanning the scene's ground truth or
-    ``depth_range``."""
+    """Depth planes (m); empty: planes spanning ``depth_range`` or, when it is not set, the
+    scene's ground truth or the depths the capture's time profile holds signal at."""
     depth_range: tuple[float, float] | None = None
-    n_depths: int = 24
+    n_depths: int | None = None
+    """Number of planes; None (default): a quarter of the shortest wavelength of the band
+    apart in the volume, 1/(4 m f_max) with m = 2 for confocal captures, else 1."""
     single_frequency_images: int = 2
     """How many single-frequency images (as in the thesis figures) to add per field."""
 
     def __post_init__(self) -> None:
         require(all(d > 0 for d in self.depths), "depths", "every depth must be > 0 (in front "
                 "of the wall)")
-        require(self.n_depths >= 1, "n_depths", f"must be >= 1, got {self.n_depths}")
+        require(self.n_depths is None or self.n_depths >= 1, "n_depths",
+                f"must be >= 1 or null (automatic), got {self.n_depths}")
         if self.depth_range is not None:
             lo, hi = self.depth_range
             require(0 < lo < hi, "depth_range", f"must satisfy 0 < near < far, got "

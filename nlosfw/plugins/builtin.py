@@ -67,7 +67,7 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.rsd:RSDImagerConfig",
         description="Direct Rayleigh-Sommerfeld sum over any voxel set",
         test_config={"chunk_mb": 1.0},
-        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.POINT_VOXELS],
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.POINT_VOXELS, C.RSD],
     )
     register(
         "fft",
@@ -75,7 +75,29 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.fft:FFTImagerConfig",
         description="Fast RSD: per-plane FFT convolution (Liu 2020)",
         test_config={"workers": 2},
-        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS],
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.RSD],
+    )
+    # the classical confocal imagers, on the field's transient (nlosfw.image.transient)
+    register(
+        "lct",
+        "nlosfw.image.lct:LCTImager",
+        config="nlosfw.image.lct:LCTImagerConfig",
+        description="Light-cone transform with a Wiener filter (O'Toole 2018), confocal",
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS],
+    )
+    register(
+        "fk",
+        "nlosfw.image.fk:FKImager",
+        config="nlosfw.image.transient:TransientImagerConfig",
+        description="f-k (Stolt) migration (Lindell 2019), confocal",
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS],
+    )
+    register(
+        "fbp",
+        "nlosfw.image.lct:FBPImager",
+        config="nlosfw.image.lct:LightConeConfig",
+        description="Backprojection with a Laplacian filter along depth, confocal",
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS],
     )
 
 

@@ -44,6 +44,7 @@ class Capability(str, Enum):
     # imagers
     PLANE_VOXELS = "plane_voxels"
     POINT_VOXELS = "point_voxels"
+    RSD = "rsd"
     # capture formats
     READABLE = "readable"
     WRITABLE = "writable"
@@ -92,6 +93,8 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
         C.PLANE_VOXELS: "voxels in planes parallel to the wall on the wall's grid, "
                         "(Y, X, 3) or (Z, Y, X, 3)",
         C.POINT_VOXELS: "any voxel list (N, 3)",
+        C.RSD: "its image is the field's Rayleigh-Sommerfeld image (the reference RSD's); "
+               "classical imagers (lct, fk, fbp) image the field's transient otherwise",
     }),
     "capture_format": MappingProxyType({
         C.READABLE: "recognises its files by their content and reads them as captures",
@@ -105,7 +108,7 @@ DEFAULTS: Mapping[str, frozenset[Capability]] = MappingProxyType({
     "simulator": frozenset({C.SINGLE_SPOT, C.CONFOCAL, C.DEVICE_LEGS, C.OCCLUSION}),
     "transform": frozenset({C.SINGLE_SPOT, C.CONFOCAL}),
     "model": frozenset({C.MULTI_FREQUENCY, C.SAVE_LOAD}),
-    "imager": frozenset({C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS}),
+    "imager": frozenset({C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.RSD}),
     "capture_format": frozenset({C.READABLE}),
 })
 
