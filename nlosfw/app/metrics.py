@@ -27,9 +27,9 @@ from nlosfw.common.errors import DataError
 from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[3]
+SchemaVersion = Literal[4]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 3
+SCHEMA_VERSION: Final[SchemaVersion] = 4
 
 Status = Literal["running", "completed", "stopped", "failed", "interrupted"]
 """``running`` only while the run is in progress: metrics.json is written when it ends.
@@ -49,7 +49,8 @@ TIMING_FIELDS: Final = (
 
 @dataclass(frozen=True, kw_only=True)
 class RunInfo:
-    """What ran: the run directory, the nlosfw version, the start and the plugins selected."""
+    """What ran: the run directory, the nlosfw version, the start, the capture (a scene and
+    its simulator, or a file and its format) and the plugins selected."""
 
     dir: str
     nlosfw_version: str
@@ -57,8 +58,10 @@ class RunInfo:
     config_hash: str = documented("SHA-256 of the configuration without the run-control "
                                   "options (cache, limits, output.overwrite): a resumed "
                                   "sweep skips a finished run only when it matches")
-    scene: str | None
-    simulator: str | None
+    scene: str | None = documented("the simulated scene (null for a run from a file)")
+    simulator: str | None = documented("its simulator (null for a run from a file)")
+    capture_file: str | None = optional("the capture file read (capture.path)")
+    capture_format: str | None = optional("the capture format that read it")
     transform: str | None
     model: str | None
     imager: str | None
@@ -67,11 +70,27 @@ class RunInfo:
 
 
 @dataclass(frozen=True, kw_only=True)
+class PreprocessingStep:
+    """One preprocessing step, as applied (enough to repeat it: ``capture.<option>=<value>``)."""
+
+    option: str = documented("the option (capture.<option>); grid: a list of wall points "
+                             "arranged as the regular grid it forms")
+    value: Any = documented("its value as the config spells it")
+    source: Literal["option", "format", "automatic"] = documented(
+        "the run's options, the capture format's default, or automatic (grid)")
+    effect: str = documented("what it did, in words")
+
+
+@dataclass(frozen=True, kw_only=True)
 class CaptureMetrics:
-    """The capture: where it came from and its shape, timing and total signal."""
+    """The capture: where it came from, how it was preprocessed, its shape, timing and
+    total signal (after preprocessing)."""
 
     source: Literal["simulated", "file"]
     path: str | None = optional("the file read (source: file)")
+    format: str | None = optional("the capture format that read it (source: file)")
+    preprocessing: tuple[PreprocessingStep, ...] = documented(
+        "every step applied, in order (empty: none)")
     simulator: str | None = optional("the simulator plugin (source: simulated)")
     cache_hit: bool | None = optional("whether the simulated capture came from the cache")
     shape: tuple[int, ...] = documented("shape of the transient H (time first)")

@@ -128,10 +128,11 @@ class Pipeline:
             return self._run_held()
 
     def _run_held(self) -> float | None:
-        self.console.print(config_tree(self.config, title=f"nlosfw run → {self.run_dir}"))
+        shown = self._used_config()
+        self.console.print(config_tree(shown, title=f"nlosfw run → {self.run_dir}"))
         try:
             self.host.hook.on_run_start(run_dir=str(self.run_dir), config=self.config)
-            self.ctx.write_text("config", yaml_safe.dump(self.config))
+            self.ctx.write_text("config", yaml_safe.dump(shown))
             objective = self._stages()
         except BaseException as err:  # any failure, ours or a bug: record it, then re-raise
             self._record_end(err)
@@ -149,6 +150,13 @@ class Pipeline:
         self.console.print(summary_table(self.metrics))
         self.console.print(f"[bold green]done[/] ({status}): {self.run_dir}")
         return objective
+
+    def _used_config(self) -> dict[str, Any]:
+        """The config without what the run does not use: a run from a file has no scene and
+        no simulator (their defaults would mislabel it)."""
+        if self.settings.capture.path is None:
+            return self.config
+        return {k: v for k, v in self.config.items() if k not in ("scene", "simulator")}
 
     def _record_end(self, err: BaseException) -> None:
         """metrics.json with status failed or interrupted, the stage and the one-line reason,
@@ -200,15 +208,13 @@ class Pipeline:
 
     # ------------------------------------------------------------------ stages
     def capture(self) -> CaptureResult:
-        """Read ``capture.path`` or simulate the scene (cached); write capture.hdf5."""
-        path = self.settings.capture.path
-        if path is not None:
-            source = Path(path).expanduser()
-            result = CaptureResult(capture=read_capture(source),
-                                   key=cache_key({"file": file_digest(source)}),
-                                   source="file", path=source.resolve())
+        """Read ``capture.path`` (format forced or detected) or simulate the scene (cached),
+        preprocess it; write capture.hdf5."""
+        source = self.settings.capture
+        if source.path is not None:
+            result = self._file_capture()
         else:
-            result = self._simulated_capture()
+            result = self._preprocessed(self._simulated_capture())
         self.ctx.write("capture", lambda p: write_capture(
             p, result.capture, compression=self.settings.output.compression))
         self.ctx.metrics = replace(self.metrics, capture=capture_metrics(result))
@@ -360,16 +366,46 @@ class Pipeline:
         simulator = self.host.registry.create("simulator", name, options)
         clean_scene = dataclasses.replace(scene, noise=NoiseConfig())
         clean_key = self._capture_key(name, simulator, clean_scene)
+        label = f"{scene.name} ({name})"
         with self.console.status(f"simulating {scene.name} with {name}…"):
             clean, hit = self._cached_capture(clean_key,
                                               lambda: simulator.simulate_clean(clean_scene))
             if scene.noise == NoiseConfig():
                 return CaptureResult(capture=clean, key=clean_key, source="simulated",
-                                     simulator=name, cache_hit=hit)
+                                     label=label, simulator=name, cache_hit=hit)
             key = self._capture_key(name, simulator, scene)
             capture, hit = self._cached_capture(key, lambda: simulator.add_noise(clean, scene))
-        return CaptureResult(capture=capture, key=key, source="simulated", simulator=name,
-                             cache_hit=hit, clean=clean, clean_key=clean_key)
+        return CaptureResult(capture=capture, key=key, source="simulated", label=label,
+                             simulator=name, cache_hit=hit, clean=clean, clean_key=clean_key)
+
+    def _file_capture(self) -> CaptureResult:
+        """The capture of ``capture.path``, preprocessed; the run is labelled with its format."""
+        from nlosfw.app.capture_source import load_file_capture
+
+        loaded = load_file_capture(self.settings.capture, self.host)
+        key = loaded.cache_key(self._plugin_version("capture_format", loaded.format))
+        self.ctx.metrics = replace(self.metrics, run=replace(
+            self.metrics.run, capture_format=loaded.format))
+        return CaptureResult(capture=loaded.prepared.capture, key=key, source="file",
+                             label=f"{loaded.path.name} ({loaded.format})",
+                             path=loaded.path.resolve(), format=loaded.format,
+                             steps=loaded.prepared.steps)
+
+    def _preprocessed(self, raw: CaptureResult) -> CaptureResult:
+        """A simulated capture (and its noise-free twin) with the run's preprocessing."""
+        from nlosfw.app.capture_source import options_of, prepare
+
+        options = options_of(self.settings.capture)
+        prepared = prepare(raw.capture, options, frozenset(), self.host)
+        if not prepared.steps:
+            return raw
+        key = cache_key({"capture": raw.key, **prepared.key_material})
+        clean, clean_key = raw.clean, raw.clean_key
+        if clean is not None:
+            clean = prepare(clean, options, frozenset(), self.host).capture
+            clean_key = cache_key({"capture": raw.clean_key, **prepared.key_material})
+        return replace(raw, capture=prepared.capture, key=key, steps=prepared.steps,
+                       clean=clean, clean_key=clean_key)
 
     def _cached_capture(self, key: str,
                         compute: Callable[[], Capture]) -> tuple[Capture, bool]:
@@ -461,15 +497,24 @@ class Pipeline:
         return volume_voxels(depths, (x0, x0 + nx * dx), (y0, y0 + ny * dy), (ny, nx))
 
     def _run_info(self) -> RunInfo:
+        """The run's plugins and capture: a scene and its simulator, or a file and its format
+        (known once the capture stage has read it, unless ``capture.format`` forces it)."""
         def selected(group: str) -> str | None:
             name = (self.config.get(group) or {}).get("name")
             return None if name is None else str(name)
 
+        source = self.settings.capture
+        path = None if source.path is None else Path(source.path).expanduser().resolve()
+        from_file = path is not None
         return RunInfo(dir=str(self.run_dir), nlosfw_version=__version__,
                        started=time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-                       config_hash=lifecycle.config_hash(self.config), scene=selected("scene"),
-                       simulator=selected("simulator"), transform=selected("transform"),
-                       model=selected("model"), imager=selected("imager"))
+                       config_hash=lifecycle.config_hash(self.config),
+                       scene=None if from_file else selected("scene"),
+                       simulator=None if from_file else selected("simulator"),
+                       capture_file=None if path is None else str(path),
+                       capture_format=source.format if from_file else None,
+                       transform=selected("transform"), model=selected("model"),
+                       imager=selected("imager"))
 
 
 class _OnceFilter(logging.Filter):

@@ -11,7 +11,7 @@ from nlosfw.plugins import PluginHost
 def plugins_table(host: PluginHost) -> Table:
     """Kind, name, distribution, whether its dependencies import (else the pip command)."""
     table = Table(title="nlosfw plugins", title_justify="left")
-    table.add_column("kind", style="cyan")
+    table.add_column("kind", style="cyan", no_wrap=True)
     table.add_column("name", style="bold")
     table.add_column("distribution")
     table.add_column("dependencies")

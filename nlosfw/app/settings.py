@@ -13,6 +13,7 @@ from typing import Any
 
 from omegaconf import MISSING
 
+from nlosfw.capture.preprocess import Preprocessing
 from nlosfw.common.config import Choice, config_from_mapping, require
 from nlosfw.common.schema import is_schema_node
 from nlosfw.model.protocol import SpectralSplit
@@ -37,11 +38,21 @@ class StopAfter(Choice):
 
 
 @dataclass(frozen=True)
-class CaptureSource:
-    """Where the capture comes from."""
+class CaptureSource(Preprocessing):
+    """Where the capture comes from, and its preprocessing (the fields of
+    :class:`~nlosfw.capture.Preprocessing`: gate, time_crop, bin, stride, flip, transpose,
+    bin_width, tofgrid, background), applied to a file's capture and to a simulated one."""
 
     path: str | None = None
-    """Read this HDF5 capture (nlosfw, y-tal or Zaragoza layout) instead of simulating."""
+    """Read this capture file instead of simulating; its format is detected from its content."""
+    format: str | None = None
+    """Force a capture format (a ``capture_format`` plugin: nlosfw, ytal, znlos, lct, fk,
+    wisconsin, ...); null: the one that recognises the file."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require(self.format is None or self.path is not None, "format",
+                "forces the format of capture.path: give capture.path too")
 
 
 @dataclass(frozen=True)

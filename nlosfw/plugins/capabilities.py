@@ -58,7 +58,7 @@ class Capability(str, Enum):
 C = Capability
 
 #: Per kind (by :class:`~nlosfw.plugins.PluginKind` value), each valid capability and what
-#: it promises. ``capture_format`` is the kind of issue 11's file-format plugins.
+#: it promises.
 VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
     "simulator": MappingProxyType({
         C.SINGLE_SPOT: "renders single-spot captures (one laser spot, a grid of sensors)",
@@ -97,8 +97,8 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
                "classical imagers (lct, fk, fbp) image the field's transient otherwise",
     }),
     "capture_format": MappingProxyType({
-        C.READABLE: "reads captures of this format",
-        C.WRITABLE: "writes captures of this format (and reads them back unchanged)",
+        C.READABLE: "recognises its files by their content and reads them as captures",
+        C.WRITABLE: "writes captures in its layout (and reads them back unchanged)",
     }),
 })
 
