@@ -15,7 +15,16 @@ Importing this package loads only numpy, scipy and the core data types; plugins 
 their heavy backends (torch, JAX, mitsuba, embreex) load on demand.
 """
 
-from nlosfw.capture import Capture, CaptureGeometry, CaptureKind, GridFormat, HFormat, VolumeFormat
+from nlosfw.capture import (
+    Capture,
+    CaptureFormat,
+    CaptureFormatConfig,
+    CaptureGeometry,
+    CaptureKind,
+    GridFormat,
+    HFormat,
+    VolumeFormat,
+)
 from nlosfw.common import (
     ConfigError,
     DataError,
@@ -32,7 +41,8 @@ from nlosfw.simulate import Scene, Simulator, SimulatorConfig
 from nlosfw.transform import PhasorField, PhasorTransform, PhasorTransformConfig
 
 __all__ = [
-    "Capability", "Capture", "CaptureGeometry", "CaptureKind", "ConfigError", "DataError",
+    "Capability", "Capture", "CaptureFormat", "CaptureFormatConfig", "CaptureGeometry",
+    "CaptureKind", "ConfigError", "DataError",
     "FieldModel", "FieldModelConfig", "FitError", "FitReport", "GridFormat", "HFormat", "Imager",
     "ImagerConfig", "NlosfwError", "PhasorField", "PhasorTransform", "PhasorTransformConfig",
     "PluginError", "PluginKind", "Reconstruction", "Scene", "Simulator", "SimulatorConfig",

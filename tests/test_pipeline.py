@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from nlosfw.app.cache import Cache
+from nlosfw.app.lifecycle import MARKER_NAME
 from nlosfw.app.pipeline import Pipeline
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
@@ -117,7 +118,10 @@ def test_lifecycle_hooks_follow_a_run(tmp_path, cache_dir):
         "capture", "transform", "fit", "predict", "reconstruct", "report"]
     written = {Path(a["path"]).relative_to(run_dir).as_posix() for a in tracker.names("artefact")}
     on_disk = {p.relative_to(run_dir).as_posix() for p in run_dir.rglob("*") if p.is_file()}
-    assert written == on_disk  # every file of the run was announced, and nothing else
+    # every file of the run was announced, and nothing else (but the run's marker, which
+    # lists them: nlosfw.app.lifecycle)
+    assert written == on_disk - {MARKER_NAME}
+    assert set(json.loads((run_dir / MARKER_NAME).read_text())["files"]) == written
     assert tracker.names("run_end") == [{"status": "completed", "metrics_status": "completed"}]
     assert {s["source"] for s in tracker.names("training_step")} <= {"interp"}
 

@@ -41,16 +41,18 @@ def write_figures(ctx: RunContext, results: RunResults, scores: ReconstructionMe
     fields = results.fields.by_source()
     recons = results.reconstructions
     truth_depth = results.capture.truth_depth
+    run = results.capture.label
     for single in recons.single_frequency:
         ctx.write(f"figures/fields_f{single.index}.png",
-                  _saver(partial(_field_figure, fields, single.index, single.split), dpi),
+                  _saver(partial(_field_figure, fields, single.index, single.split, run), dpi),
                   kind="figure")
     ctx.write("figures/reconstructions.png",
               _saver(lambda: _recon_figure(recons.by_source, scores.sources, truth_depth,
-                                           "all frequencies"), dpi), kind="figure")
+                                           f"{run} from all frequencies"), dpi), kind="figure")
     for single in recons.single_frequency:
         entry = scores.single_frequency[str(single.index)]
-        title = f"f = {entry.frequency:.3f} cycles/m only ({entry.split} frequency)"
+        title = (f"{run} from f = {entry.frequency:.3f} cycles/m only ({entry.split} "
+                 "frequency)")
         ctx.write(f"figures/reconstructions_f{single.index}.png",
                   _saver(partial(_recon_figure, single.by_source, entry.sources, truth_depth,
                                  title), dpi), kind="figure")
@@ -73,7 +75,7 @@ def _extent(field: PhasorField) -> list[float]:
             w[0, 0, 1] - sp[0] / 2, w[-1, 0, 1] + sp[0] / 2]
 
 
-def _field_figure(fields: Mapping[str, PhasorField], index: int, label: str) -> Any:
+def _field_figure(fields: Mapping[str, PhasorField], index: int, label: str, run: str) -> Any:
     true = fields["true"]
     sources = list(fields)
     amp_max = float(np.abs(true.values[index]).max()) or 1.0
@@ -83,7 +85,7 @@ def _field_figure(fields: Mapping[str, PhasorField], index: int, label: str) -> 
     fig = Figure(figsize=(9.5, 3.0 * len(sources)))
     axes = fig.subplots(len(sources), 3, squeeze=False)
     freq = true.frequencies[index]
-    fig.suptitle(f"phasor field at f = {freq:.3f} cycles/m (λ = {100 / freq:.1f} cm), "
+    fig.suptitle(f"{run}: phasor field at f = {freq:.3f} cycles/m (λ = {100 / freq:.1f} cm), "
                  f"{label} frequency")
     for row, source in enumerate(sources):
         values = fields[source].values[index]
@@ -145,7 +147,7 @@ def _recon_figure(recons: Mapping[str, Reconstruction], scores: Mapping[str, Ima
     for ax in axes.ravel():
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
-    fig.suptitle(f"reconstructions from {title}")
+    fig.suptitle(f"reconstructions of {title}")
     fig.tight_layout()
     return fig
 

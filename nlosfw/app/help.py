@@ -27,6 +27,8 @@ SUBCOMMANDS = (
                                         "checks"),
     ("python -m nlosfw plugins --check", "import every plugin; broken ones say why"),
     ("python -m nlosfw report DIR", "tables and plots of the runs under DIR (a sweep)"),
+    ("python -m nlosfw cache info|clean", "the cache's entries and sizes; evict them "
+                                          "(--keep-gb N)"),
     ("python -m nlosfw -cn NAME -m", "a sweep preset: {primary}"),
     ("python -m nlosfw.testing NAME", "the conformance kit on a plugin (--plan: which "
                                       "checks)"),

@@ -27,11 +27,13 @@ MAX_CHANGES = 12
 
 
 def choices(config: Mapping[str, Any]) -> dict[str, str]:
-    """The selected scene and plugins by group (``scene`` is the scene's name)."""
+    """The selected scene and plugins by group (``scene`` is the scene's name); a group the
+    config leaves out (a run from a file has no scene and no simulator) is left out."""
     out = {}
     for group in ("scene", *PLUGIN_GROUPS):
-        node = config.get(group) or {}
-        out[group] = str(node.get("name", "?"))
+        node = config.get(group)
+        if node is not None:
+            out[group] = str(node.get("name", "?"))
     return out
 
 
@@ -50,8 +52,9 @@ def changed_options(config: Mapping[str, Any], host: PluginHost) -> list[str]:
         name = str(rest.pop("name", ""))
         out.append(f"compare.{label}.name={name}")
         out += _diff(f"compare.{label}", rest, _plugin_defaults(host, "model", name))
-    scene = dict(config.get("scene") or {})
-    out += _diff("scene", scene, _scene_defaults(str(scene.get("name", ""))))
+    if config.get("scene") is not None:
+        scene = dict(config["scene"])
+        out += _diff("scene", scene, _scene_defaults(str(scene.get("name", ""))))
     return out
 
 
@@ -59,8 +62,11 @@ def overview_lines(config: Mapping[str, Any], host: PluginHost,
                    settings: RunSettings) -> list[str]:
     """The lines printed before a run (rich markup): choices, changed options, the plan."""
     picked = choices(config)
+    named = dict(picked)
+    if settings.capture.path is not None:
+        named = {"capture": str(settings.capture.path), **picked}
     lines = ["  " + " · ".join(f"{group} [bold]{escape(name)}[/]"
-                               for group, name in picked.items())]
+                               for group, name in named.items())]
     changes = changed_options(config, host)
     if changes:
         shown = changes[:MAX_CHANGES]

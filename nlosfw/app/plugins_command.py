@@ -59,7 +59,7 @@ def plugin_status(spec: PluginSpec, full: bool = False) -> Status:
 def plugins_table(host: PluginHost, full: bool = False) -> Table:
     """Kind, name, distribution, status (ok, missing: the pip command, broken: why)."""
     table = Table(title="nlosfw plugins", title_justify="left")
-    table.add_column("kind", style="cyan")
+    table.add_column("kind", style="cyan", no_wrap=True)
     table.add_column("name", style="bold")
     table.add_column("distribution")
     table.add_column("status", overflow="fold")

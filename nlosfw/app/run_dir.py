@@ -16,7 +16,9 @@ Artefact names (relative to the run directory; see the README):
 ========================  ================================================
 
 The large files (capture, phasor field, fields, model, reconstructions) are written only
-when ``output.keep`` lists them (:class:`~nlosfw.app.settings.Artefact`).
+when ``output.keep`` lists them (:class:`~nlosfw.app.settings.Artefact`). Every file is
+claimed in the directory's run marker before it is written (:mod:`nlosfw.app.lifecycle`),
+so a later run knows exactly which files are this run's.
 """
 
 from __future__ import annotations
@@ -30,7 +32,8 @@ from pathlib import Path
 from typing import Any
 
 from nlosfw.app.console import FILE_ONLY
-from nlosfw.app.metrics import RunInfo, RunMetrics, Status, metrics_schema_text
+from nlosfw.app.lifecycle import RunHold
+from nlosfw.app.metrics import RunError, RunInfo, RunMetrics, Status, metrics_schema_text
 from nlosfw.app.settings import Artefact
 from nlosfw.common.errors import DataError
 from nlosfw.common.files import atomic_path, write_text
@@ -46,6 +49,9 @@ ARTEFACTS = {
     "phasor_field": "phasor_field.hdf5",
     "field_model": "field_model.npz",
 }
+#: Top-level names a run may create in its directory (Hydra adds .hydra and run.log).
+PLANNED_NAMES = (*ARTEFACTS.values(), "fields", "reconstructions", "figures",
+                 "thesis_comparison.md")
 
 
 class RunContext:
@@ -53,7 +59,8 @@ class RunContext:
 
     ``metrics`` is the run's :class:`RunMetrics` so far; stages replace its sections as
     they finish, and :meth:`finish` writes it. ``keep`` lists the large artefacts to write
-    (``None``: all of them).
+    (``None``: all of them). With a ``hold`` on the directory every file is claimed in its
+    run marker before it is written.
     """
 
     def __init__(self, run_dir: Path, host: PluginHost, info: RunInfo,
@@ -63,6 +70,9 @@ class RunContext:
         self.metrics = RunMetrics(run=info)
         self.started = time.perf_counter()
         self.keep = frozenset(Artefact) if keep is None else keep
+        self.hold: RunHold | None = None
+        self.stage_reached: str | None = None
+        """The stage running now, or the last one started."""
 
     def path(self, name: str) -> Path:
         """Absolute path of an artefact given by key (``capture``) or relative name."""
@@ -78,12 +88,14 @@ class RunContext:
             log.debug("%s not written: output.keep does not list %s", name, keep_as)
             return None
         final = self.path(name)
+        self._claim(final)
         with atomic_path(final) as tmp:
             writer(tmp)
         self.host.hook.on_artefact_written(path=str(final), kind=kind or name)
         return final
 
     def write_text(self, name: str, text: str, kind: str | None = None) -> Path:
+        self._claim(self.path(name))
         final = write_text(self.path(name), text)
         self.host.hook.on_artefact_written(path=str(final), kind=kind or name)
         return final
@@ -92,6 +104,7 @@ class RunContext:
     def stage(self, name: str) -> Iterator[None]:
         """Time a pipeline stage into ``metrics.timings.<name>`` and fire ``on_stage_end``."""
         start = time.perf_counter()
+        self.stage_reached = name
         log.info("stage %s: started", name, extra=FILE_ONLY)
         yield
         seconds = time.perf_counter() - start
@@ -99,11 +112,12 @@ class RunContext:
         log.info("stage %s: %.2f s", name, seconds, extra=FILE_ONLY)
         self.host.hook.on_stage_end(stage=name, seconds=seconds)
 
-    def finish(self, status: Status) -> Path:
-        """Write ``metrics.json`` with the final status and total time, and its JSON Schema
+    def finish(self, status: Status, error: RunError | None = None) -> Path:
+        """Write ``metrics.json`` with the final status (and, for a failed or interrupted
+        run, where and why it ended) and total time, and its JSON Schema
         ``metrics.schema.json`` beside it."""
         self._record_time("total", time.perf_counter() - self.started)
-        self.metrics = dataclasses.replace(self.metrics, status=status)
+        self.metrics = dataclasses.replace(self.metrics, status=status, error=error)
         path = self.path("metrics")
         if path.exists():
             raise DataError(f"{path}: already exists; refusing to overwrite it")
@@ -115,6 +129,10 @@ class RunContext:
     def size(self) -> int:
         """Bytes in the run directory (every file, Hydra's and the log included)."""
         return sum(p.stat().st_size for p in self.run_dir.rglob("*") if p.is_file())
+
+    def _claim(self, path: Path) -> None:
+        if self.hold is not None:
+            self.hold.claim(path.relative_to(self.run_dir).as_posix())
 
     def _record_time(self, name: str, seconds: float) -> None:
         timings = dataclasses.replace(self.metrics.timings, **{name: round(seconds, 4)})

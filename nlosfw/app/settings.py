@@ -13,6 +13,7 @@ from typing import Any
 
 from omegaconf import MISSING
 
+from nlosfw.capture.preprocess import Preprocessing
 from nlosfw.common.config import Choice, config_from_mapping, require
 from nlosfw.common.schema import is_schema_node
 from nlosfw.model.protocol import SpectralSplit
@@ -37,11 +38,21 @@ class StopAfter(Choice):
 
 
 @dataclass(frozen=True)
-class CaptureSource:
-    """Where the capture comes from."""
+class CaptureSource(Preprocessing):
+    """Where the capture comes from, and its preprocessing (the fields of
+    :class:`~nlosfw.capture.Preprocessing`: gate, time_crop, bin, stride, flip, transpose,
+    bin_width, tofgrid, background), applied to a file's capture and to a simulated one."""
 
     path: str | None = None
-    """Read this HDF5 capture (nlosfw, y-tal or Zaragoza layout) instead of simulating."""
+    """Read this capture file instead of simulating; its format is detected from its content."""
+    format: str | None = None
+    """Force a capture format (a ``capture_format`` plugin: nlosfw, ytal, znlos, lct, fk,
+    wisconsin, ...); null: the one that recognises the file."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require(self.format is None or self.path is not None, "format",
+                "forces the format of capture.path: give capture.path too")
 
 
 @dataclass(frozen=True)
@@ -66,19 +77,21 @@ class ReconstructionSettings:
     """The voxels imaged from every field."""
 
     depths: tuple[float, ...] = ()
-    """[m] Depth planes; empty: ``n_depths`` planes spanning the scene's ground truth or
-    ``depth_range``."""
+    """[m] Depth planes; empty: planes spanning ``depth_range`` or, when it is not set, the
+    scene's ground truth or the depths the capture's time profile holds signal at."""
     depth_range: tuple[float, float] | None = None
-    """[m] Near and far depth of the planes when the capture has no ground truth."""
-    n_depths: int = 24
-    """Number of depth planes when ``depths`` is empty."""
+    """[m] Near and far depth of the planes when ``depths`` is empty."""
+    n_depths: int | None = None
+    """Number of planes; None (default): a quarter of the shortest wavelength of the band
+    apart in the volume, 1/(4 m f_max) with m = 2 for confocal captures, else 1."""
     single_frequency_images: int = 2
     """How many single-frequency images (as in the thesis figures) to add per field."""
 
     def __post_init__(self) -> None:
         require(all(d > 0 for d in self.depths), "depths", "every depth must be > 0 (in front "
                 "of the wall)")
-        require(self.n_depths >= 1, "n_depths", f"must be >= 1, got {self.n_depths}")
+        require(self.n_depths is None or self.n_depths >= 1, "n_depths",
+                f"must be >= 1 or null (automatic), got {self.n_depths}")
         if self.depth_range is not None:
             lo, hi = self.depth_range
             require(0 < lo < hi, "depth_range", f"must satisfy 0 < near < far, got "
@@ -107,6 +120,13 @@ class CacheSettings:
     """Read and write the cache (false: compute everything again)."""
     dir: str = "~/.cache/nlosfw"
     """Where the cache lives (``$NLOSFW_CACHE_DIR`` when set)."""
+    max_gb: float | None = 20.0
+    """[GB] Size limit: beyond it the least recently used entries are evicted (never one a
+    running process is using); null: no limit."""
+
+    def __post_init__(self) -> None:
+        require(self.max_gb is None or self.max_gb >= 0, "max_gb",
+                f"must be >= 0 (GB) or null, got {self.max_gb}")
 
 
 class Artefact(Choice):
@@ -135,11 +155,23 @@ class OutputSettings:
     fields and the reconstructions follow from them quickly and are left out."""
     compression: int = 4
     """gzip level (0-9) for the transient in capture.hdf5."""
+    overwrite: bool = False
+    """Replace an earlier run's files in the run directory (only files that run wrote);
+    without it a directory holding a run is refused."""
 
     def __post_init__(self) -> None:
         require(0 <= self.compression <= 9, "compression", f"must be 0-9, got {self.compression}")
         require(len(set(self.keep)) == len(self.keep), "keep",
                 f"lists an artefact twice: {[str(a) for a in self.keep]}")
+
+
+@dataclass(frozen=True)
+class LimitSettings:
+    """Safety limits checked before a run starts."""
+
+    allow_large: bool = False
+    """Run even when the memory the configuration needs (estimated before anything is
+    allocated) exceeds the memory available."""
 
 
 @dataclass(frozen=True)
@@ -159,7 +191,9 @@ class RunSettings:
     cache: CacheSettings = field(default_factory=CacheSettings)
     """The cache of captures and phasor fields."""
     output: OutputSettings = field(default_factory=OutputSettings)
-    """Which large files the run writes."""
+    """Which large files the run writes, and whether it may replace an earlier run's."""
+    limits: LimitSettings = field(default_factory=LimitSettings)
+    """Safety limits checked before the run starts."""
     compare: dict[str, dict[str, Any]] = field(default_factory=dict)
     """More field models fitted and imaged beside ``model`` and interp: label -> options with
     the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""

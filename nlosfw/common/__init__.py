@@ -10,6 +10,7 @@ from nlosfw.common.config import (
     config_from_mapping,
     config_to_dict,
     require,
+    require_finite,
 )
 from nlosfw.common.cores import available_cores
 from nlosfw.common.errors import (
@@ -42,6 +43,7 @@ __all__ = [
     "PluginError",
     "ProgressCallback",
     "require",
+    "require_finite",
     "USER_ERROR_EXIT_STATUS",
     "write_text",
 ]

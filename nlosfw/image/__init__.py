@@ -6,8 +6,11 @@ import only these."""
 
 
 from nlosfw.common.progress import ProgressCallback
+from nlosfw.image.depths import automatic_depths, depth_span, depth_step
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
+from nlosfw.image.fk import FKImager
 from nlosfw.image.interface import Imager, ImagerConfig
+from nlosfw.image.lct import FBPImager, LCTImager, LCTImagerConfig, LightConeConfig
 from nlosfw.image.propagation import PropagationConfig, PropagationImager
 from nlosfw.image.reconstruction import Reconstruction, cell_centres, plane_voxels, volume_voxels
 from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
@@ -21,15 +24,31 @@ from nlosfw.image.rsd_kernel import (
     wall_field,
 )
 from nlosfw.image.scores import image_metrics, normalise, psnr, rmse, ssim
+from nlosfw.image.transient import (
+    Falloff,
+    TransientImager,
+    TransientImagerConfig,
+    full_band_frequencies,
+)
 
 __all__ = [
+    "automatic_depths",
     "cell_centres",
+    "depth_span",
+    "depth_step",
+    "Falloff",
+    "FBPImager",
     "FFTImager",
     "FFTImagerConfig",
+    "FKImager",
+    "full_band_frequencies",
     "image_metrics",
     "Imager",
     "ImagerConfig",
     "kernel",
+    "LCTImager",
+    "LCTImagerConfig",
+    "LightConeConfig",
     "laser_phase",
     "normalise",
     "path_multiplier",
@@ -46,6 +65,8 @@ __all__ = [
     "RSDImager",
     "RSDImagerConfig",
     "ssim",
+    "TransientImager",
+    "TransientImagerConfig",
     "volume_voxels",
     "wall_field",
     "write_reconstruction",

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from nlosfw.capture.geometry import device_legs
-from nlosfw.common.config import Choice, config_from_mapping, require
+from nlosfw.common.config import Choice, config_from_mapping, require, require_finite
 
 #: Geometry item types understood by :mod:`nlosfw.simulate.geometry`.
 GEOMETRY_TYPES = ("rectangle", "box", "mesh", "patch", "point", "heightfield")
@@ -31,6 +31,7 @@ class WallConfig:
     """[m] Centre of the wall (x, y)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(all(s > 0 for s in self.size), "size", f"must be > 0 metres, got {self.size}")
         require(all(r >= 1 for r in self.resolution), "resolution",
                 f"must be >= 1 sensor per axis, got {self.resolution}")
@@ -74,6 +75,7 @@ class CaptureSetup:
     """Count the device-to-wall legs in the time axis (t_accounts_first_and_last_bounces)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.laser_position[2] > 0, "laser_position",
                 "must be in front of the wall (z > 0)")
         require(self.sensor_position[2] > 0, "sensor_position",
@@ -92,6 +94,7 @@ class TimeAxis:
     """[m] Optical path length at the start of the first bin."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.bins > 0, "bins", f"must be a positive number of bins, got {self.bins}")
         require(self.bin_width > 0, "bin_width",
                 f"must be a positive number of metres, got {self.bin_width}")
@@ -123,6 +126,7 @@ class GeometryItem:
     """Shape-specific parameters (e.g. a heightfield's bumps)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.type in GEOMETRY_TYPES, "type",
                 f"unknown geometry type {self.type!r}; valid: {', '.join(GEOMETRY_TYPES)}")
         require(self.albedo >= 0, "albedo", f"must be >= 0, got {self.albedo}")
@@ -160,6 +164,7 @@ class NoiseConfig:
     """[ps] Standard deviation of Gaussian timing jitter (any model)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.photons > 0, "photons", f"must be > 0, got {self.photons}")
         require(self.dark_counts >= 0, "dark_counts", f"must be >= 0, got {self.dark_counts}")
         require(self.jitter_ps >= 0, "jitter_ps", f"must be >= 0, got {self.jitter_ps}")

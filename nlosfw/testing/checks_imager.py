@@ -18,8 +18,10 @@ frequencies around 4 cycles/m; voxels are planes parallel to the wall whose
   non-decreasing up to total, and gives the same image as without the callback.
 
 Imagers declare the geometries they image (``single_spot``, ``confocal``; each check
-runs once per declared one) and the voxel layouts they accept (``plane_voxels``,
-``point_voxels``).
+runs once per declared one), the voxel layouts they accept (``plane_voxels``,
+``point_voxels``), and ``rsd`` when their image is the Rayleigh-Sommerfeld image (the
+two checks against the reference RSD need it; the classical lct, fk and fbp do not
+declare it).
 """
 
 from __future__ import annotations
@@ -78,7 +80,7 @@ def check_imager_focuses_point(spec: PluginSpec, confocal: bool) -> None:
             f"(confocal={confocal}, device legs in field={legs}); expected within one voxel")
 
 
-@requires(Capability.PLANE_VOXELS, each=GEOMETRIES)
+@requires(Capability.PLANE_VOXELS, Capability.RSD, each=GEOMETRIES)
 def check_imager_matches_reference(spec: PluginSpec, confocal: bool) -> None:
     """Same image as the plain reference RSD (normalised correlation >= 0.99), with and
     without device legs in the field's phase."""
@@ -134,7 +136,7 @@ def check_imager_output_shapes(spec: PluginSpec, confocal: bool) -> None:
             f"{spec.qualified_name}: intensity must be real, finite and >= 0")
 
 
-@requires(Capability.POINT_VOXELS, each=GEOMETRIES)
+@requires(Capability.POINT_VOXELS, Capability.RSD, each=GEOMETRIES)
 def check_imager_point_voxels(spec: PluginSpec, confocal: bool) -> None:
     """A voxel list (N, 3): 60 random points around the point scatterer and the point
     itself give intensities (N,) that correlate with the reference RSD (>= 0.99) and
