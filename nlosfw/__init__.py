@@ -23,6 +23,7 @@ their heavy backends (torch, JAX, mitsuba, embreex), Hydra and matplotlib load o
 
 from nlosfw.api import (
     fit_model,
+    load_capture,
     predict_field,
     reconstruct,
     run,
@@ -31,6 +32,8 @@ from nlosfw.api import (
 )
 from nlosfw.capture import (
     Capture,
+    CaptureFormat,
+    CaptureFormatConfig,
     CaptureGeometry,
     CaptureKind,
     GridFormat,
@@ -62,12 +65,13 @@ from nlosfw.simulate import Scene, Simulator, SimulatorConfig
 from nlosfw.transform import PhasorField, PhasorTransform, PhasorTransformConfig
 
 __all__ = [
-    "Capability", "Capture", "CaptureGeometry", "CaptureKind", "ConfigError", "DataError",
+    "Capability", "Capture", "CaptureFormat", "CaptureFormatConfig", "CaptureGeometry",
+    "CaptureKind", "ConfigError", "DataError",
     "FieldModel", "FieldModelConfig", "FitError", "FitReport", "GridFormat", "HFormat", "Imager",
     "ImagerConfig", "NlosfwError", "PhasorField", "PhasorTransform", "PhasorTransformConfig",
     "PluginError", "PluginKind", "Reconstruction", "Scene", "Simulator", "SimulatorConfig",
     "TrainingStep", "VolumeFormat", "__version__", "hookimpl", "require",
     # the Python API (nlosfw.api): one function per stage, and a whole run
-    "depth_span", "field_metrics", "fit_model", "predict_field", "read_capture",
+    "depth_span", "field_metrics", "fit_model", "load_capture", "predict_field", "read_capture",
     "reconstruct", "run", "simulate_scene", "split_field", "transform_capture", "write_capture",
 ]

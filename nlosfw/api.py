@@ -7,7 +7,7 @@ as the command line checks them (an unknown option or a bad value is a one-line
     import numpy as np
     import nlosfw
 
-    capture = nlosfw.simulate_scene("thesis_two_planes")             # or nlosfw.read_capture(path)
+    capture = nlosfw.simulate_scene("thesis_two_planes")             # or nlosfw.load_capture(path)
     field = nlosfw.transform_capture(capture, "fft", n_frequencies=51)
     split = nlosfw.split_field(field, spatial_step=2)
     model = nlosfw.fit_model(split.train_field, "siren_torch", steps=500)
@@ -54,6 +54,30 @@ def simulate_scene(scene: Scene | str | Mapping[str, Any], simulator: str = "ana
     plugin = _host().registry.create("simulator", simulator, options)
     capture: Capture = plugin.simulate(_scene(scene))
     return capture
+
+
+def load_capture(path: str | Path, format: str | None = None,
+                 **preprocessing: Any) -> Capture:
+    """The capture in file ``path``, as a run with ``capture.path=PATH`` reads it.
+
+    Any installed capture format reads it (``lct``, ``fk``, ``znlos``, ``ytal``,
+    ``wisconsin``, nlosfw's own HDF5, ...), detected from the file's content or forced with
+    ``format``; the format's default preprocessing applies, and ``preprocessing`` overrides
+    it with the options of ``capture.*`` (``gate=600``, ``bin=2``, ``tofgrid="tof.mat"``).
+    A bad file or option is a one-line :class:`~nlosfw.common.errors.NlosfwError`.
+    """
+    import dataclasses
+
+    from nlosfw.app.capture_source import load_file_capture
+    from nlosfw.app.settings import CaptureSource
+
+    valid = {f.name for f in dataclasses.fields(CaptureSource)} - {"path", "format"}
+    for key in preprocessing:
+        if key not in valid:
+            raise ConfigError(f"capture.{key}", f"unknown preprocessing option; valid: "
+                                                f"{', '.join(sorted(valid))}")
+    source = CaptureSource(path=str(path), format=format, **preprocessing)
+    return load_file_capture(source, _host()).prepared.capture
 
 
 def transform_capture(capture: Capture, transform: str = "fft", **options: Any) -> PhasorField:

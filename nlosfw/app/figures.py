@@ -37,8 +37,8 @@ VIEWPOINT = ("view along depth z from the relay wall into the hidden scene; "
 def run_title(info: RunInfo, capture: CaptureResult | None = None) -> str:
     """What ran, in one line: the scene and simulator (or the capture file), the model
     and the imager (for figure titles)."""
-    if capture is not None and capture.path is not None:
-        source = f"capture {capture.path.name}"
+    if capture is not None:
+        source = f"{'capture' if capture.path is not None else 'scene'} {capture.label}"
     else:
         source = f"scene {info.scene} ({info.simulator})"
     return f"{source} · model {info.model} · imager {info.imager}"

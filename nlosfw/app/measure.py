@@ -12,6 +12,7 @@ from nlosfw.app.metrics import (
     FieldMetrics,
     FitMetrics,
     ImageScores,
+    PreprocessingStep,
     ReconstructionMetrics,
     SingleFrequencyMetrics,
     TransformMetrics,
@@ -24,11 +25,14 @@ from nlosfw.transform.field import PhasorField
 
 
 def capture_metrics(result: CaptureResult) -> CaptureMetrics:
-    """Where the capture came from, its shape, timing and total signal."""
+    """Where the capture came from, its preprocessing, its shape, timing and total signal."""
     capture = result.capture
     return CaptureMetrics(
         source=result.source,
         path=None if result.path is None else str(result.path),
+        format=result.format,
+        preprocessing=tuple(PreprocessingStep(option=s.option, value=s.value, source=s.source,
+                                              effect=s.effect) for s in result.steps),
         simulator=result.simulator, cache_hit=result.cache_hit,
         shape=tuple(int(n) for n in capture.H.shape), kind=capture.kind,
         delta_t=float(capture.delta_t), t_start=float(capture.t_start),

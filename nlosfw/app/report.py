@@ -74,6 +74,8 @@ COLUMNS: tuple[tuple[str, Column], ...] = (
     ("status", lambda r: r.metrics.status),
     ("scene", lambda r: r.metrics.run.scene),
     ("simulator", lambda r: r.metrics.run.simulator),
+    ("capture_file", lambda r: r.metrics.run.capture_file),
+    ("capture_format", lambda r: r.metrics.run.capture_format),
     ("model", lambda r: r.metrics.run.model),
     ("imager", lambda r: r.metrics.run.imager),
     ("overrides", lambda r: " ".join(r.overrides)),

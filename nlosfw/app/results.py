@@ -23,6 +23,7 @@ import numpy as np
 
 from nlosfw.app.metrics import RunMetrics
 from nlosfw.capture.data import Capture
+from nlosfw.capture.preprocess import AppliedStep
 from nlosfw.common.errors import DataError
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.model.interface import FieldModel, FitReport
@@ -48,10 +49,16 @@ class CaptureResult:
     key: str
     """Cache key: the file's digest, or everything that produced the simulation."""
     source: Literal["simulated", "file"]
+    label: str
+    """What the run images, for titles: ``<file name> (<format>)`` or ``<scene> (<simulator>)``."""
     path: Path | None = None
     """The file read (source ``file``)."""
+    format: str | None = None
+    """The capture format that read it (source ``file``)."""
     simulator: str | None = None
     """The simulator plugin (source ``simulated``)."""
+    steps: tuple[AppliedStep, ...] = ()
+    """The preprocessing applied to ``capture`` (and to ``clean``)."""
     cache_hit: bool | None = None
     """Whether the simulated capture came from the cache."""
     clean: Capture | None = None
@@ -60,8 +67,9 @@ class CaptureResult:
     def __post_init__(self) -> None:
         if (self.clean is None) != (self.clean_key is None):
             raise ValueError("CaptureResult: clean and clean_key come together")
-        if (self.source == "file") != (self.path is not None):
-            raise ValueError("CaptureResult: a path exactly when the source is a file")
+        if (self.source == "file") != (self.path is not None and self.format is not None):
+            raise ValueError("CaptureResult: a path and a format exactly when the source is a "
+                             "file")
 
     @property
     def truth_depth(self) -> np.ndarray | None:

@@ -5,6 +5,7 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these."""
 
 
+from nlosfw.common.progress import ProgressCallback
 from nlosfw.image.depths import automatic_depths, depth_span, depth_step
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
 from nlosfw.image.fk import FKImager
@@ -60,6 +61,7 @@ __all__ = [
     "phasor_series",
     "phasor_steps",
     "plane_voxels",
+    "ProgressCallback",
     "PropagationConfig",
     "PropagationImager",
     "psnr",

@@ -16,7 +16,13 @@ Check = Callable[..., None]
 def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
     """Every check of plugins of ``kind`` (common checks, then kind-specific ones), whatever
     they declare; :func:`check_plan` says which apply to one plugin."""
-    from nlosfw.testing import checks_imager, checks_model, checks_simulator, checks_transform
+    from nlosfw.testing import (
+        checks_capture_format,
+        checks_imager,
+        checks_model,
+        checks_simulator,
+        checks_transform,
+    )
     from nlosfw.testing.checks_common import COMMON_CHECKS
 
     specific = {
@@ -24,6 +30,7 @@ def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
         PluginKind.PHASOR_TRANSFORM: checks_transform.TRANSFORM_CHECKS,
         PluginKind.FIELD_MODEL: checks_model.MODEL_CHECKS,
         PluginKind.IMAGER: checks_imager.IMAGER_CHECKS,
+        PluginKind.CAPTURE_FORMAT: checks_capture_format.CAPTURE_FORMAT_CHECKS,
     }[PluginKind(kind)]
     return COMMON_CHECKS + tuple(specific)
 

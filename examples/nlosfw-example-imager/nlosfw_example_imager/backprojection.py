@@ -3,7 +3,7 @@
 import numpy as np
 
 from nlosfw import DataError, Imager, PhasorField, Reconstruction
-from nlosfw.image import laser_phase, path_multiplier, phasor_steps, wall_field
+from nlosfw.image import ProgressCallback, laser_phase, path_multiplier, phasor_steps, wall_field
 from nlosfw_example_imager.hooks import BackprojectionConfig
 
 
@@ -15,12 +15,14 @@ class BackprojectionImager(Imager):
     with nlosfw's conventions (nlosfw.image's RSD kernel): m = 2 for confocal scans and
     1 for a single laser spot, whose leg L_f(v) undoes; P' has the device legs undone;
     w_f are the field's spectral weights. Any voxels: planes or a list of points.
-    O(voxels x wall samples x frequencies): small volumes only.
+    O(voxels x wall samples x frequencies): small volumes only, so it reports progress
+    after each block of voxels (the run shows it as a progress bar).
     """
 
     config_class = BackprojectionConfig
 
-    def reconstruct(self, field: PhasorField, voxels: np.ndarray) -> Reconstruction:
+    def reconstruct(self, field: PhasorField, voxels: np.ndarray,
+                    on_progress: ProgressCallback | None = None) -> Reconstruction:
         points = np.asarray(voxels, dtype=float)
         if points.shape[-1:] != (3,) or not np.all(np.isfinite(points)):
             raise DataError(f"voxels: need finite (x, y, z) points, got shape {points.shape}")
@@ -43,5 +45,7 @@ class BackprojectionImager(Imager):
                 u = np.einsum("vs,s->v", kern, values[i])                      # (n,)
                 total += field.effective_weights[i] * (u if legs is None else u * legs[i])
             intensity[start:start + block.shape[0]] = np.abs(total) ** 2
+            if on_progress is not None:
+                on_progress(start + block.shape[0], flat.shape[0])   # (done, total)
         return Reconstruction(intensity=intensity.reshape(points.shape[:-1]), voxels=points,
                               metadata={"imager": "example_backprojection"})

@@ -27,5 +27,6 @@ def register_imagers(register: Any) -> None:
         test_config={"block": 64},                              # small, fast options for the kit
         # what the conformance kit checks (nlosfw.plugins.CAPABILITIES["imager"]); "rsd":
         # its image is the Rayleigh-Sommerfeld one, compared with the kit's reference
-        capabilities=["single_spot", "confocal", "plane_voxels", "point_voxels", "rsd"],
+        capabilities=["single_spot", "confocal", "plane_voxels", "point_voxels", "rsd",
+                      "progress"],
     )
