@@ -12,6 +12,7 @@ from nlosfw.app.metrics import (
     FieldMetrics,
     FitMetrics,
     ImageScores,
+    PreprocessingStep,
     ReconstructionMetrics,
     SingleFrequencyMetrics,
     SplitMetrics,
@@ -26,11 +27,14 @@ from nlosfw.transform.field import PhasorField
 
 
 def capture_metrics(result: CaptureResult) -> CaptureMetrics:
-    """Where the capture came from, its shape, timing and total signal."""
+    """Where the capture came from, its preprocessing, its shape, timing and total signal."""
     capture = result.capture
     return CaptureMetrics(
         source=result.source,
         path=None if result.path is None else str(result.path),
+        format=result.format,
+        preprocessing=tuple(PreprocessingStep(option=s.option, value=s.value, source=s.source,
+                                              effect=s.effect) for s in result.steps),
         simulator=result.simulator, cache_hit=result.cache_hit,
         shape=tuple(int(n) for n in capture.H.shape), kind=capture.kind,
         delta_t=float(capture.delta_t), t_start=float(capture.t_start),
@@ -113,9 +117,13 @@ def reconstruction_metrics(imager: str, recons: Reconstructions,
                            truth_depth: np.ndarray | None = None) -> ReconstructionMetrics:
     """Scores of every reconstruction, whole band and single frequencies; ``truth_depth``
     (Y, X), the scene's true depth seen from the wall, adds each one's depth RMSE."""
+    depths = np.asarray(recons.voxels[:, 0, 0, 2], dtype=float)
+    steps = np.diff(depths)
+    even = steps.size > 0 and bool(np.allclose(steps, steps[0], rtol=1e-6, atol=0))
     return ReconstructionMetrics(
         imager=imager, reference="true",
-        depths=tuple(float(d) for d in recons.voxels[:, 0, 0, 2]),
+        depths=tuple(float(d) for d in depths), depth_planes=int(depths.size),
+        depth_spacing=float(steps[0]) if even else None,
         sources=image_scores(recons.by_source, recons.seconds, truth_depth),
         single_frequency={
             str(single.index): SingleFrequencyMetrics(frequency=single.frequency,

@@ -3,15 +3,20 @@
 Writes into ``DIR/report/`` (or ``report-2``, ... if that exists: earlier reports are
 never overwritten):
 
-* ``report.csv``: one row per run (its scene, sparsity, seed, field errors and
-  reconstruction scores);
+* ``report.csv``: one row per run (its scene or capture file, sparsity, seed, field
+  errors and reconstruction scores);
 * ``study.csv``: the runs grouped over seeds (:mod:`nlosfw.app.study`): per condition,
   sparsity and source, the mean, standard deviation, minimum and maximum of each score;
-* ``report.md``: both as markdown tables, plus thesis comparison tables when presets
-  carry reference numbers;
-* ``report.png`` (when runs reached their reconstructions): reconstruction quality
-  (PSNR, SSIM, depth RMSE) against sparsity, one line per field model (spread over
-  seeds shown), ``raw`` and ``interp`` on every panel.
+* ``report.png``: reconstruction quality against the swept parameter, one line per
+  field model with ``raw`` and ``interp`` on every panel. A sweep over sparsity gets the
+  study's figure (PSNR, SSIM, depth RMSE against the undersampling factor, spread over
+  seeds, :func:`nlosfw.app.study.study_figure`); any other sweep the quality plot of
+  :mod:`nlosfw.app.quality` (SSIM, PSNR and the held-out field error against the swept
+  key);
+* ``report.md``: the figure's numbers and every run as markdown tables, plus thesis
+  comparison tables when presets carry reference numbers;
+* ``report.html``: all of it in one self-contained page, linking each run's own
+  ``report.html``.
 """
 
 from __future__ import annotations
@@ -28,7 +33,16 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
+from nlosfw.app.html_report import sweep_report
 from nlosfw.app.metrics import ErrorMetrics, FieldMetrics, ImageScores, SplitErrors, SplitMetrics
+from nlosfw.app.quality import (
+    QualityTable,
+    quality_figure,
+    quality_points,
+    quality_table,
+    quality_tables,
+    sweep_layout,
+)
 from nlosfw.app.records import RunRecord, find_runs, read_run
 from nlosfw.app.study import SCORES, study_csv_rows, study_figure, study_rows, study_table
 from nlosfw.app.tables import markdown_table
@@ -97,6 +111,8 @@ COLUMNS: tuple[tuple[str, Column], ...] = (
     ("status", lambda r: r.metrics.status),
     ("scene", lambda r: r.metrics.run.scene),
     ("simulator", lambda r: r.metrics.run.simulator),
+    ("capture_file", lambda r: r.metrics.run.capture_file),
+    ("capture_format", lambda r: r.metrics.run.capture_format),
     ("noise", _noise),
     ("model", lambda r: r.metrics.run.model),
     ("seed", _field("model", lambda e: e.seed)),
@@ -162,34 +178,55 @@ def _free_dir(root: Path) -> Path:
     return target
 
 
-def write_report(root: Path) -> tuple[Path, list[dict[str, str]]]:
-    """Write report.csv, report.md, report.png for the runs under ``root``; return the dir."""
+def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str, str]]]:
+    """Write report.csv, report.md, report.png and report.html for the runs under ``root``
+    into a new
+    report directory (returned, with the table's rows); ``x`` is the override key on the
+    quality plot's x axis (default: chosen by :func:`nlosfw.app.quality.sweep_layout`)."""
     runs = find_runs(root)
     if not runs:
         raise DataError(f"{root}: holds no run (no metrics.json below it)")
     records = [read_run(r, root) for r in runs]
     rows = report_rows(records)
+    layout = sweep_layout(records, x)
+    points = quality_points(records, layout)
     study = study_rows(records)
+    # a sweep over sparsity is a study: its figure and table aggregate the seeds per
+    # condition and sparsity; any other sweep gets the quality plot against its key
+    by_sparsity = x is None and len({(r.pattern, r.undersampling) for r in study}) > 1
     out = _free_dir(root)
     out.mkdir(parents=True)
     write_text(out / "report.csv", to_csv(rows))
     write_text(out / "study.csv", csv_text(*study_csv_rows(study)))
     markdown = f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n"
-    if study:
+    if by_sparsity:
+        header, cells = study_table(study)
+        tables = [QualityTable(heading="reconstruction quality against sparsity, mean ± "
+                                       "standard deviation over seeds",
+                               header=tuple(header), rows=tuple(tuple(c) for c in cells))]
         markdown += ("## Reconstruction quality against sparsity\n\n"
+                     "![reconstruction quality against sparsity](report.png)\n\n"
                      "Scores against the full capture's reconstruction (amplitudes, each "
                      "normalised to its maximum; scikit-image PSNR and SSIM at their "
                      "defaults), mean ± standard deviation over the runs of each row "
                      "(seeds); `true` is the full capture itself.\n\n"
-                     + markdown_table(*study_table(study)) + "\n## Runs\n\n")
-    markdown += to_markdown(rows)
-    tables = thesis_comparison(records)
-    if tables:
-        markdown += "\n## Next to the thesis\n\n" + tables
+                     + markdown_table(header, cells) + "\n")
+    else:
+        tables = quality_tables(points, layout)
+        markdown += (f"## Quality against {layout.x_label}\n\n![quality against "
+                     f"{layout.x_label}](report.png)\n\n{quality_table(points, layout)}\n")
+    markdown += f"## Every run\n\n{to_markdown(rows)}"
+    thesis_tables = thesis_comparison(records)
+    if thesis_tables:
+        markdown += "\n## Next to the thesis\n\n" + thesis_tables
     write_text(out / "report.md", markdown)
-    if study:
-        with atomic_path(out / "report.png") as tmp:
+    with atomic_path(out / "report.png") as tmp:
+        if by_sparsity:
             study_figure(study, tmp)
+        else:
+            quality_figure(points, layout).savefig(tmp, dpi=110, format="png")
+    write_text(out / "report.html", sweep_report(root, out, records, rows,
+                                                 (out / "report.png").read_bytes(), tables))
     return out, rows
 
 
@@ -197,11 +234,14 @@ def report_command(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m nlosfw report",
                                      description="Aggregate the runs of a sweep directory.")
     parser.add_argument("directory", help="a sweep (multirun) directory or any parent of runs")
+    parser.add_argument("--x", metavar="KEY", default=None,
+                        help="the swept override on the quality plot's x axis (default: the "
+                             "numeric swept key with the most values, else another swept key)")
     args = parser.parse_args(list(argv))
     root = Path(args.directory).expanduser()
     if not root.is_dir():
         raise ConfigError("directory", f"{root} is not a directory")
-    out, rows = write_report(root)
+    out, rows = write_report(root, args.x)
     console = Console()
     table = Table(title=f"{len(rows)} runs under {root}", title_justify="left")
     shown = ("run", "status", "scene", "model", "seed", "undersampling", "raw_psnr",

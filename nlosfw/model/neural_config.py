@@ -78,7 +78,7 @@ class NeuralFieldConfig(FieldModelConfig):
     """Evaluations without a validation improvement before stopping (0: never stop early).
     The weights of the best evaluation are kept in every case."""
     max_seconds: float = 0.0
-    """Wall-clock budget of the training loop in seconds (0: none)."""
+    """[s] Wall-clock budget of the training loop (0: none)."""
     margin: float = 0.9
     """Inputs and targets are scaled into [-margin, margin], inside the open interval (-1, 1)."""
     divergence_factor: float = 1e3
