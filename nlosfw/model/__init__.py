@@ -25,11 +25,14 @@ from nlosfw.model.neural_config import (
 from nlosfw.model.normalisation import FieldNormalisation, estimate_delay
 from nlosfw.model.protocol import (
     FieldSplit,
+    SpatialPattern,
+    SpatialSampling,
     error_metrics,
     field_metrics,
     heldout_frequency_indices,
     hull_mask,
     parameter_data_ratio,
+    scattered_field,
     split_field,
 )
 from nlosfw.model.thesis_networks import (
@@ -101,6 +104,9 @@ __all__ = [
     "reference_state",
     "resolve_architecture",
     "SirenFieldConfig",
+    "scattered_field",
+    "SpatialPattern",
+    "SpatialSampling",
     "split_field",
     "TanhFieldConfig",
     "THESIS_NETWORKS",
