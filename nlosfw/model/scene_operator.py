@@ -20,7 +20,8 @@ only) times a per-voxel laser leg L_f(x_v) = g(r_l) e^{-2 pi i f r_l}, evaluated
 FFT layout of :mod:`nlosfw.image.plane_convolution` (the ``fft`` imager's layout, also
 for voxels coarser than the wall) with the kernels of
 :func:`nlosfw.image.rsd_kernel.phasor_series`. The adjoint is the correlation with the
-conjugate kernels, i.e. an RSD back-propagation: the ``fft`` imager's sum with this model's amplitudes.
+conjugate kernels, i.e. an RSD back-propagation: the ``fft`` imager's sum with this
+model's amplitudes.
 """
 
 from __future__ import annotations
