@@ -8,8 +8,9 @@ width is chosen so that it keeps about 90 frequencies), then:
 * ``fft``: one depth plane and a 64-plane volume (64 x 64 voxels per plane);
 * ``rsd``: a few planes, extrapolated to the 64^3 volume (``--full-rsd`` runs it all);
 * y-tal's ``tal.reconstruct.pf_dev`` on the same capture (written with
-  ``nlosfw.capture.write_capture``) for one plane, when ``/work/ytal-venv/bin/python``
-  exists, in a subprocess; our time is reported as a ratio against it.
+  ``nlosfw.capture.write_capture``) for one plane, when ``$NLOSFW_YTAL_PYTHON`` (default
+  ``/tmp/ytal-venv/bin/python``) exists, in a subprocess; our time is reported as a ratio
+  against it.
 
 Times are wall-clock seconds (best of ``--repeat`` for single planes); peak
 memory is the largest traced numpy/Python allocation (tracemalloc) of a
@@ -42,7 +43,8 @@ from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
 from nlosfw.transform.wavelet import WaveletTransform
 
-YTAL_PYTHON = Path("/work/ytal-venv/bin/python")
+#: A Python with y-tal (it pins numpy<2: keep it in its own venv, never a dependency).
+YTAL_PYTHON = Path(os.environ.get("NLOSFW_YTAL_PYTHON", "/tmp/ytal-venv/bin/python"))
 RESULTS = Path(__file__).parent / "results" / "bench_imagers.json"
 TARGETS = {"fft_plane_s": 0.15, "fft_volume_s": 8.0, "rsd_volume_peak_mb": 4096.0}
 

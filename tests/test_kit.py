@@ -95,7 +95,7 @@ def test_declared_capabilities_are_stored_and_nothing_declared_means_the_default
     silent = fake_spec("imager", "silent")
     assert silent.declared_capabilities is None
     assert silent.capabilities == {Capability.SINGLE_SPOT, Capability.CONFOCAL,
-                                   Capability.PLANE_VOXELS}
+                                   Capability.PLANE_VOXELS, Capability.RSD}
     assert "(declares none: the kind's defaults)" in check_plan(silent).format()
 
 
@@ -211,7 +211,8 @@ LIES = [
      "check_transform_at_requested_frequencies[confocal]", ConfigError, "frequencies"),
     ("model", None, ["multi_frequency", "neural"], "check_seed_changes_fit[multi_frequency]",
      AssertionError, "seeds 0 and 1 fit the same model"),
-    ("imager", None, ["single_spot", "point_voxels"], "check_imager_point_voxels[single_spot]",
+    ("imager", None, ["single_spot", "point_voxels", "rsd"],
+     "check_imager_point_voxels[single_spot]",
      DataError, "planes parallel to the wall"),
 ]
 

@@ -3,7 +3,9 @@
 One top-level dataset per :class:`~nlosfw.capture.Capture` field, enums as HDF5
 enum datasets of shape (1,), ``None`` as an empty dataset, ``scene_info`` as a
 YAML string. A file written here holds exactly y-tal's keys, so
-``tal.io.read_capture`` opens it unchanged.
+``tal.io.read_capture`` opens it unchanged; nlosfw's own files add only the root
+attributes ``nlosfw_type = "capture"`` and ``format_version`` (y-tal ignores attributes),
+which is how the ``nlosfw`` capture format tells them from other y-tal files.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from nlosfw.capture.data import YTAL_FIELDS, Capture
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError, one_line
-from nlosfw.common.files import atomic_path
+from nlosfw.common.hdf5 import new_file, write_header
 
 log = logging.getLogger(__name__)
 
@@ -39,16 +41,23 @@ _YTAL_ENUM_MEMBERS = {
 _REQUIRED = ("H", "H_format", "sensor_grid_xyz", "laser_grid_xyz", "delta_t")
 
 
+#: The ``nlosfw_type`` root attribute of nlosfw's capture files.
+NLOSFW_CAPTURE_TYPE = "capture"
+
+
 def write_capture(path: str | Path, capture: Capture, compression: int = 0,
-                  overwrite: bool = False) -> Path:
+                  overwrite: bool = False, nlosfw_attributes: bool = True) -> Path:
     """Write ``capture`` atomically to ``path`` in y-tal's HDF5 layout.
 
     ``compression`` is a gzip level 0-9 for ``H`` (0: none). An existing file is
-    never replaced unless ``overwrite``.
+    never replaced unless ``overwrite``. ``nlosfw_attributes`` marks the file as
+    nlosfw's own (root attributes only: the datasets are y-tal's either way).
     """
     if not 0 <= compression <= 9:
         raise DataError(f"compression: must be a gzip level 0-9, got {compression}")
-    with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
+    with new_file(path, overwrite=overwrite) as f:
+        if nlosfw_attributes:
+            write_header(f, NLOSFW_CAPTURE_TYPE)
         for key in YTAL_FIELDS:
             _write_field(f, key, getattr(capture, key), compression)
     return Path(path)
@@ -61,17 +70,29 @@ def read_capture(path: str | Path) -> Capture:
     mismatched grids) raises :class:`DataError` naming the file and the field.
     """
     path = Path(path)
+    raw = read_fields(path)
+    if "data" in raw and "H" not in raw:
+        from nlosfw.capture.znlos_layout import znlos_to_ytal
+
+        raw = znlos_to_ytal(raw, path)
+    return capture_from_fields(raw, path)
+
+
+def read_fields(path: Path) -> dict[str, Any]:
+    """Every top-level dataset of an HDF5 file (None for empty ones and groups)."""
     if not path.is_file():
         raise DataError(f"{path}: capture file not found")
     try:
         with h5py.File(path, "r") as f:
-            raw = {key: _read_field(f, key, path) for key in f}
+            return {key: _read_field(f, key, path) for key in f}
     except DataError:
         raise
     except (OSError, RuntimeError, ValueError, KeyError) as err:
         raise DataError(f"{path}: not a readable HDF5 capture ({one_line(err)})") from None
-    if "data" in raw and "H" not in raw:
-        raw = _znlos_to_ytal(raw, path)
+
+
+def capture_from_fields(raw: dict[str, Any], path: Path) -> Capture:
+    """The capture of y-tal's fields ``raw`` read from ``path`` (named in every error)."""
     missing = [k for k in _REQUIRED if raw.get(k) is None]
     if missing:
         raise DataError(f"{path}: missing field '{missing[0]}' (a y-tal capture needs "
@@ -161,6 +182,8 @@ def _scene_info(value: Any, path: Path) -> dict:
     if isinstance(value, (bytes, str)):
         try:
             value = yaml_safe.load(value)
+        except yaml_safe.LimitExceeded as err:
+            raise DataError(f"{path}: field 'scene_info' is refused: {err}") from None
         except Exception as err:  # yaml raises many error types
             raise DataError(f"{path}: field 'scene_info' is not valid YAML ({one_line(err)})"
                             ) from None
@@ -170,66 +193,3 @@ def _scene_info(value: Any, path: Path) -> dict:
         raise DataError(f"{path}: field 'scene_info' must be a YAML mapping, got "
                         f"{type(value).__name__}")
     return value
-
-
-# ------------------------------------------------------------------------ Zaragoza (ZNLOS)
-def _xy3(arr: Any) -> np.ndarray:
-    """ZNLOS stores point grids as (3, ...) (MATLAB order); y-tal fully transposes them."""
-    arr = np.asarray(arr, dtype=np.float64)
-    return np.transpose(arr) if arr.shape[0] == 3 else arr
-
-
-def _znlos_to_ytal(raw: dict[str, Any], path: Path) -> dict[str, Any]:
-    """Convert a Zaragoza NLOS dataset file's fields to y-tal's, as y-tal does."""
-    needed = ("data", "deltaT", "t0", "cameraPosition", "cameraGridPositions",
-              "laserPosition", "laserGridPositions")
-    missing = [k for k in needed if raw.get(k) is None]
-    if missing:
-        raise DataError(f"{path}: Zaragoza (HDF5_ZNLOS) file lacks field '{missing[0]}'")
-    H = np.asarray(raw["data"])
-    if H.ndim == 7:
-        if H.shape[4] == 6:  # (ly, lx, sy, sx, bounces, t, colors)
-            H = np.moveaxis(H, list(range(7)), (4, 3, 6, 5, 1, 2, 0))
-        elif H.shape[2] == 6:  # (colors, t, bounces, sx, sy, lx, ly)
-            H = np.moveaxis(H, list(range(7)), (0, 2, 1, 6, 5, 4, 3))
-        else:
-            raise DataError(f"{path}: field 'data' has 7 axes {H.shape} in no known ZNLOS order")
-    elif H.ndim == 5:
-        if H.shape[0] == H.shape[1]:  # (sy, sx, bounces, t, colors)
-            H = np.moveaxis(H, list(range(5)), (3, 4, 1, 2, 0))
-        elif H.shape[3] == H.shape[4]:  # (colors, t, bounces, sx, sy)
-            H = np.moveaxis(H, list(range(5)), (0, 2, 1, 4, 3))
-        else:
-            raise DataError(f"{path}: field 'data' has 5 axes {H.shape} in no known ZNLOS order")
-    else:
-        raise DataError(f"{path}: field 'data' must have 5 (confocal) or 7 axes, got {H.ndim}")
-    H = np.squeeze(H.sum(axis=(0, 1)))
-    if H.ndim not in (3, 5):
-        raise DataError(f"{path}: field 'data' reduces to {H.ndim} axes; expected 3 or 5")
-
-    def opt(key: str) -> np.ndarray | None:
-        return None if raw.get(key) is None else _xy3(raw[key])
-
-    volume = {}
-    for src, dst in (("hiddenVolumePosition", "center"), ("hiddenVolumeRotation", "rotation"),
-                     ("hiddenVolumeSize", "size")):
-        if raw.get(src) is not None:
-            v = np.asarray(raw[src], dtype=float).reshape(-1)
-            volume[dst] = (np.repeat(v, 3) if v.size == 1 else v).tolist()
-    return {
-        "H": H.astype(np.float32),
-        "H_format": HFormat.T_Sx_Sy if H.ndim == 3 else HFormat.T_Lx_Ly_Sx_Sy,
-        "sensor_xyz": np.asarray(raw["cameraPosition"], dtype=float).reshape(3),
-        "sensor_grid_xyz": _xy3(raw["cameraGridPositions"]),
-        "sensor_grid_normals": opt("cameraGridNormals"),
-        "sensor_grid_format": GridFormat.X_Y_3,
-        "laser_xyz": np.asarray(raw["laserPosition"], dtype=float).reshape(3),
-        "laser_grid_xyz": _xy3(raw["laserGridPositions"]),
-        "laser_grid_normals": opt("laserGridNormals"),
-        "laser_grid_format": GridFormat.X_Y_3,
-        "volume_format": VolumeFormat.X_Y_Z_3,
-        "delta_t": raw["deltaT"],
-        "t_start": raw["t0"],
-        "t_accounts_first_and_last_bounces": True,
-        "scene_info": {"original_format": "HDF5_ZNLOS", "volume": volume},
-    }

@@ -27,12 +27,11 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
+from nlosfw.common.progress import ProgressCallback, ProgressCounter
+from nlosfw.image.grids import apply_ops, plane_grid, undo_ops, wall_grid
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
 from nlosfw.image.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
-from nlosfw.transform.field import PhasorField, regular_grid_spacing
-
-#: Relative tolerance on "voxel spacing = wall spacing / k" and on plane flatness.
-_RTOL = 1e-6
+from nlosfw.transform.field import PhasorField
 
 
 class Precision(Choice):
@@ -51,7 +50,7 @@ class FFTImagerConfig(PropagationConfig):
     workers: int = -1
     """Threads of scipy.fft (-1: all cores)."""
     chunk_mb: float = 512.0
-    """Memory (MiB) of one batch of frequency planes; the field's spectrum is cached when it
+    """[MiB] Memory of one batch of frequency planes; the field's spectrum is cached when it
     fits in half of this."""
 
     def __post_init__(self) -> None:
@@ -84,6 +83,26 @@ class _Axis:
         return self.offset + self.step * (np.arange(self.n_linear) - (self.n_interleaved - 1))
 
 
+@dataclass(frozen=True, eq=False)
+class _PlaneJob:
+    """One voxel plane to image: the wall field (F, Y, X) in canonical order, its
+    frequencies, the plane's voxels and depth, its convolution geometry, the path
+    multiplier, the field's geometry, the coefficient rows, the shared spectrum cache and
+    the FFT dtype."""
+
+    values: np.ndarray
+    freqs: np.ndarray
+    plane: np.ndarray
+    z: float
+    ay: _Axis
+    ax: _Axis
+    m: int
+    geometry: CaptureGeometry
+    coeffs: np.ndarray
+    cache: dict[tuple[int, ...], np.ndarray]
+    cdtype: type
+
+
 class FFTImager(PropagationImager):
     """Fast RSD for planes parallel to the wall on a regular grid (both capture kinds)."""
 
@@ -96,37 +115,40 @@ class FFTImager(PropagationImager):
             raise DataError(f"voxels: the fft imager needs planes parallel to the wall on a "
                             f"regular grid, (Y, X, 3) or (Z, Y, X, 3); got a point list "
                             f"{voxels.shape} (use the rsd imager for arbitrary points)")
-        _wall_grid(field)
+        wall_grid(field)
         for i, plane in enumerate(voxels.reshape((-1,) + voxels.shape[-3:])):
-            _plane_grid(plane, i)
+            plane_grid(plane, i)
         return voxels
 
     # ------------------------------------------------------------------ imaging
-    def _intensity(self, field: PhasorField, voxels: np.ndarray,
-                   coeffs: np.ndarray) -> np.ndarray:
+    def _intensity(self, field: PhasorField, voxels: np.ndarray, coeffs: np.ndarray,
+                   on_progress: ProgressCallback | None = None) -> np.ndarray:
         cfg = self.config
         cdtype = np.complex64 if cfg.precision == "single" else np.complex128
-        ops, (wy0, wx0), (dy, dx) = _wall_grid(field)
-        values = _apply(wall_field(field, cdtype), ops, axes=(1, 2))
+        ops, (wy0, wx0), (dy, dx) = wall_grid(field)
+        values = apply_ops(wall_field(field, cdtype), ops, axes=(1, 2))
         geometry = field.geometry
         m = path_multiplier(geometry)
         planes = voxels.reshape((-1,) + voxels.shape[-3:])
         out = np.empty((coeffs.shape[0],) + planes.shape[:-1], dtype=np.float64)
         cache: dict[tuple[int, ...], np.ndarray] = {}
+        progress = ProgressCounter(len(planes), on_progress)
         for i, plane in enumerate(planes):
-            pops, (vy0, vx0), (vdy, vdx), z = _plane_grid(plane, i)
-            canon = _apply(plane, pops, axes=(0, 1))
+            pops, (vy0, vx0), (vdy, vdx), z = plane_grid(plane, i)
+            canon = apply_ops(plane, pops, axes=(0, 1))
             ay = _axis(values.shape[1], canon.shape[0], dy, vdy, vy0 - wy0, "y")
             ax = _axis(values.shape[2], canon.shape[1], dx, vdx, vx0 - wx0, "x")
-            image = self._plane(values, field.frequencies, canon, z, ay, ax, m, geometry,
-                                coeffs, cache, cdtype)
-            out[:, i] = _undo(image, pops, axes=(1, 2))
+            image = self._plane(_PlaneJob(values, field.frequencies, canon, z, ay, ax, m,
+                                          geometry, coeffs, cache, cdtype))
+            out[:, i] = undo_ops(image, pops, axes=(1, 2))
+            progress.advance()
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
 
-    def _plane(self, values: np.ndarray, freqs: np.ndarray, plane: np.ndarray, z: float,
-               ay: _Axis, ax: _Axis, m: int, geometry: CaptureGeometry, coeffs: np.ndarray,
-               cache: dict, cdtype: type) -> np.ndarray:
+    def _plane(self, job: _PlaneJob) -> np.ndarray:
         cfg = self.config
+        values, freqs, plane, z = job.values, job.freqs, job.plane, job.z
+        ay, ax, m, geometry = job.ay, job.ax, job.m, job.geometry
+        coeffs, cache, cdtype = job.coeffs, job.cache, job.cdtype
         n_f = freqs.size
         shape = (scipy.fft.next_fast_len(ay.n_linear), scipy.fft.next_fast_len(ax.n_linear))
         itemsize = np.dtype(cdtype).itemsize
@@ -173,86 +195,6 @@ class FFTImager(PropagationImager):
         grid = np.zeros((v.shape[0], ay.n_interleaved, ax.n_interleaved), dtype=v.dtype)
         grid[:, ::ay.ratio, ::ax.ratio] = v
         return scipy.fft.fft2(grid, s=shape, workers=self.config.workers)
-
-
-# ---------------------------------------------------------------------- grids
-def _grid_ops(points: np.ndarray) -> tuple[bool, bool, bool]:
-    """(transpose, flip rows, flip columns) that make x run along axis 1 and y along axis 0,
-    both increasing (a single row or column is oriented by its one varying coordinate)."""
-    p = points
-    transpose = False
-    if p.shape[0] > 1 and p.shape[1] > 1:
-        along0 = np.abs(p[1, 0, :2] - p[0, 0, :2])
-        transpose = bool(along0[0] > along0[1])
-    elif p.shape[0] > 1:
-        transpose = bool(abs(p[1, 0, 0] - p[0, 0, 0]) > abs(p[1, 0, 1] - p[0, 0, 1]))
-    elif p.shape[1] > 1:
-        transpose = bool(abs(p[0, 1, 1] - p[0, 0, 1]) > abs(p[0, 1, 0] - p[0, 0, 0]))
-    q = p.transpose(1, 0, 2) if transpose else p
-    flip_rows = q.shape[0] > 1 and q[-1, 0, 1] < q[0, 0, 1]
-    flip_cols = q.shape[1] > 1 and q[0, -1, 0] < q[0, 0, 0]
-    return transpose, bool(flip_rows), bool(flip_cols)
-
-
-def _apply(a: np.ndarray, ops: tuple[bool, bool, bool], axes: tuple[int, int]) -> np.ndarray:
-    """Bring an array laid out like the grid into canonical order."""
-    transpose, flip_rows, flip_cols = ops
-    if transpose:
-        a = np.swapaxes(a, *axes)
-    if flip_rows:
-        a = np.flip(a, axis=axes[0])
-    if flip_cols:
-        a = np.flip(a, axis=axes[1])
-    return a
-
-
-def _undo(a: np.ndarray, ops: tuple[bool, bool, bool], axes: tuple[int, int]) -> np.ndarray:
-    """Inverse of :func:`_apply`."""
-    transpose, flip_rows, flip_cols = ops
-    if flip_cols:
-        a = np.flip(a, axis=axes[1])
-    if flip_rows:
-        a = np.flip(a, axis=axes[0])
-    if transpose:
-        a = np.swapaxes(a, *axes)
-    return a
-
-
-def _wall_grid(field: PhasorField) -> tuple[tuple[bool, bool, bool], tuple[float, float],
-                                            tuple[float, float]]:
-    """(ops, (y0, x0), (dy, dx)) of the field's wall in canonical order; DataError if irregular."""
-    wall = field.wall_xyz
-    ops = _grid_ops(wall)
-    canon = _apply(wall, ops, axes=(0, 1))
-    spacing = regular_grid_spacing(canon)
-    if spacing is None:
-        raise DataError("field.wall_xyz: the fft imager needs the field on a regular, "
-                        "axis-aligned wall grid in the plane z = 0; use the rsd imager for "
-                        "other walls")
-    return ops, (float(canon[0, 0, 1]), float(canon[0, 0, 0])), spacing
-
-
-def _plane_grid(plane: np.ndarray, index: int) -> tuple[tuple[bool, bool, bool],
-                                                         tuple[float, float],
-                                                         tuple[float, float], float]:
-    """(ops, (y0, x0), (dy, dx), z) of one voxel plane; DataError unless it is a regular grid
-    parallel to the wall."""
-    z = plane[..., 2]
-    scale = max(1.0, float(np.abs(z).max()), float(np.ptp(plane[..., :2])))
-    if np.ptp(z) > _RTOL * scale:
-        raise DataError(f"voxels: plane {index} is not parallel to the wall (z from "
-                        f"{z.min():.6g} to {z.max():.6g} m); the fft imager needs planes of "
-                        "constant z on a regular x-y grid; use the rsd imager for other voxels")
-    flat = plane.copy()
-    flat[..., 2] = 0.0
-    ops = _grid_ops(flat)
-    canon = _apply(flat, ops, axes=(0, 1))
-    spacing = regular_grid_spacing(canon)
-    if spacing is None:
-        raise DataError(f"voxels: plane {index} is not a regular axis-aligned x-y grid; the fft "
-                        "imager needs regularly spaced planes parallel to the wall; use the rsd "
-                        "imager for other voxels")
-    return ops, (float(canon[0, 0, 1]), float(canon[0, 0, 0])), spacing, float(z.mean())
 
 
 def _axis(n_wall: int, n_vox: int, wall_step: float, vox_step: float, offset: float,

@@ -38,11 +38,14 @@ from nlosfw.model.neural_config import (
 from nlosfw.model.normalisation import FieldNormalisation, estimate_delay
 from nlosfw.model.protocol import (
     FieldSplit,
+    SpatialPattern,
+    SpatialSampling,
     error_metrics,
     field_metrics,
     heldout_frequency_indices,
     hull_mask,
     parameter_data_ratio,
+    scattered_field,
     split_field,
 )
 from nlosfw.model.smoothness import FrequencySmoothness, second_difference_matrix
@@ -127,6 +130,9 @@ __all__ = [
     "second_difference_matrix",
     "SirenFieldConfig",
     "SmoothnessBatch",
+    "scattered_field",
+    "SpatialPattern",
+    "SpatialSampling",
     "split_field",
     "TanhFieldConfig",
     "thesis_architecture",

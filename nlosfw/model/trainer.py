@@ -189,7 +189,7 @@ class NeuralFieldModel(FieldModel):
         cfg: NeuralFieldConfig = self.config
         single = cfg.mode == FieldMode.single
         norm = FieldNormalisation.fit(field, cfg.margin, cfg.demodulate)
-        shape = FieldShape(cfg.mode, field.grid_shape, field.n_frequencies)
+        shape = FieldShape.of(cfg.mode, field)
         rng = np.random.default_rng([cfg.seed, 0x6261746368])  # "batch" stream
         x, y = self._samples(norm, field)
         n = x.shape[0]

@@ -13,7 +13,7 @@ from nlosfw.plugins.capabilities import DEFAULTS as DEFAULT_CAPABILITIES
 from nlosfw.plugins.capabilities import VOCABULARY as CAPABILITIES
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.hookspecs import hookimpl, hookspec
-from nlosfw.plugins.kinds import INTERFACES, PluginKind
+from nlosfw.plugins.kinds import INTERFACES, RUN_KINDS, PluginKind
 from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_plugins
 from nlosfw.plugins.networks import (
     ENGINES,
@@ -45,6 +45,7 @@ __all__ = [
     "PluginKind",
     "PluginSpec",
     "Registry",
+    "RUN_KINDS",
     "hookimpl",
     "hookspec",
     "import_object",

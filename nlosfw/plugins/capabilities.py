@@ -41,9 +41,12 @@ class Capability(str, Enum):
     SINGLE_FREQUENCY = "single_frequency"
     SAVE_LOAD = "save_load"
     NEURAL = "neural"
+    PHYSICAL_PRIOR = "physical_prior"
     # imagers
     PLANE_VOXELS = "plane_voxels"
     POINT_VOXELS = "point_voxels"
+    PROGRESS = "progress"
+    RSD = "rsd"
     # capture formats
     READABLE = "readable"
     WRITABLE = "writable"
@@ -57,7 +60,7 @@ class Capability(str, Enum):
 C = Capability
 
 #: Per kind (by :class:`~nlosfw.plugins.PluginKind` value), each valid capability and what
-#: it promises. ``capture_format`` is the kind of issue 11's file-format plugins.
+#: it promises.
 VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
     "simulator": MappingProxyType({
         C.SINGLE_SPOT: "renders single-spot captures (one laser spot, a grid of sensors)",
@@ -84,6 +87,10 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
                             "the wall",
         C.SAVE_LOAD: "save() writes one file that load() restores exactly",
         C.NEURAL: "trained from a random initialisation: the seed changes the fitted model",
+        C.PHYSICAL_PRIOR: "represents only fields a hidden scene can produce through the "
+                          "field's capture geometry (not any smooth function): the kit fits "
+                          "it on a point scatterer's exact field instead of a sum of plane "
+                          "waves",
         C.GPU: "can train on a GPU with device=auto (descriptive: no check needs it)",
     }),
     "imager": MappingProxyType({
@@ -92,10 +99,14 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
         C.PLANE_VOXELS: "voxels in planes parallel to the wall on the wall's grid, "
                         "(Y, X, 3) or (Z, Y, X, 3)",
         C.POINT_VOXELS: "any voxel list (N, 3)",
+        C.PROGRESS: "reconstruct(..., on_progress=callback) reports (done, total) as blocks of "
+                    "voxels finish, the last time with done == total",
+        C.RSD: "its image is the field's Rayleigh-Sommerfeld image (the reference RSD's); "
+               "classical imagers (lct, fk, fbp) image the field's transient otherwise",
     }),
     "capture_format": MappingProxyType({
-        C.READABLE: "reads captures of this format",
-        C.WRITABLE: "writes captures of this format (and reads them back unchanged)",
+        C.READABLE: "recognises its files by their content and reads them as captures",
+        C.WRITABLE: "writes captures in its layout (and reads them back unchanged)",
     }),
 })
 
@@ -105,7 +116,7 @@ DEFAULTS: Mapping[str, frozenset[Capability]] = MappingProxyType({
     "simulator": frozenset({C.SINGLE_SPOT, C.CONFOCAL, C.DEVICE_LEGS, C.OCCLUSION}),
     "transform": frozenset({C.SINGLE_SPOT, C.CONFOCAL}),
     "model": frozenset({C.MULTI_FREQUENCY, C.SAVE_LOAD}),
-    "imager": frozenset({C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS}),
+    "imager": frozenset({C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.RSD}),
     "capture_format": frozenset({C.READABLE}),
 })
 

@@ -50,6 +50,12 @@ def register_imagers(register: Any) -> None:
     """Register :class:`~nlosfw.image.Imager` plugins."""
 
 
+@hookspec
+def register_capture_formats(register: Any) -> None:
+    """Register :class:`~nlosfw.capture.CaptureFormat` plugins (readers and writers of capture
+    files; capabilities ``readable``, ``writable``)."""
+
+
 # ------------------------------------------------------------------ run lifecycle
 @hookspec
 def on_run_start(run_dir: str, config: dict[str, Any]) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from enum import Enum
 
+from nlosfw.capture.formats import CaptureFormat
 from nlosfw.common.config import Configurable
 from nlosfw.image.interface import Imager
 from nlosfw.model.interface import FieldModel
@@ -12,12 +13,20 @@ from nlosfw.transform.interface import PhasorTransform
 
 
 class PluginKind(str, Enum):
-    """The four pluggable interfaces."""
+    """The pluggable interfaces."""
 
     SIMULATOR = "simulator"
     PHASOR_TRANSFORM = "transform"
     FIELD_MODEL = "model"
     IMAGER = "imager"
+    CAPTURE_FORMAT = "capture_format"
+    """Readers and writers of capture files; chosen by ``capture.format`` or detected from
+    the file, not a config group of the run (``capture`` is the group of ``capture.path``)."""
+
+
+#: The kinds a run selects one plugin of, each a Hydra config group (``model=interp``).
+RUN_KINDS: tuple[PluginKind, ...] = (PluginKind.SIMULATOR, PluginKind.PHASOR_TRANSFORM,
+                                     PluginKind.FIELD_MODEL, PluginKind.IMAGER)
 
 
 #: The interface class of each plugin kind (by :class:`PluginKind` value).
@@ -26,4 +35,5 @@ INTERFACES: dict[str, type[Configurable]] = {
     "transform": PhasorTransform,
     "model": FieldModel,
     "imager": Imager,
+    "capture_format": CaptureFormat,
 }

@@ -32,6 +32,7 @@ _HOOK_OF_KIND = {
     PluginKind.PHASOR_TRANSFORM: "register_phasor_transforms",
     PluginKind.FIELD_MODEL: "register_field_models",
     PluginKind.IMAGER: "register_imagers",
+    PluginKind.CAPTURE_FORMAT: "register_capture_formats",
 }
 _NETWORK_HOOK = "register_networks"
 

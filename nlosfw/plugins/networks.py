@@ -87,6 +87,11 @@ class NetworkSpec(LazyFactory):
             self._bound["model"] = network_model(self)
         return self._bound["model"]
 
+    def import_paths(self) -> tuple[str, ...]:
+        """The engine's, the factory's and the config's import paths."""
+        return tuple(p for p in (ENGINES[self.engine][0], self.factory, self.config)
+                     if isinstance(p, str))
+
 
 def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
     """A :class:`NeuralFieldModel` subclass for ``spec`` (imports the factory and engine)."""

@@ -25,10 +25,18 @@ import yaml
 from nlosfw.common.config import config_from_mapping, config_to_dict
 from nlosfw.common.errors import ConfigError, NlosfwError
 from nlosfw.common.schema import schema_class
+from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures
-from nlosfw.testing.selection import FREQUENCY_MODES, GEOMETRIES, VOXEL_LAYOUTS, combine, requires
+from nlosfw.testing.selection import (
+    FREQUENCY_MODES,
+    GEOMETRIES,
+    VOXEL_LAYOUTS,
+    combine,
+    requires,
+    variant,
+)
 
 #: Modules that registering or listing plugins must never import.
 HEAVY_MODULES = ("torch", "jax", "jaxlib", "mitsuba", "drjit", "embreex", "mitransient")
@@ -40,6 +48,7 @@ EXERCISE_VARIANTS = {
     PluginKind.PHASOR_TRANSFORM.value: GEOMETRIES,
     PluginKind.FIELD_MODEL.value: FREQUENCY_MODES,
     PluginKind.IMAGER.value: combine(VOXEL_LAYOUTS, GEOMETRIES),
+    PluginKind.CAPTURE_FORMAT.value: (variant("", [Capability.READABLE]),),
 }
 
 
@@ -48,10 +57,20 @@ def exercise(spec: PluginSpec, options: dict[str, Any] | None = None, *,
     """Run the plugin once on the tiny fixture of its kind and return its main output array.
 
     ``confocal``: capture geometry (simulators, transforms, imagers); ``single``: fit one
-    frequency (field models); ``plane``: voxels as planes, else as a list (imagers).
+    frequency (field models); ``plane``: voxels as planes, else as a list (imagers). A
+    capture format reads a file in its layout (:mod:`nlosfw.testing.checks_capture_format`).
     """
     options = dict(spec.test_config if options is None else options)
     plugin = spec.create(options)
+    if spec.kind is PluginKind.CAPTURE_FORMAT:
+        import tempfile
+        from pathlib import Path
+
+        from nlosfw.testing.layouts import known_captures, write_sample
+
+        with tempfile.TemporaryDirectory() as tmp:
+            path = write_sample(spec, plugin, known_captures(spec)[0], Path(tmp))
+            return plugin.read(path).H
     if spec.kind is PluginKind.SIMULATOR:
         return plugin.simulate(fixtures.tiny_scene(confocal=confocal)).H
     if spec.kind is PluginKind.PHASOR_TRANSFORM:

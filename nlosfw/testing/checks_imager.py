@@ -13,11 +13,15 @@ frequencies around 4 cycles/m; voxels are planes parallel to the wall whose
 * moving the point parallel to the wall moves the peak by the same number of voxels;
 * voxels at or behind the wall give a one-line DataError; output shapes follow the voxels;
 * ``point_voxels``: a plain voxel list (N, 3) around the point gives the reference RSD's
-  values there (normalised correlation >= 0.99) and peaks at the point.
+  values there (normalised correlation >= 0.99) and peaks at the point;
+* ``progress``: ``reconstruct(..., on_progress=...)`` reports (done, total) with done
+  non-decreasing up to total, and gives the same image as without the callback.
 
 Imagers declare the geometries they image (``single_spot``, ``confocal``; each check
-runs once per declared one) and the voxel layouts they accept (``plane_voxels``,
-``point_voxels``).
+runs once per declared one), the voxel layouts they accept (``plane_voxels``,
+``point_voxels``), and ``rsd`` when their image is the Rayleigh-Sommerfeld image (the
+two checks against the reference RSD need it; the classical lct, fk and fbp do not
+declare it).
 """
 
 from __future__ import annotations
@@ -76,7 +80,7 @@ def check_imager_focuses_point(spec: PluginSpec, confocal: bool) -> None:
             f"(confocal={confocal}, device legs in field={legs}); expected within one voxel")
 
 
-@requires(Capability.PLANE_VOXELS, each=GEOMETRIES)
+@requires(Capability.PLANE_VOXELS, Capability.RSD, each=GEOMETRIES)
 def check_imager_matches_reference(spec: PluginSpec, confocal: bool) -> None:
     """Same image as the plain reference RSD (normalised correlation >= 0.99), with and
     without device legs in the field's phase."""
@@ -132,7 +136,7 @@ def check_imager_output_shapes(spec: PluginSpec, confocal: bool) -> None:
             f"{spec.qualified_name}: intensity must be real, finite and >= 0")
 
 
-@requires(Capability.POINT_VOXELS, each=GEOMETRIES)
+@requires(Capability.POINT_VOXELS, Capability.RSD, each=GEOMETRIES)
 def check_imager_point_voxels(spec: PluginSpec, confocal: bool) -> None:
     """A voxel list (N, 3): 60 random points around the point scatterer and the point
     itself give intensities (N,) that correlate with the reference RSD (>= 0.99) and
@@ -157,6 +161,29 @@ def check_imager_point_voxels(spec: PluginSpec, confocal: bool) -> None:
             f"at {target}")
 
 
+@requires(Capability.PROGRESS, any_of=GEOMETRIES)
+def check_imager_reports_progress(spec: PluginSpec, confocal: bool) -> None:
+    """``on_progress(done, total)`` is called with one total, 0 < done <= total, done never
+    decreasing and the last call done == total; the image equals the one made without it."""
+    field = _field(_target(*TARGET_INDEX), confocal)
+    voxels = fixtures.aligned_voxels(fixtures.rect_wall_grid(SHAPE, SPACING), DEPTHS)
+    imager = spec.create(dict(spec.test_config))
+    calls: list[tuple[int, int]] = []
+    image = imager.reconstruct(field, voxels,
+                               on_progress=lambda done, total: calls.append((done, total)))
+    name = spec.qualified_name
+    assert calls, f"{name}: on_progress was never called"
+    totals = {total for _, total in calls}
+    done = [d for d, _ in calls]
+    assert len(totals) == 1 and min(totals) >= 1, f"{name}: totals {sorted(totals)}; expected one"
+    assert all(0 < d <= calls[0][1] for d in done) and done == sorted(done), (
+        f"{name}: done values {done} must rise within 1..{calls[0][1]}")
+    assert done[-1] == calls[0][1], f"{name}: the last call {calls[-1]} must have done == total"
+    plain = imager.reconstruct(field, voxels).intensity
+    np.testing.assert_array_equal(image.intensity, plain,
+                                  err_msg=f"{name}: on_progress changed the image")
+
+
 IMAGER_CHECKS = (
     check_imager_focuses_point,
     check_imager_matches_reference,
@@ -164,4 +191,5 @@ IMAGER_CHECKS = (
     check_imager_rejects_voxels_behind_wall,
     check_imager_output_shapes,
     check_imager_point_voxels,
+    check_imager_reports_progress,
 )

@@ -16,7 +16,13 @@ Check = Callable[..., None]
 def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
     """Every check of plugins of ``kind`` (common checks, then kind-specific ones), whatever
     they declare; :func:`check_plan` says which apply to one plugin."""
-    from nlosfw.testing import checks_imager, checks_model, checks_simulator, checks_transform
+    from nlosfw.testing import (
+        checks_capture_format,
+        checks_imager,
+        checks_model,
+        checks_simulator,
+        checks_transform,
+    )
     from nlosfw.testing.checks_common import COMMON_CHECKS
 
     specific = {
@@ -24,6 +30,7 @@ def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
         PluginKind.PHASOR_TRANSFORM: checks_transform.TRANSFORM_CHECKS,
         PluginKind.FIELD_MODEL: checks_model.MODEL_CHECKS,
         PluginKind.IMAGER: checks_imager.IMAGER_CHECKS,
+        PluginKind.CAPTURE_FORMAT: checks_capture_format.CAPTURE_FORMAT_CHECKS,
     }[PluginKind(kind)]
     return COMMON_CHECKS + tuple(specific)
 
@@ -46,7 +53,8 @@ def check_plan(spec: PluginSpec) -> CheckPlan:
 
 def select_specs(registry: Registry | None = None, kinds: Iterable[str] | None = None,
                  names: Iterable[str] | None = None) -> list[PluginSpec]:
-    """Registered plugins, optionally only some kinds or names (``name`` or ``kind:name``)."""
+    """Registered plugins, optionally only some kinds or names (``name``, ``kind:name``, or
+    a distribution's name for every plugin it registers)."""
     if registry is None:
         from nlosfw.plugins.manager import load_plugins
 
@@ -55,7 +63,8 @@ def select_specs(registry: Registry | None = None, kinds: Iterable[str] | None =
     wanted_names = set(names) if names is not None else None
     return [spec for spec in registry.specs()
             if (wanted_kinds is None or spec.kind in wanted_kinds)
-            and (wanted_names is None or {spec.name, spec.qualified_name} & wanted_names)]
+            and (wanted_names is None
+                 or {spec.name, spec.qualified_name, spec.distribution} & wanted_names)]
 
 
 def check_cases(registry: Registry | None = None, kinds: Iterable[str] | None = None,

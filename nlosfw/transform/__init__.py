@@ -9,18 +9,21 @@ from nlosfw.transform.fft import FFTTransform, FFTTransformConfig
 from nlosfw.transform.field import PhasorField, regular_grid_spacing
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 from nlosfw.transform.frequencies import (
+    aliasing_warning,
     default_band,
     dft_length,
     spatial_limit,
     temporal_nyquist,
     uniform_step,
     wall_spacing,
+    warn_aliasing,
 )
 from nlosfw.transform.interface import PhasorTransform, PhasorTransformConfig
 from nlosfw.transform.temporal_dft import temporal_dft, unit_phasor
 from nlosfw.transform.wavelet import GaussianWavelet, WaveletTransform, WaveletTransformConfig
 
 __all__ = [
+    "aliasing_warning",
     "default_band",
     "dft_length",
     "FFTTransform",
@@ -37,6 +40,7 @@ __all__ = [
     "uniform_step",
     "unit_phasor",
     "wall_spacing",
+    "warn_aliasing",
     "WaveletTransform",
     "WaveletTransformConfig",
     "write_phasor_field",

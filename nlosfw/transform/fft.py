@@ -23,6 +23,7 @@ from nlosfw.common.errors import ConfigError
 from nlosfw.transform.common import FieldOptions, check_capture, transform_capture
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.frequencies import (
+    band_info,
     check_frequency_values,
     default_band,
     grid_spacing,
@@ -38,21 +39,23 @@ class FFTTransformConfig(PhasorTransformConfig):
     """Options of the ``fft`` transform.
 
     Either an explicit ``frequencies`` list, or ``n_frequencies`` spread
-    linearly over [f_min, f_max]. By default f_max = 1/(2Δ), Δ the wall grid
-    spacing (finest wavelength 2Δ, capped at the temporal Nyquist limit), and
-    f_min = f_max / 4 (longest wavelength 8Δ).
+    linearly over [f_min, f_max]. By default f_max is the wall grid's aliasing
+    limit, 1/(2Δ) for a single laser spot and 1/(4Δ) for a confocal scan (the path
+    doubles), Δ the wall grid spacing, capped at the temporal Nyquist limit; and
+    f_min = f_max / 4. A band past the aliasing limit logs one warning.
     """
 
     frequencies: tuple[float, ...] = ()
-    """Explicit frequencies (cycles per metre of path); empty: use the band below."""
+    """[1/m] Explicit frequencies (cycles per metre of path); empty: use the band below."""
     n_frequencies: int = 151
     """Number of frequencies spread linearly over the band (the thesis uses 151)."""
     f_min: float | None = None
-    """Lowest frequency of the band; default f_max / 4."""
+    """[1/m] Lowest frequency of the band; default f_max / 4."""
     f_max: float | None = None
-    """Highest frequency of the band; default 1/(2 Δ) for wall grid spacing Δ."""
+    """[1/m] Highest frequency of the band; default the aliasing limit 1/(2 m Δ) for wall
+    grid spacing Δ (m = 1 single-spot, 2 confocal)."""
     grid_spacing: float | None = None
-    """Wall spacing Δ (m) for the default band and the aliasing warning; default the
+    """[m] Wall spacing Δ for the default band and the aliasing warning; default the
     capture's (set it to the spacing of a denser grid the field will be upsampled to)."""
     remove_device_legs: bool = True
     """Take the device-to-wall legs out of the phase when the capture's time axis has them."""
@@ -85,26 +88,34 @@ class FFTTransform(PhasorTransform):
     config_class = FFTTransformConfig
 
     def frequencies_for(self, capture: Capture) -> np.ndarray:
-        """The frequencies this transform uses for ``capture`` (validated)."""
+        """The frequencies this transform uses for ``capture`` (validated; warns once if
+        they alias on the wall grid)."""
+        return self._band(capture)[0]
+
+    def _band(self, capture: Capture) -> tuple[np.ndarray, float | None, str]:
+        """(frequencies, wall spacing checked against, option named in the warning)."""
         cfg = self.config
         if cfg.frequencies:
             freqs = np.asarray(cfg.frequencies, dtype=float)
             spacing = wall_spacing(cfg.grid_spacing, capture, required=False)
-            return validate_frequencies(freqs, capture.delta_t, spacing, "transform.frequencies")
+            option = "transform.frequencies"
+            return validate_frequencies(freqs, capture.delta_t, spacing, option,
+                                        capture.kind), spacing, option
         spacing = (cfg.grid_spacing if cfg.grid_spacing is not None
                    else grid_spacing(capture.sensor_grid_xyz))
         try:
-            lo, hi = default_band(spacing, capture.delta_t, cfg.f_min, cfg.f_max)
+            lo, hi = default_band(spacing, capture.delta_t, cfg.f_min, cfg.f_max, capture.kind)
         except ConfigError as err:
             raise err.within("transform") from None
         option = "transform.f_max" if cfg.f_max is not None else "transform.f_min"
         return validate_frequencies(np.linspace(lo, hi, cfg.n_frequencies), capture.delta_t,
-                                    spacing, option)
+                                    spacing, option, capture.kind), spacing, option
 
     def transform(self, capture: Capture) -> PhasorField:
         """The phasor field of ``capture`` (layout [frequency, y, x], no weights)."""
         check_capture(capture, "fft")
-        freqs = self.frequencies_for(capture)
+        freqs, spacing, option = self._band(capture)
         return transform_capture(capture, freqs, FieldOptions(
             transform="fft", method=self.config.method,
-            remove_device_legs=self.config.remove_device_legs))
+            remove_device_legs=self.config.remove_device_legs,
+            metadata={"band": band_info(freqs, spacing, capture.kind, option)}))

@@ -5,8 +5,16 @@ Frequencies are temporal frequencies in cycles per metre of optical path
 
 * the capture's temporal Nyquist limit ``1 / (2 delta_t)``: a histogram with
   bins of ``delta_t`` metres carries nothing above it (an error);
-* the wall's spatial sampling: a wall grid of spacing Δ carries phasor
-  wavelengths down to 2Δ without aliasing, so ``f <= 1 / (2Δ)`` (a warning).
+* the wall's spatial sampling. A scatterer at distance r from wall point x_s
+  puts the phase exp(-2 pi i f m r) on the field, m = 1 for a single laser spot
+  (only the sensor leg moves with x_s) and m = 2 for a confocal scan (laser and
+  sensor legs both move: the path doubles). The field is a wave of spatial
+  wavelength 1/(m f) on the wall, which a grid of spacing Δ carries without
+  aliasing when 1/(m f) >= 2Δ, i.e. ``f <= 1 / (2 m Δ)``: 1/(2Δ) single-spot,
+  1/(4Δ) confocal (:func:`spatial_limit`; exceeding it is a warning).
+
+The automatic band (:func:`default_band`) ends at that limit and starts a
+factor :data:`DEFAULT_BAND_RATIO` lower.
 """
 
 from __future__ import annotations
@@ -16,13 +24,19 @@ from typing import Any
 
 import numpy as np
 
+from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import ConfigError, DataError
 
 log = logging.getLogger(__name__)
 
-#: Default ratio f_max / f_min of the band: wavelengths from 2Δ to 8Δ, centred
+#: Default ratio f_max / f_min of the band: wall wavelengths from 2Δ to 8Δ, centred
 #: (geometrically) on Liu's usual 4Δ virtual wavelength.
 DEFAULT_BAND_RATIO = 4.0
+
+
+def path_multiplier(kind: CaptureKind) -> int:
+    """m: how many legs of the path move with the wall point, 2 confocal, else 1."""
+    return 2 if kind is CaptureKind.CONFOCAL else 1
 
 
 def wall_spacing(configured: float | None, capture: Any, required: bool) -> float | None:
@@ -77,9 +91,44 @@ def temporal_nyquist(delta_t: float) -> float:
     return 0.5 / float(delta_t)
 
 
-def spatial_limit(spacing: float) -> float:
-    """Highest frequency (cycles per metre) a wall grid of spacing Δ carries: 1/(2Δ)."""
-    return 0.5 / float(spacing)
+def spatial_limit(spacing: float, kind: CaptureKind = CaptureKind.SINGLE_SPOT) -> float:
+    """Highest frequency (cycles per metre of path) a wall grid of spacing Δ carries without
+    aliasing: 1/(2 m Δ), i.e. 1/(2Δ) single-spot and 1/(4Δ) confocal (module docstring)."""
+    return 0.5 / (path_multiplier(kind) * float(spacing))
+
+
+def aliasing_warning(f_max: float, spacing: float | None, kind: CaptureKind,
+                     option: str) -> str | None:
+    """The one-line warning for a band reaching ``f_max`` on a wall of spacing Δ, or None
+    when it does not alias (or no spacing is known)."""
+    if spacing is None:
+        return None
+    limit = spatial_limit(spacing, kind)
+    if f_max <= limit * (1 + 1e-9):
+        return None
+    m = path_multiplier(kind)
+    why = "confocal: the path doubles, " if m == 2 else ""
+    return (f"{option}: frequencies up to {f_max:.4g} cycles/m alias on the wall grid of "
+            f"spacing {spacing:.4g} m ({why}limit 1/({2 * m}Δ) = {limit:.4g} cycles/m); keep "
+            f"f <= {limit:.4g} cycles/m")
+
+
+def warn_aliasing(f_max: float, spacing: float | None, kind: CaptureKind, option: str) -> None:
+    """Log :func:`aliasing_warning` (a WARNING) if the band aliases."""
+    message = aliasing_warning(f_max, spacing, kind, option)
+    if message is not None:
+        log.warning("%s", message)
+
+
+def band_info(frequencies: np.ndarray, spacing: float | None, kind: CaptureKind,
+              option: str) -> dict[str, Any]:
+    """What a transform records about its band in the field's metadata (``band``): the wall
+    spacing it was checked against, the aliasing limit, whether it aliases, the option."""
+    f_max = float(np.max(frequencies))
+    limit = None if spacing is None else spatial_limit(spacing, kind)
+    return {"grid_spacing": None if spacing is None else float(spacing),
+            "spatial_limit": limit, "option": option,
+            "aliases": aliasing_warning(f_max, spacing, kind, option) is not None}
 
 
 def check_frequency_values(values: tuple[float, ...] | np.ndarray, option: str) -> None:
@@ -92,12 +141,14 @@ def check_frequency_values(values: tuple[float, ...] | np.ndarray, option: str) 
 
 
 def validate_frequencies(frequencies: np.ndarray, delta_t: float, spacing: float | None,
-                         option: str = "frequencies") -> np.ndarray:
+                         option: str = "frequencies",
+                         kind: CaptureKind = CaptureKind.SINGLE_SPOT) -> np.ndarray:
     """Check ``frequencies`` against a capture; return them as a float64 array.
 
     Errors (one line, naming ``option``) on an empty set, non-finite or
     non-positive values, or values above the temporal Nyquist limit; a logged
-    WARNING when the finest wavelength is below twice the wall ``spacing``.
+    WARNING (:func:`warn_aliasing`) when they pass the wall grid's
+    :func:`spatial_limit` for the capture's ``kind``.
     """
     f = np.atleast_1d(np.asarray(frequencies, dtype=float))
     if f.size == 0:
@@ -108,24 +159,22 @@ def validate_frequencies(frequencies: np.ndarray, delta_t: float, spacing: float
         raise ConfigError(option, f"{f.max():.6g} cycles/m is above the capture's temporal "
                                   f"Nyquist limit 1/(2*delta_t) = {nyquist:.6g}; valid: 0 < f <= "
                                   f"{nyquist:.6g}")
-    if spacing is not None and f.max() > spatial_limit(spacing) * (1 + 1e-9):
-        log.warning("%s: finest wavelength %.4g m is under twice the wall grid spacing "
-                    "(2 x %.4g m): the phasor field aliases; keep f <= %.4g cycles/m",
-                    option, 1.0 / f.max(), spacing, spatial_limit(spacing))
+    warn_aliasing(float(f.max()), spacing, kind, option)
     return f
 
 
 def default_band(spacing: float, delta_t: float, f_min: float | None,
-                 f_max: float | None) -> tuple[float, float]:
+                 f_max: float | None,
+                 kind: CaptureKind = CaptureKind.SINGLE_SPOT) -> tuple[float, float]:
     """(f_min, f_max) of the default band, filling whichever end is not given.
 
-    f_max defaults to the grid limit 1/(2Δ) (finest wavelength 2Δ), capped at
-    the temporal Nyquist limit; f_min defaults to f_max / 4 (longest
-    wavelength 8Δ). Raises ConfigError when the band is empty.
+    f_max defaults to the grid limit :func:`spatial_limit` (1/(2Δ) single-spot,
+    1/(4Δ) confocal: finest wall wavelength 2Δ), capped at the temporal Nyquist
+    limit; f_min defaults to f_max / 4. Raises ConfigError when the band is empty.
     """
     hi = f_max
     if hi is None:
-        hi = spatial_limit(spacing)
+        hi = spatial_limit(spacing, kind)
         nyquist = temporal_nyquist(delta_t)
         if hi > nyquist:
             log.info("default f_max %.4g cycles/m capped at the temporal Nyquist limit %.4g",

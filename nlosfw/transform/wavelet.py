@@ -37,7 +37,12 @@ from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError
 from nlosfw.transform.common import FieldOptions, check_capture, transform_capture
 from nlosfw.transform.field import PhasorField
-from nlosfw.transform.frequencies import validate_frequencies, wall_spacing
+from nlosfw.transform.frequencies import (
+    band_info,
+    path_multiplier,
+    validate_frequencies,
+    wall_spacing,
+)
 from nlosfw.transform.interface import PhasorTransform, PhasorTransformConfig
 from nlosfw.transform.temporal_dft import DftMethod
 
@@ -49,18 +54,20 @@ class WaveletTransformConfig(PhasorTransformConfig):
     """Options of the ``wavelet`` transform (Liu's virtual illumination)."""
 
     wavelength: float | None = None
-    """Central wavelength lambda_c in metres; default ``wavelength_factor`` x the grid spacing."""
+    """[m] Central wavelength lambda_c (of path); default ``wavelength_factor`` x the grid
+    spacing, doubled for confocal captures (their path doubles)."""
     wavelength_factor: float = 4.0
-    """lambda_c as a multiple of the wall grid spacing when ``wavelength`` is not given."""
+    """lambda_c as a multiple of the wall grid spacing Δ when ``wavelength`` is not given
+    (times 2 for confocal captures: the same 4Δ wavelength on the wall)."""
     n_cycles: float = 5.0
     """Periods of the carrier within the pulse's ±3 sigma: sigma = n_cycles * lambda_c / 6."""
     sigma_range: float = 3.0
     """Keep the bins within f_c ± sigma_range * sigma_f."""
     frequency_step: float | None = None
-    """Spacing df of the kept bins (cycles/m); default 1/(N delta_t) with
+    """[1/m] Spacing df of the kept bins; default 1/(N delta_t) with
     N >= n_bins + 6 sigma / delta_t."""
     grid_spacing: float | None = None
-    """Wall spacing Δ (m) for ``wavelength_factor`` and the aliasing warning; default the
+    """[m] Wall spacing Δ for ``wavelength_factor`` and the aliasing warning; default the
     capture's."""
     remove_device_legs: bool = True
     """Take the device-to-wall legs out of the phase when the capture's time axis has them."""
@@ -121,7 +128,7 @@ class WaveletTransform(PhasorTransform):
         spacing = wall_spacing(cfg.grid_spacing, capture, required=cfg.wavelength is None)
         wavelength = cfg.wavelength
         if wavelength is None:
-            wavelength = cfg.wavelength_factor * spacing
+            wavelength = cfg.wavelength_factor * spacing * path_multiplier(capture.kind)
         return GaussianWavelet(wavelength, cfg.n_cycles * wavelength / 6.0), spacing
 
     def frequencies_for(self, capture: Capture) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
@@ -147,7 +154,8 @@ class WaveletTransform(PhasorTransform):
             raise ConfigError("transform.frequency_step",
                               f"no bin k*df (df = {df:.6g}) lies in the band {fc:.6g} ± "
                               f"{half:.6g} cycles/m; use a smaller frequency_step")
-        f = validate_frequencies(f, capture.delta_t, spacing, "transform.wavelength")
+        option = "transform.wavelength"
+        f = validate_frequencies(f, capture.delta_t, spacing, option, capture.kind)
         weights = df * wavelet.spectrum(f)
         info = {
             "wavelength": float(wavelet.wavelength),
@@ -161,13 +169,15 @@ class WaveletTransform(PhasorTransform):
             "grid_spacing": None if spacing is None else float(spacing),
             "kernel": "exp(-t^2/(2 sigma^2)) exp(2 pi i t / wavelength)",
         }
+        info["band"] = band_info(f, spacing, capture.kind, option)
         return f, weights, info
 
     def transform(self, capture: Capture) -> PhasorField:
         """The phasor field at the wavelet's bins, with its spectral weights."""
         check_capture(capture, "wavelet")
         freqs, weights, info = self.frequencies_for(capture)
+        band = info.pop("band")
         return transform_capture(capture, freqs, FieldOptions(
             transform="wavelet", method=self.config.method,
             remove_device_legs=self.config.remove_device_legs, weights=weights,
-            metadata={"wavelet": info}))
+            metadata={"wavelet": info, "band": band}))

@@ -1,0 +1,185 @@
+"""Speed of the volume imagers against the work they cannot avoid (issue 11).
+
+Every ratio is against a baseline measured in the same process, on the same field:
+
+* ``confocal``: the ``fft`` imager on a confocal field against the plain numpy minimum
+  (one forward FFT per frequency; per plane, every frequency's spectrum times a
+  depth-step propagator, a sum over frequencies in the Fourier domain and one inverse
+  FFT), 64 x 64 (151 frequencies, 96 planes, 128 x 128 padded) and 128 x 128
+  (128 planes, 256 x 256 padded);
+* ``single_spot``: the same against its minimum (the laser leg differs per voxel and
+  frequency: one inverse FFT per frequency and plane);
+* ``real size``: a 64 x 64 x 2048 confocal capture (0.7 m scan, 4 ps bins from 0.2 m
+  of path, a letter 0.9 m away), automatic band and depths: the transform plus ``fft``
+  imaging, and the ``lct``, ``fk`` and ``fbp`` imagers on the same field and voxels.
+
+The machine's cores are shared, so each time is the minimum of ``--repeat`` runs.
+Results go to ``benchmarks/results/bench_speed.json``.
+
+    python benchmarks/bench_speed.py [--quick] [--repeat N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.fft
+
+from nlosfw.image import FFTImager, automatic_depths, depth_span, volume_voxels
+from nlosfw.plugins import load_plugins
+from nlosfw.simulate import AnalyticSimulator
+from nlosfw.simulate.builtin_scenes import builtin_scene
+from nlosfw.testing import fixtures
+from nlosfw.transform import FFTTransform, PhasorField
+
+RESULTS = Path(__file__).parent / "results" / "bench_speed.json"
+TARGETS = {"confocal_ratio": 2.0, "single_spot_ratio": 2.0, "real_size_seconds": 1.5}
+
+
+def best(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
+    """(minimum wall-clock seconds over ``repeat`` runs, last result)."""
+    seconds, out = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        out = fn()
+        seconds = min(seconds, time.perf_counter() - start)
+    return seconds, out
+
+
+def point_field(n: int, confocal: bool) -> PhasorField:
+    """A point scatterer's field on an n x n wall of 2 m, 151 frequencies up to the limit."""
+    spacing = 2.0 / n
+    f_max = 1 / (2 * spacing * (2 if confocal else 1))
+    freqs = np.linspace(f_max / 4, f_max, 151)
+    return fixtures.point_field((0.1, -0.2, 1.0), shape=(n, n), spacing=spacing,
+                                frequencies=freqs, confocal=confocal)
+
+
+def plain_minimum(field: PhasorField, depths: np.ndarray, confocal: bool) -> np.ndarray:
+    """The unavoidable work written plainly: forward FFTs once, a depth-step propagator per
+    plane; confocal sums frequencies before one inverse FFT, single-spot needs one inverse
+    FFT per frequency and plane (times the per-voxel laser phase)."""
+    n_f, ny, nx = field.values.shape
+    shape = (scipy.fft.next_fast_len(2 * ny - 1), scipy.fft.next_fast_len(2 * nx - 1))
+    dy, dx = field.grid_spacing() or (1.0, 1.0)
+    m = 2 if confocal else 1
+    spec = scipy.fft.fft2(field.values.astype(np.complex64), s=shape, workers=-1)
+    ky = np.fft.fftfreq(shape[0], dy)[:, None]
+    kx = np.fft.fftfreq(shape[1], dx)[None, :]
+    kz = np.sqrt(((m * field.frequencies)[:, None, None] ** 2 - ky**2 - kx**2).astype(complex))
+    current = spec * np.exp(2j * np.pi * kz * depths[0]).astype(np.complex64)
+    step = np.exp(2j * np.pi * kz * (depths[1] - depths[0])).astype(np.complex64)
+    coeffs = np.ones(n_f, dtype=np.complex64)
+    out = np.empty((depths.size, ny, nx), dtype=np.float32)
+    laser = None if confocal else np.exp(2j * np.pi * field.frequencies).astype(np.complex64)
+    for i in range(depths.size):
+        if laser is None:
+            image = scipy.fft.ifft2(np.einsum("f,fyx->yx", coeffs, current), workers=-1)
+            image = image[:ny, :nx]
+        else:
+            fields = scipy.fft.ifft2(current, workers=-1)[:, :ny, :nx]
+            fields *= laser[:, None, None]                # stands in for the per-voxel phase
+            image = np.einsum("f,fyx->yx", coeffs, fields)
+        out[i] = np.abs(image) ** 2
+        current *= step
+    return out
+
+
+def imager_case(n: int, planes: int, confocal: bool, repeat: int) -> dict[str, Any]:
+    field = point_field(n, confocal)
+    spacing = 2.0 / n
+    depths = np.linspace(0.6, 1.6, planes)
+    voxels = volume_voxels(depths, (-1.0, 1.0), (-1.0, 1.0), (n, n))
+    imager = FFTImager()
+    t_imager, _ = best(lambda: imager.reconstruct(field, voxels), repeat)
+    t_plain, _ = best(lambda: plain_minimum(field, depths, confocal), repeat)
+    return {"wall": [n, n], "spacing_m": spacing, "frequencies": 151, "planes": planes,
+            "padded": [scipy.fft.next_fast_len(2 * n - 1)] * 2,
+            "imager_seconds": t_imager, "plain_minimum_seconds": t_plain,
+            "ratio": t_imager / t_plain}
+
+
+def real_size_case(repeat: int, quick: bool) -> dict[str, Any]:
+    n = 32 if quick else 64
+    scene = builtin_scene("letter_t", wall={"size": [0.7, 0.7], "resolution": [n, n]},
+                          capture={"type": "confocal"},
+                          time={"bins": 2048, "bin_width": 0.0012, "start": 0.2})
+    start = time.perf_counter()
+    capture = AnalyticSimulator().simulate(scene)
+    simulate = time.perf_counter() - start
+    transform = FFTTransform()
+    t_transform, field = best(lambda: transform.transform(capture), repeat)
+    depths = automatic_depths(depth_span(capture), float(field.frequencies.max()),
+                              field.geometry.kind)
+    voxels = fixtures.aligned_voxels(field.wall_xyz, depths)
+    host = load_plugins()
+    rows: dict[str, Any] = {}
+    for name in ("fft", "lct", "fk", "fbp"):
+        imager = host.registry.create("imager", name)
+        seconds, _ = best(lambda imager=imager: imager.reconstruct(field, voxels), repeat)
+        rows[name] = seconds
+    return {"capture": [2048, n, n], "simulate_seconds": simulate,
+            "band": [float(field.frequencies[0]), float(field.frequencies[-1])],
+            "frequencies": int(field.n_frequencies), "planes": int(depths.size),
+            "depth_step_m": float(depths[1] - depths[0]),
+            "transform_seconds": t_transform, "imager_seconds": rows,
+            "fft_transform_plus_imaging_seconds": t_transform + rows["fft"]}
+
+
+def main(argv: list[str] | None = None) -> dict[str, Any]:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="small sizes (smoke run)")
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args(argv)
+    small = 32 if args.quick else 64
+    cases = {
+        f"confocal {small}x{small}, 96 planes": imager_case(small, 96, True, args.repeat),
+        f"single_spot {small}x{small}, 96 planes": imager_case(small, 96, False, args.repeat),
+    }
+    if not args.quick:
+        cases["confocal 128x128, 128 planes"] = imager_case(128, 128, True, args.repeat)
+    results = {"benchmark": "bench_speed", "quick": args.quick, "repeat": args.repeat,
+               "timing": "minimum of the repeats (shared cores)",
+               "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                           "numpy": np.__version__},
+               "imagers": cases, "real_size": real_size_case(args.repeat, args.quick),
+               "targets": TARGETS}
+    report(results)
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(results, indent=2) + "\n")
+    return results
+
+
+def report(results: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"fft imager vs the plain minimum (min of {results['repeat']} runs, "
+                        f"{results['machine']['cpus']} cores)")
+    for col in ("case", "imager s", "plain minimum s", "ratio", "target"):
+        table.add_column(col, justify="left" if col == "case" else "right")
+    for name, row in results["imagers"].items():
+        table.add_row(name, f"{row['imager_seconds']:.3f}", f"{row['plain_minimum_seconds']:.3f}",
+                      f"{row['ratio']:.2f}", "<= 2")
+    real = results["real_size"]
+    table.add_row(f"real size {real['capture']}: transform", f"{real['transform_seconds']:.3f}",
+                  "", "", "")
+    for name, seconds in real["imager_seconds"].items():
+        table.add_row(f"  {name} imager ({real['planes']} planes)", f"{seconds:.3f}", "", "",
+                      "")
+    table.add_row("  transform + fft", f"{real['fft_transform_plus_imaging_seconds']:.3f}", "",
+                  "", "<= 1.5 s")
+    Console(width=120).print(table)
+
+
+if __name__ == "__main__":
+    sys.exit(0 if main() else 1)

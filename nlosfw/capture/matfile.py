@@ -1,0 +1,187 @@
+"""MATLAB ``.mat`` files, version 5 (scipy) and 7.3 (HDF5, h5py), seen the same way.
+
+Arrays come back in MATLAB's axis order whatever the version: a v7.3 file is HDF5 and
+stores an ``[A, B, C]`` MATLAB array as an HDF5 dataset of shape ``(C, B, A)`` (MATLAB is
+column-major), so its axes are reversed here. Version 5 files are read with
+``scipy.io.loadmat``, which already gives MATLAB's order. Structs (``dataset.data``) are
+HDF5 groups in v7.3 files; :func:`read_mat_struct` reads one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlosfw.common.errors import DataError, one_line
+
+#: The text every MATLAB 5 and 7.3 file starts with (7.3 files carry it in the HDF5 user block).
+MAT_HEADER = b"MATLAB"
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+@dataclass(frozen=True)
+class MatVariable:
+    """One top-level variable: its MATLAB shape (``()`` for a struct) and class name."""
+
+    name: str
+    shape: tuple[int, ...]
+    matlab_class: str
+
+
+def is_hdf5(path: Path) -> bool:
+    """Whether ``path`` holds HDF5 (a MATLAB 7.3 file is HDF5 after a 512-byte user block)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(2048 + 8)
+    except OSError:
+        return False
+    return any(head[offset:offset + 8] == _HDF5_SIGNATURE for offset in (0, 512, 1024, 2048))
+
+
+def mat_version(path: Path) -> int | None:
+    """5 or 73 for a MATLAB file of that version, None for anything else."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(128)
+    except OSError:
+        return None
+    if not head.startswith(MAT_HEADER):
+        return None
+    if b"7.3" in head[:40] and is_hdf5(path):
+        return 73
+    if len(head) >= 128 and head[126:128] in (b"IM", b"MI"):
+        return 5
+    return None
+
+
+def mat_variables(path: Path) -> dict[str, MatVariable]:
+    """The top-level variables of a v5 or v7.3 file (HDF5 without MATLAB's header counts as
+    7.3), by name, without reading their data. DataError if it is neither."""
+    if is_hdf5(path):
+        import h5py
+
+        try:
+            with h5py.File(path, "r") as f:
+                return {name: _hdf5_variable(name, node) for name, node in f.items()
+                        if not name.startswith("#")}
+        except OSError as err:
+            raise DataError(f"{path}: not a readable HDF5 file ({one_line(err)})") from None
+    if mat_version(path) == 5:
+        import scipy.io
+
+        try:
+            found = scipy.io.whosmat(str(path))
+        except Exception as err:  # scipy raises several types for damaged files
+            raise DataError(f"{path}: not a readable MATLAB file ({one_line(err)})") from None
+        return {name: MatVariable(name, tuple(int(n) for n in shape), str(cls))
+                for name, shape, cls in found}
+    raise DataError(f"{path}: not a MATLAB .mat file (version 5 or 7.3) nor HDF5")
+
+
+def _hdf5_variable(name: str, node: Any) -> MatVariable:
+    import h5py
+
+    cls = node.attrs.get("MATLAB_class", b"")
+    cls = cls.decode() if isinstance(cls, bytes) else str(cls)
+    if isinstance(node, h5py.Group):
+        return MatVariable(name, (), cls or "struct")
+    shape = () if node.shape is None else tuple(int(n) for n in reversed(node.shape))
+    return MatVariable(name, shape, cls or str(node.dtype))
+
+
+def variables_or_none(path: Path) -> dict[str, MatVariable] | None:
+    """:func:`mat_variables`, or None for a file that is neither MATLAB nor HDF5 (for
+    detection, which must never raise)."""
+    try:
+        return mat_variables(path)
+    except (DataError, OSError):
+        return None
+
+
+def hdf5_keys(path: Path, group: str = "") -> set[str] | None:
+    """The names in an HDF5 file's root (or ``group``), None if it is not a readable HDF5
+    file or has no such group; never raises (for detection)."""
+    if not is_hdf5(path):
+        return None
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            node = f[group] if group else f
+            return set(node.keys()) if isinstance(node, h5py.Group) else None
+    except (OSError, KeyError, RuntimeError, ValueError):
+        return None
+
+
+def require_variables(path: Path, names: Sequence[str], expected: str) -> dict[str, MatVariable]:
+    """The variables of ``path``; DataError naming the first of ``names`` it lacks and
+    ``expected`` (what the format holds) when one is missing."""
+    found = mat_variables(path)
+    for name in names:
+        if name not in found:
+            have = ", ".join(sorted(found)) or "none"
+            raise DataError(f"{path}: no variable '{name}' (expected {expected}; the file "
+                            f"holds: {have})")
+    return found
+
+
+def read_mat_array(path: Path, name: str, dtype: Any = None) -> np.ndarray:
+    """Variable ``name`` of a v5 or v7.3 file in MATLAB's axis order (``dtype``: convert
+    while reading, so a large v7.3 array is never held in two types at once)."""
+    if is_hdf5(path):
+        import h5py
+
+        try:
+            with h5py.File(path, "r") as f:
+                node = f.get(name)
+                if not isinstance(node, h5py.Dataset):
+                    raise DataError(f"{path}: variable '{name}' is missing or not an array")
+                value = node.astype(dtype)[()] if dtype is not None else node[()]
+        except (OSError, RuntimeError) as err:
+            raise DataError(f"{path}: variable '{name}' cannot be read (file truncated or "
+                            f"corrupt: {one_line(err)})") from None
+        return np.asarray(value).T
+    import scipy.io
+
+    try:
+        value = scipy.io.loadmat(str(path), variable_names=[name])[name]
+    except KeyError:
+        raise DataError(f"{path}: no variable '{name}'") from None
+    except Exception as err:  # scipy raises several types for damaged files
+        raise DataError(f"{path}: variable '{name}' cannot be read ({one_line(err)})") from None
+    value = np.asarray(value)
+    return value if dtype is None else value.astype(dtype, copy=False)
+
+
+def read_mat_struct(path: Path, name: str) -> dict[str, np.ndarray]:
+    """The fields of struct ``name`` of a v7.3 file (each in MATLAB's axis order)."""
+    import h5py
+
+    if not is_hdf5(path):
+        raise DataError(f"{path}: struct '{name}' must be in a MATLAB 7.3 (HDF5) file")
+    try:
+        with h5py.File(path, "r") as f:
+            group = f.get(name)
+            if not isinstance(group, h5py.Group):
+                raise DataError(f"{path}: no struct '{name}'")
+            return {key: np.asarray(node[()]).T for key, node in group.items()
+                    if isinstance(node, h5py.Dataset)}
+    except (OSError, RuntimeError) as err:
+        raise DataError(f"{path}: struct '{name}' cannot be read (file truncated or corrupt: "
+                        f"{one_line(err)})") from None
+
+
+def scalar(value: np.ndarray, path: Path, name: str, expected: str) -> float:
+    """The one finite number ``value`` holds; DataError naming ``name`` and ``expected``."""
+    arr = np.asarray(value)
+    if arr.size != 1 or not np.issubdtype(arr.dtype, np.number):
+        raise DataError(f"{path}: variable '{name}' must be {expected}, got shape {arr.shape} "
+                        f"of {arr.dtype}")
+    number = float(arr.reshape(-1)[0])
+    if not np.isfinite(number):
+        raise DataError(f"{path}: variable '{name}' must be {expected}, got {number}")
+    return number

@@ -1,0 +1,118 @@
+"""Wisconsin/Zaragoza phasor-field captures (Liu et al., "Non-line-of-sight imaging using
+phasor-field virtual wave optics", Nature 572, 2019; Liu, Bauer, Velten, "Phasor field
+diffraction based reconstruction for fast non-line-of-sight imaging systems", Nature
+Communications 11, 2020), MATLAB v7.3 (HDF5) ``.mat`` files.
+
+Published at https://biostat.wisc.edu/~compoptics/phasornlos20/fastnlos.html. The layout
+is the one y-tal reads (``tal/io/format.py``, ``__convert_dict_pfmat_to_tal``, format
+``MAT_PHASOR_FIELDS``; https://github.com/diegoroyo/tal), matched here field for field:
+
+* a struct ``dataset`` with ``t`` (the number of bins), ``data`` of shape (nt, ns, nl) as
+  h5py reads it (MATLAB ``[nl, ns, nt]``) with one camera point (``ns = 1``),
+  ``laserOrigin``, ``laserPos`` (nl points), ``laserNorm``, ``cameraPos`` (the camera's
+  point on the wall), ``cameraNormal``, ``deltat`` and ``t0`` (metres of optical path:
+  the authors' conversion scripts multiply the gate times by c);
+  top-level ``minimalpos``, ``maximalpos`` and ``sampling_grid_spacing`` (the volume).
+* y-tal swaps laser and sensor by reciprocity: the capture's sensor points are the laser
+  positions (``sensor_grid_xyz = laserPos``, ``sensor_xyz = laserOrigin``) and its one
+  "laser" point is the camera's (``laser_grid_xyz = laser_xyz = cameraPos``);
+  ``H_format`` T_Si, grids N_3 (points given as n x 3 or 3 x n), the time axis includes the
+  device legs (``t_accounts_first_and_last_bounces`` true), ``t_start = t0``.
+  Where y-tal stacks a single normal into shape (n, 1, 3), the normals here are (n, 3).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlosfw.capture.data import Capture
+from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
+from nlosfw.capture.formats import CaptureFormat
+from nlosfw.capture.matfile import hdf5_keys, is_hdf5, read_mat_array, read_mat_struct, scalar
+from nlosfw.common.errors import DataError
+
+#: The struct's fields that must be present.
+FIELDS = ("t", "data", "laserOrigin", "laserPos", "cameraPos", "deltat", "t0")
+_EXPECTED = ("a struct 'dataset' with t, data [nl, 1, nt], laserOrigin, laserPos, laserNorm, "
+             "cameraPos, cameraNormal, deltat, t0, as in the Wisconsin phasor-field captures")
+
+
+def points(value: Any, path: Path, name: str, count: int | None = None) -> np.ndarray:
+    """``value`` (MATLAB n x 3 or 3 x n) as (n, 3); one point repeated ``count`` times."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 1 and arr.size == 3:
+        arr = arr.reshape(1, 3)
+    if arr.ndim != 2 or 3 not in arr.shape:
+        raise DataError(f"{path}: field 'dataset.{name}' has shape {list(arr.shape)}; expected "
+                        "points as n x 3 (or 3 x n)")
+    n3 = arr if arr.shape[1] == 3 else arr.T
+    if count is not None and n3.shape[0] == 1 and count > 1:
+        n3 = np.repeat(n3, count, axis=0)
+    if count is not None and n3.shape[0] != count:
+        raise DataError(f"{path}: field 'dataset.{name}' holds {n3.shape[0]} points; expected "
+                        f"{count}")
+    return n3
+
+
+class WisconsinFormat(CaptureFormat):
+    """Wisconsin/Zaragoza phasor-field ``.mat`` captures (``MAT_PHASOR_FIELDS``); read only."""
+
+    def detect(self, path: Path) -> bool:
+        keys = hdf5_keys(path, "dataset")
+        return keys is not None and {"data", "deltat"} <= keys
+
+    def read(self, path: Path) -> Capture:
+        if not is_hdf5(path):
+            raise DataError(f"{path}: not a MATLAB 7.3 (HDF5) file; expected {_EXPECTED}")
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            if not isinstance(f.get("dataset"), h5py.Group):
+                raise DataError(f"{path}: no struct 'dataset' (expected {_EXPECTED})")
+        ds = read_mat_struct(path, "dataset")
+        missing = [k for k in FIELDS if k not in ds]
+        if missing:
+            raise DataError(f"{path}: no field 'dataset.{missing[0]}' (expected {_EXPECTED})")
+        data = np.asarray(ds["data"])
+        if data.ndim != 3 or data.shape[1] != 1:
+            raise DataError(f"{path}: field 'dataset.data' has MATLAB shape {list(data.shape)}; "
+                            "expected [nl, 1, nt] (one camera point)")
+        n_l, _, n_t = data.shape
+        n_t_declared = int(scalar(ds["t"], path, "dataset.t", "the number of time bins"))
+        if n_t_declared != n_t:
+            raise DataError(f"{path}: field 'dataset.t' says {n_t_declared} bins but "
+                            f"'dataset.data' has {n_t}")
+        if not np.issubdtype(data.dtype, np.number) or not np.all(np.isfinite(data)):
+            raise DataError(f"{path}: field 'dataset.data' must hold finite numbers")
+        H = np.ascontiguousarray(data[:, 0, :].T, dtype=np.float32)
+        camera = points(ds["cameraPos"], path, "cameraPos", 1)
+        normals = (points(ds["laserNorm"], path, "laserNorm", n_l) if "laserNorm" in ds
+                   else None)
+        camera_normal = (points(ds["cameraNormal"], path, "cameraNormal", 1)
+                         if "cameraNormal" in ds else None)
+        volume = {}
+        for src, dst in (("minimalpos", "minimal_pos"), ("maximalpos", "maximal_pos"),
+                         ("sampling_grid_spacing", "sampling_grid_spacing")):
+            try:
+                value = np.asarray(read_mat_array(path, src), dtype=float).reshape(-1)
+            except DataError:
+                continue
+            volume[dst] = float(value[0]) if value.size == 1 else value.tolist()
+        try:
+            return Capture(
+                H=H, H_format=HFormat.T_Si,
+                sensor_xyz=points(ds["laserOrigin"], path, "laserOrigin", 1).reshape(3),
+                sensor_grid_xyz=points(ds["laserPos"], path, "laserPos", n_l),
+                sensor_grid_normals=normals, sensor_grid_format=GridFormat.N_3,
+                laser_xyz=camera.reshape(3), laser_grid_xyz=camera,
+                laser_grid_normals=camera_normal, laser_grid_format=GridFormat.N_3,
+                volume_format=VolumeFormat.X_Y_Z_3,
+                delta_t=scalar(ds["deltat"], path, "dataset.deltat", "one number of metres"),
+                t_start=scalar(ds["t0"], path, "dataset.t0", "one number of metres"),
+                t_accounts_first_and_last_bounces=True,
+                scene_info={"original_format": "MAT_PHASOR_FIELDS", "volume": volume})
+        except DataError as err:
+            raise DataError(f"{path}: {err}") from None

@@ -1,0 +1,248 @@
+"""What the classical (time-domain) imagers share: the field's transient, grids, voxels.
+
+LCT, f-k migration and filtered backprojection are published as operators on the
+confocal transient H(x_s, t). Like every nlosfw imager they take a
+:class:`~nlosfw.transform.PhasorField`, and they get the transient back from it:
+
+    h(x_s, t) = sum_f P'_f(x_s) exp(+2 pi i f t)
+
+with P' the field with the device legs undone and t in metres of path from the
+wall. h is the analytic (complex) signal of the transient filtered to the
+field's band: a scatterer at path d gives the pulse sum_f exp(2 pi i f (t - d))
+centred at t = d. For the full band of a capture (every DFT bin:
+``transform.frequencies`` set to :func:`full_band_frequencies`) its real part is
+the histogram itself (less its mean) and the imagers are the published
+algorithms applied to its analytic signal; for a band-limited field (the default
+transform, a field model's prediction) they image the transient of that band.
+The field's spectral weights (a virtual illumination pulse, Liu 2019) are NOT
+applied: the published methods undo the 1/r^n falloff by multiplying the
+transient by a power of t, and over a pulse as long as the weighted ones (the
+conformance kit's is sigma = 0.2 m of path) that gain moves the pulse's envelope
+by (n - 1) sigma^2 / t, several centimetres of depth; the flat band's pulse is
+about four times shorter. The operators are linear, so the image is
+|volume|^2, the intensity every nlosfw imager returns.
+
+Uniformly spaced frequencies make h periodic in t with period 1/df; the imagers
+keep one period, starting a quarter period before the path to the nearest voxel.
+
+Geometry: confocal fields only (the published LCT and f-k are confocal; a
+single-spot field is a one-line error). Voxels are planes parallel to the wall
+whose (x, y) are samples of the field's regular wall grid (any subset, any
+order); the imagers compute a volume on their own depth grid over the whole wall
+and interpolate it linearly in depth at the voxels' depths.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.common.config import Choice, require
+from nlosfw.common.errors import DataError
+from nlosfw.common.progress import ProgressCallback, ProgressCounter
+from nlosfw.image.grids import apply_ops, plane_grid, wall_grid
+from nlosfw.image.interface import Imager, ImagerConfig
+from nlosfw.image.propagation import check_field, check_voxels
+from nlosfw.image.reconstruction import Reconstruction
+from nlosfw.image.rsd_kernel import wall_field
+from nlosfw.transform.field import PhasorField
+from nlosfw.transform.frequencies import uniform_step
+
+
+class Falloff(Choice):
+    """How the returning light falls off with the distance r to the wall, undone before
+    imaging: ``diffuse`` 1/r^4 (O'Toole's default), ``retroreflective`` 1/r^2."""
+
+    diffuse = "diffuse"
+    retroreflective = "retroreflective"
+
+
+@dataclass(frozen=True)
+class TransientImagerConfig(ImagerConfig):
+    """Options shared by the ``lct``, ``fk`` and ``fbp`` imagers."""
+
+    falloff: Falloff = Falloff.diffuse
+    """Radiometric falloff undone before imaging (diffuse 1/r^4, retroreflective 1/r^2)."""
+    samples_per_wavelength: float = 4.0
+    """Time samples per shortest wavelength of the field's band (dt = 1/(this x f_max))."""
+    workers: int = -1
+    """Threads of scipy.fft (-1: all cores)."""
+
+    def __post_init__(self) -> None:
+        require(self.samples_per_wavelength >= 2, "samples_per_wavelength",
+                f"must be >= 2 (Nyquist), got {self.samples_per_wavelength}")
+        require(self.workers == -1 or self.workers >= 1, "workers",
+                f"must be -1 (all cores) or >= 1, got {self.workers}")
+
+    @property
+    def falloff_power(self) -> int:
+        """n of the 1/r^n falloff."""
+        return 4 if self.falloff == "diffuse" else 2
+
+
+@dataclass(frozen=True, eq=False)
+class WallGrid:
+    """The field's wall as a canonical regular grid: values (F, Y, X) with the device legs
+    undone, origin (y0, x0) and spacing (dy, dx) in metres."""
+
+    values: np.ndarray
+    origin: tuple[float, float]
+    spacing: tuple[float, float]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return int(self.values.shape[1]), int(self.values.shape[2])
+
+    @property
+    def lateral_reach(self) -> float:
+        """Largest lateral distance between two wall samples (m)."""
+        ny, nx = self.shape
+        return float(np.hypot((ny - 1) * self.spacing[0], (nx - 1) * self.spacing[1]))
+
+
+@dataclass(frozen=True, eq=False)
+class VoxelPlanes:
+    """Where each voxel lies in the canonical wall grid: per plane its depth, per voxel its
+    (row, column) index; ``shape`` is the voxels' shape without the last axis."""
+
+    depths: np.ndarray          # (Z,)
+    rows: np.ndarray            # (Z, Y, X) int
+    cols: np.ndarray            # (Z, Y, X) int
+    shape: tuple[int, ...]
+
+
+class TransientImager(Imager):
+    """Base of the imagers that work on the field's transient (see the module docstring)."""
+
+    config_class: ClassVar[type] = TransientImagerConfig
+    imager_name: ClassVar[str] = "transient"
+
+    def reconstruct(self, field: PhasorField, voxels: np.ndarray,
+                    on_progress: ProgressCallback | None = None) -> Reconstruction:
+        """Intensity |volume|^2 at ``voxels`` (a plane or planes on the wall's grid);
+        ``on_progress(done, total)`` after the whole-volume transform and after the voxel
+        lookup (these imagers have no smaller unit of work)."""
+        progress = ProgressCounter(2, on_progress)
+        field = check_field(field)
+        if field.geometry.kind is not CaptureKind.CONFOCAL:
+            raise DataError(f"field.geometry: the {self.imager_name} imager images confocal "
+                            f"fields only (got {field.geometry.kind.value}); use the rsd or fft "
+                            "imager for single-spot captures")
+        voxels = check_voxels(voxels)
+        grid = canonical_wall(field)
+        planes = voxel_planes(voxels, grid, self.imager_name)
+        f_max = float(field.frequencies.max())
+        dt = 1.0 / (self.config.samples_per_wavelength * f_max)
+        window = time_window(field.frequencies, float(planes.depths.min()))
+        volume, info = self._planes(field, grid, planes.depths, dt, window)   # (Z, Y, X)
+        progress.advance()
+        image = volume.real ** 2 + volume.imag ** 2
+        intensity = image[np.arange(planes.depths.size)[:, None, None], planes.rows, planes.cols]
+        progress.advance()
+        meta: dict[str, Any] = {
+            "imager": self.imager_name,
+            "frequencies": [float(f) for f in field.frequencies],
+            "weights_applied": False,
+            "capture_kind": field.geometry.kind.value,
+            "falloff": str(self.config.falloff),
+            "time_step": dt,
+            "time_window": list(window),
+            "n_voxels": int(np.prod(planes.shape)),
+            **info,   # no wall-clock time: same field, same bytes (timings: metrics.json)
+        }
+        return Reconstruction(intensity=np.asarray(intensity.reshape(planes.shape), float),
+                              voxels=voxels, metadata=meta)
+
+    @abstractmethod
+    def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
+                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, Any]]:
+        """(complex volume (len(depths), Y, X) over the whole wall grid, metadata)."""
+
+    def transient(self, field: PhasorField, grid: WallGrid, times: np.ndarray,
+                  window: tuple[float, float]) -> np.ndarray:
+        """h at ``times`` (path from the wall, m) inside ``window``, zero outside: (T, Y, X),
+        complex64, times the falloff compensation d^(n-1), d = t/2 the distance."""
+        t = np.asarray(times, dtype=float)
+        inside = (t >= window[0]) & (t < window[1])
+        out = np.zeros((t.size,) + grid.shape, dtype=np.complex64)
+        if not inside.any():
+            return out
+        coeffs = np.exp(
+            2j * np.pi * np.outer(t[inside], field.frequencies))         # (T', F)
+        coeffs *= ((t[inside] / 2.0) ** (self.config.falloff_power - 1))[:, None]
+        flat = grid.values.reshape(grid.values.shape[0], -1)
+        out[inside] = (coeffs @ flat).reshape((-1,) + grid.shape)
+        return out
+
+
+def canonical_wall(field: PhasorField) -> WallGrid:
+    """The field's wall as a :class:`WallGrid` (DataError unless it is a regular grid)."""
+    ops, origin, spacing = wall_grid(field)
+    values = np.ascontiguousarray(apply_ops(wall_field(field), ops, axes=(1, 2)))
+    return WallGrid(values=values, origin=origin, spacing=spacing)
+
+
+def voxel_planes(voxels: np.ndarray, grid: WallGrid, name: str) -> VoxelPlanes:
+    """Each voxel's plane depth and wall-grid index; DataError unless every plane is parallel
+    to the wall and every voxel's (x, y) is a wall sample."""
+    planes = voxels.reshape((-1,) + voxels.shape[-3:]) if voxels.ndim >= 3 else None
+    if planes is None:
+        raise DataError(f"voxels: the {name} imager needs planes parallel to the wall, (Y, X, 3) "
+                        f"or (Z, Y, X, 3); got a point list {voxels.shape} (use the rsd imager)")
+    depths = np.array([plane_grid(p, i)[3] for i, p in enumerate(planes)])
+    (y0, x0), (dy, dx) = grid.origin, grid.spacing
+    ny, nx = grid.shape
+    rows_f = (planes[..., 1] - y0) / dy if ny > 1 else np.zeros(planes.shape[:-1])
+    cols_f = (planes[..., 0] - x0) / dx if nx > 1 else np.zeros(planes.shape[:-1])
+    rows, cols = np.rint(rows_f).astype(np.int64), np.rint(cols_f).astype(np.int64)
+    off = (np.abs(rows_f - rows) > 1e-3) | (np.abs(cols_f - cols) > 1e-3)
+    off |= (rows < 0) | (rows >= ny) | (cols < 0) | (cols >= nx)
+    if off.any():
+        bad = planes[np.unravel_index(int(np.argmax(off)), off.shape)]
+        raise DataError(f"voxels: the {name} imager images the wall's own grid (x, y), and "
+                        f"voxel ({bad[0]:.6g}, {bad[1]:.6g}) is not one of its samples; use "
+                        "the rsd or fft imager for other voxels")
+    return VoxelPlanes(depths=depths, rows=rows, cols=cols, shape=voxels.shape[:-1])
+
+
+def time_window(frequencies: np.ndarray, nearest_depth: float) -> tuple[float, float]:
+    """[start, end) of the transient kept: one period 1/df of a uniformly spaced band,
+    starting a quarter period before the nearest voxel's path 2 z (or from 0); everything
+    from 0 for other frequency sets."""
+    f = np.sort(np.asarray(frequencies, dtype=float))
+    step = uniform_step(f) if f.size > 1 else None
+    if step is None:
+        return 0.0, float("inf")
+    period = 1.0 / step
+    start = max(0.0, 2.0 * nearest_depth - period / 4)
+    return start, start + period
+
+
+def full_band_frequencies(n_bins: int, delta_t: float) -> np.ndarray:
+    """Every positive DFT bin k / (n_bins delta_t), k = 1 .. n_bins/2, of a capture: with
+    ``transform.frequencies`` set to these the classical imagers see the whole transient."""
+    return np.arange(1, n_bins // 2 + 1) / (n_bins * delta_t)
+
+
+def lateral_frequencies(n: int, spacing: float) -> np.ndarray:
+    """FFT frequencies (cycles/m) of a padded axis of ``n`` samples ``spacing`` apart."""
+    return np.fft.fftfreq(n, d=spacing) if n > 1 else np.zeros(1)
+
+
+def interpolate_depths(volume: np.ndarray, z0: float, dz: float,
+                       depths: np.ndarray) -> np.ndarray:
+    """Linear interpolation along axis 0 of a volume sampled at z0 + k dz, at ``depths``
+    (zero outside)."""
+    pos = (np.asarray(depths, dtype=float) - z0) / dz
+    i0 = np.floor(pos).astype(np.int64)
+    frac = (pos - i0).astype(np.float32)[:, None, None]
+    n = volume.shape[0]
+    lo = np.where((i0 >= 0) & (i0 < n), i0, 0)
+    hi = np.where((i0 + 1 >= 0) & (i0 + 1 < n), i0 + 1, 0)
+    a = np.where(((i0 >= 0) & (i0 < n))[:, None, None], volume[lo], 0)
+    b = np.where(((i0 + 1 >= 0) & (i0 + 1 < n))[:, None, None], volume[hi], 0)
+    return a * (1 - frac) + b * frac
