@@ -101,7 +101,10 @@ def _n_depths(config: Any, bins: int) -> int:
     if _get(config, "capture.path") is not None or not (size and res and width):
         return MAX_AUTOMATIC_PLANES
     spacing = min(float(s) / max(int(r), 1) for s, r in zip(size, res, strict=False))
-    return max(2, min(MAX_AUTOMATIC_PLANES, math.ceil(bins * float(width) / spacing) + 1))
+    ratio = bins * float(width) / spacing if spacing > 0 else math.inf
+    if not math.isfinite(ratio):  # a non-finite size is refused by the scene's own checks
+        return MAX_AUTOMATIC_PLANES
+    return max(2, min(MAX_AUTOMATIC_PLANES, math.ceil(ratio) + 1))
 
 
 def _history(options: Any) -> float:

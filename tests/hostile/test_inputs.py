@@ -89,8 +89,9 @@ def test_metadata_cannot_run_code(tmp_path):
 
 # -------------------------------------------------------------------------- huge sizes
 @pytest.mark.parametrize(("overrides", "what"), [
+    # automatic depths at this wall spacing reach the cap of 512 planes, each 10^10 voxels
     (["scene.wall.resolution=[100000,100000]"],
-     "the transient H (scene.wall.resolution [100000, 100000] × scene.time.bins 512"),
+     "the voxels and images (512 depth planes × 10000000000 voxels each"),
     (["scene.time.bins=10000000000"],
      "the transient H (scene.wall.resolution [16, 16] × scene.time.bins 10000000000"),
     (["transform.n_frequencies=1000000000"],
