@@ -21,7 +21,7 @@ OUR_DISTRIBUTIONS = {"nlosfw", "nlosfw-embree", "nlosfw-mitsuba", "nlosfw-torch"
                      "nlosfw-example-plugin", "nlosfw-example-network"}
 
 #: Units the built-in configs use.
-UNITS = {"m", "1/m", "s", "ps", "deg", "MiB"}
+UNITS = {"m", "1/m", "s", "ps", "deg", "MiB", "GB"}
 
 #: A unit written in the text instead of the tag (the style the tag replaced).
 UNTAGGED_UNIT = re.compile(r"\((?:m|s|ps|MiB|deg|cycles/m|m of path)\)"

@@ -45,8 +45,8 @@ def test_reconstruction_figure_names_the_run_and_the_viewpoint(tiny_run):
     panels, colorbars = fig.axes[:3 * n], fig.axes[3 * n:]
     assert n == 4 and len(colorbars) == 3                 # one colorbar per row
     titles = [ax.get_title() for ax in panels[:n]]
-    assert titles[0] == "true field" and titles[1].startswith("raw (training samples)\nSSIM ")
-    assert titles[3].startswith("nn (nearest)\nSSIM")
+    assert titles[0] == "true field" and titles[1].startswith("raw (training samples)\nPSNR ")
+    assert titles[3].startswith("nn (nearest)\nPSNR") and titles[3].endswith(" vs true")
     for ax in panels:
         assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "y (m)"
 
@@ -91,11 +91,13 @@ def test_field_figure_columns_share_one_scale(tiny_run):
 def test_run_title_names_a_capture_file():
     from nlosfw.app.metrics import RunInfo
 
-    info = RunInfo(dir="d", nlosfw_version="0", started="now", scene="tiny",
-                   simulator="analytic", transform="fft", model="siren_torch", imager="rsd")
+    info = RunInfo(dir="d", nlosfw_version="0", started="now", config_hash="h", scene=None,
+                   simulator=None, transform="fft", model="siren_torch", imager="rsd")
     capture = CaptureResult(capture=None, key="k", source="file",  # type: ignore[arg-type]
-                            path=Path("/data/bike.hdf5"))
-    assert run_title(info, capture) == "capture bike.hdf5 · model siren_torch · imager rsd"
+                            label="bike.hdf5 (ytal)", path=Path("/data/bike.hdf5"),
+                            format="ytal")
+    assert run_title(info, capture) == ("capture bike.hdf5 (ytal) · model siren_torch · "
+                                        "imager rsd")
 
 
 def test_run_writes_every_figure(tiny_run):

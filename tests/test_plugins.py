@@ -291,7 +291,8 @@ def test_an_ambiguous_or_unknown_plugin_name_is_one_line(capsys):
                                               "simulator:analytic, ")
     assert main(["plugins", "sensor:fft"]) == 2
     assert capsys.readouterr().err == ("error: unknown plugin kind 'sensor' in 'sensor:fft'; "
-                                       "valid: simulator, transform, model, imager\n")
+                                       "valid: simulator, transform, model, imager, "
+                                       "capture_format\n")
     assert main(["plugins", "--bogus"]) == 2
     assert capsys.readouterr().err.startswith("error: plugins: unrecognized arguments: --bogus")
 

@@ -40,16 +40,19 @@ def _entry(plugin, nmse_db):
 
 def record(name, overrides, model, ssim):
     """A run of field model ``model`` whose sources have the given SSIM (and NMSE = -10 SSIM)."""
-    info = RunInfo(dir=name, nlosfw_version="0", started="now", scene="s", simulator="analytic",
-                   transform="fft", model=model, imager="fft")
+    info = RunInfo(dir=name, nlosfw_version="0", started="now", config_hash="h", scene="s",
+                   simulator="analytic", transform="fft", model=model, imager="fft")
     field = {("interp" if model == "interp" else "model"): _entry(model, -10 * ssim[model])}
     if model != "interp":
         field["interp"] = _entry("interp", -10 * ssim["interp"])
-    sources = {"true": ImageScores(rmse=0.0, psnr=None, ssim=1.0),
+    sources = {"true": ImageScores(rmse=0.0, psnr=None, ssim=1.0, volume_psnr=None,
+                                   volume_ssim=1.0),
                **{("model" if s == model != "interp" else s):
-                  ImageScores(rmse=0.1, psnr=20 * v, ssim=v) for s, v in ssim.items()}}
+                  ImageScores(rmse=0.1, psnr=20 * v, ssim=v, volume_psnr=20 * v, volume_ssim=v)
+                  for s, v in ssim.items()}}
     recon = ReconstructionMetrics(imager="fft", reference="true", depths=(1.0,),
-                                  sources=sources, single_frequency={})
+                                  depth_planes=1, depth_spacing=None, sources=sources,
+                                  single_frequency={})
     metrics = RunMetrics(status="completed", run=info, field=field, reconstruction=recon)
     return RunRecord(name=name, metrics=metrics, overrides=tuple(overrides))
 

@@ -130,7 +130,7 @@ def test_the_preset_declares_the_study_and_the_acquisitions_pair_simulator_and_n
     assert hydra["sweeper"]["params"] == {
         "scene": "thesis_planes,thesis_concave,letter_t,thesis_two_planes,thesis_occluded",
         "acquisition": "clean,noisy", "split.spatial_step": "2,4,8",
-        "model": "siren_torch,pe_torch", "model.seed": "0,1,2"}
+        "model": "siren_torch,fourier_torch,rsd_prior", "model.seed": "0,1,2"}
 
 
 def test_the_study_on_a_capture_file_drops_the_scene_axes(tmp_path):

@@ -186,8 +186,8 @@ def reconstruction_figure(recons: Mapping[str, Reconstruction],
     for col, source in enumerate(sources):
         mappable["intensity"] = axes[0, col].imshow(images[source], origin="lower", extent=ext,
                                                     cmap="hot", vmin=0, vmax=1)
-        axes[0, col].set_title(f"{names[source]}\n{_score_label(scores.get(source), source)}",
-                               fontsize=10)
+        score = _score_label(scores.get(source), source)
+        axes[0, col].set_title(names[source] + (f"\n{score}" if score else ""), fontsize=10)
         depth = recons[source].depth_map(threshold=0.1)
         mappable["depth"] = axes[1, col].imshow(depth, origin="lower", extent=ext,
                                                 **depth_scale)

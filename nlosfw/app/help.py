@@ -27,8 +27,8 @@ SUBCOMMANDS = (
                                         "checks"),
     ("python -m nlosfw plugins --check", "import every plugin; broken ones say why"),
     ("python -m nlosfw report DIR", "tables and plots of the runs under DIR (a sweep)"),
-    ("python -m nlosfw cache info|clean", "the cache's entries and sizes; evict them "
-                                          "(--keep-gb N)"),
+    ("python -m nlosfw cache info", "the cache's entries and sizes (cache clean [--keep-gb N] "
+                                    "evicts)"),
     ("python -m nlosfw -cn NAME -m", "a sweep preset: {primary}"),
     ("python -m nlosfw.testing NAME", "the conformance kit on a plugin (--plan: which "
                                       "checks)"),
@@ -44,7 +44,11 @@ SELECTOR_DOCS = {
     "transform": "turns the capture into a phasor field",
     "model": "the field model fitted to the sparse field (interp is the baseline)",
     "imager": "reconstructs the hidden volume from a phasor field",
-    "experiment": "a thesis preset (model, split, training budget, reference numbers)",
+    "capture_format": "reads capture.path, detected from the file's content "
+                      "(capture.format=NAME forces one)",
+    "acquisition": "how a study captures its scenes (clean: analytic, noise-free; noisy: "
+                   "embree with Poisson noise)",
+    "experiment": "a preset (thesis figures, the noise and sparsity studies)",
 }
 
 #: Five commands a new user can run as they are (the tests compose each one).
@@ -74,7 +78,6 @@ DOCS = ("README.md (install, runs, outputs, metrics, thesis presets), CONTRIBUTI
 def help_text(host: PluginHost, conf: Path) -> str:
     """The help page; ``conf`` is the directory of Hydra's ``config.yaml``."""
     primary = sorted(p.stem for p in conf.glob("*.yaml") if p.stem != "config")
-    experiments = sorted(p.stem for p in (conf / "experiment").glob("*.yaml"))
     scenes = sorted(p.stem for p in (conf / "scene").glob("*.yaml"))
     defaults = _selected_defaults(conf / "config.yaml")
     lines = [f"nlosfw {__version__}: non-line-of-sight imaging with implicit neural phasor "
@@ -85,8 +88,8 @@ def help_text(host: PluginHost, conf: Path) -> str:
               "python -m nlosfw plugins NAME lists a plugin's options)"]
     groups = []
     for group, what in SELECTOR_DOCS.items():
-        if group == "experiment":
-            names = experiments
+        if group in ("experiment", "acquisition"):
+            names = sorted(p.stem for p in (conf / group).glob("*.yaml"))
         elif group == "scene":
             names = scenes
         else:

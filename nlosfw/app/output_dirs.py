@@ -11,6 +11,7 @@ and applies the same verdict first, and checks that they can be written at all.
 from __future__ import annotations
 
 import errno
+import itertools
 import logging
 import os
 from collections.abc import Callable, Sequence
@@ -82,16 +83,32 @@ def _check_writable(path: Path, option: str) -> None:
                                   "output directory")
 
 
+def sweep_jobs(overrides: Sequence[Any]) -> list[list[str]]:
+    """The overrides of every job of a sweep, numbered as Hydra's basic sweeper numbers its
+    job directories: a later override of a key replaces an earlier one (a command-line
+    value replaces a preset's axis), and the jobs are the product of the keys' values in
+    the order the keys first appear."""
+    axes: dict[str, list[str]] = {}
+    for override in overrides:
+        key = override.get_key_element()
+        if override.is_sweep_override():
+            if not override.is_discrete_sweep():
+                raise ConfigError(key, "only comma-separated (choice) sweeps can be resumed")
+            axes[key] = [f"{key}={value}" for value in override.sweep_string_iterator()]
+        else:
+            axes[key] = [f"{key}={override.get_value_element_as_str()}"]
+    return [list(job) for job in itertools.product(*axes.values())]
+
+
 def _check_resumed_sweep(compose: Compose, sweep_dir: Path, arguments: list[str],
                          overwrite: bool) -> None:
     """Apply the lifecycle's verdict to every job directory of the sweep that exists."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf
 
     parsed = OverridesParser.create().parse_overrides(
         [a for a in arguments if not a.lstrip("+~").startswith("hydra")])
-    (jobs,) = BasicSweeper.split_arguments(parsed, None)
+    jobs = sweep_jobs(parsed)
     existing = sorted(int(p.name) for p in sweep_dir.iterdir() if p.name.isdigit())
     for num in existing:
         if num >= len(jobs):

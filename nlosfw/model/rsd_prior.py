@@ -105,11 +105,11 @@ class RSDPriorConfig(FieldModelConfig):
     fit_frequencies: int = 32
     """Frequencies used in the fit, evenly spread over the field's (0: all)."""
     depth_range: tuple[float, ...] = ()
-    """[near, far] of the voxel planes (m); empty: estimated from the data."""
+    """[m] Near and far depth of the voxel planes; empty: estimated from the data."""
     depth_step: float | None = None
-    """Distance between voxel planes (m); default a fifth of the shortest wavelength."""
+    """[m] Distance between voxel planes; default a fifth of the shortest wavelength."""
     lateral_step: float | None = None
-    """Largest lateral voxel spacing (m); default half the shortest wavelength (a quarter
+    """[m] Largest lateral voxel spacing; default half the shortest wavelength (a quarter
     for confocal scans). The training spacing is a whole multiple of the spacing used."""
     depth_threshold: float = 0.1
     """Automatic depth range: keep the planes where the coarse fit's largest contribution
@@ -129,7 +129,7 @@ class RSDPriorConfig(FieldModelConfig):
     workers: int = -1
     """Threads of scipy.fft (-1: all cores)."""
     cache_mb: float = 1024.0
-    """Memory (MiB) for the kernels' spectra during the fit (recomputed when larger)."""
+    """[MiB] Memory for the kernels' spectra during the fit (recomputed when larger)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -4,6 +4,7 @@ timing fields of metrics.json that nlosfw.app.metrics.TIMING_FIELDS documents.""
 from __future__ import annotations
 
 import json
+import re
 
 import h5py
 
@@ -16,7 +17,8 @@ RUN = ("scene=tiny", "scene.noise.model=poisson", "scene.noise.photons=1e5",
        "reconstruction.single_frequency_images=1",
        "model=siren_torch", "model.steps=30", "model.hidden=[16]",
        "imager=fft", "figures.enabled=true", "figures.dpi=40", "transform.n_frequencies=11",
-       "reconstruction.n_depths=3", "cache.enabled=false", "hydra.run.dir=run")
+       "reconstruction.n_depths=3", "cache.enabled=false", "hydra.run.dir=run",
+       "output.keep=[capture,phasor_field,fields,model,reconstructions]")
 #: Not artefacts: Hydra's records (they name the run's time), the log, the run's marker
 #: (it names the process).
 NOT_ARTEFACTS = (".hydra", "run.log", MARKER_NAME)
@@ -39,7 +41,10 @@ def test_two_runs_write_the_same_bytes(workdir, tools):
             "reconstructions/model.hdf5", "figures/reconstructions.png",
             "figures/loss.png"} <= set(a)
     differ = sorted(name for name in a if a[name] != b[name])
-    assert differ == ["metrics.json"], differ   # its timings, and nothing else:
+    # metrics.json for its timings and report.html, the page showing them; nothing else
+    assert differ == ["metrics.json", "report.html"], differ
+    numbers = re.compile(rb"\d+(?:\.\d+)?")    # the page's layout and words are the same
+    assert numbers.sub(b"#", a["report.html"]) == numbers.sub(b"#", b["report.html"])
     ma, mb = json.loads(a["metrics.json"]), json.loads(b["metrics.json"])
     assert without_timings(ma) == without_timings(mb)
     assert ma["run"]["started"] and ma["timings"]["total"] > 0     # the fields dropped exist
