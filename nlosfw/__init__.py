@@ -11,10 +11,25 @@ its public API:
 * :mod:`nlosfw.plugins`: plugin discovery and hooks; :mod:`nlosfw.testing`: the kit;
 * :mod:`nlosfw.app`: the command line (Hydra), pipeline, cache, figures and reports.
 
+For notebooks and scripts, :mod:`nlosfw.api` gives one function per stage and one for a
+whole run, all importable from here: :func:`read_capture`, :func:`simulate_scene`,
+:func:`transform_capture`, :func:`split_field`, :func:`fit_model`, :func:`predict_field`,
+:func:`reconstruct` and :func:`run` (``nlosfw.run(["model=interp"])`` is
+``python -m nlosfw model=interp``, returning the results instead of printing them).
+
 Importing this package loads only numpy, scipy and the core data types; plugins and
-their heavy backends (torch, JAX, mitsuba, embreex) load on demand.
+their heavy backends (torch, JAX, mitsuba, embreex), Hydra and matplotlib load on demand.
 """
 
+from nlosfw.api import (
+    fit_model,
+    load_capture,
+    predict_field,
+    reconstruct,
+    run,
+    simulate_scene,
+    transform_capture,
+)
 from nlosfw.capture import (
     Capture,
     CaptureFormat,
@@ -24,6 +39,8 @@ from nlosfw.capture import (
     GridFormat,
     HFormat,
     VolumeFormat,
+    read_capture,
+    write_capture,
 )
 from nlosfw.common import (
     ConfigError,
@@ -34,8 +51,15 @@ from nlosfw.common import (
     __version__,
     require,
 )
-from nlosfw.image import Imager, ImagerConfig, Reconstruction
-from nlosfw.model import FieldModel, FieldModelConfig, FitReport, TrainingStep
+from nlosfw.image import Imager, ImagerConfig, Reconstruction, depth_span
+from nlosfw.model import (
+    FieldModel,
+    FieldModelConfig,
+    FitReport,
+    TrainingStep,
+    field_metrics,
+    split_field,
+)
 from nlosfw.plugins import Capability, PluginKind, hookimpl
 from nlosfw.simulate import Scene, Simulator, SimulatorConfig
 from nlosfw.transform import PhasorField, PhasorTransform, PhasorTransformConfig
@@ -47,4 +71,7 @@ __all__ = [
     "ImagerConfig", "NlosfwError", "PhasorField", "PhasorTransform", "PhasorTransformConfig",
     "PluginError", "PluginKind", "Reconstruction", "Scene", "Simulator", "SimulatorConfig",
     "TrainingStep", "VolumeFormat", "__version__", "hookimpl", "require",
+    # the Python API (nlosfw.api): one function per stage, and a whole run
+    "depth_span", "field_metrics", "fit_model", "load_capture", "predict_field", "read_capture",
+    "reconstruct", "run", "simulate_scene", "split_field", "transform_capture", "write_capture",
 ]

@@ -1,4 +1,10 @@
-"""Command line: ``python -m nlosfw [plugins | report DIR | --debug | Hydra overrides...]``."""
+"""Command line: ``python -m nlosfw [--help | plugins [NAME] | report DIR | cache info|clean |
+--debug | Hydra overrides...]``.
+
+Errors end with one line on stderr: exit status 2 for a mistake in the input or the
+configuration, 1 for a storage failure (a full disk); SIGINT and SIGTERM stop a run
+cleanly with 130 and 143.
+"""
 
 from __future__ import annotations
 
@@ -6,7 +12,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from nlosfw.common.errors import USER_ERROR_EXIT_STATUS, NlosfwError
+from nlosfw.common.errors import NlosfwError
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -16,21 +22,46 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = [a for a in args if a != "--debug"]
         os.environ["NLOSFW_DEBUG"] = "1"
         os.environ["HYDRA_FULL_ERROR"] = "1"
-    from nlosfw.app.errors import report_user_error
+    from nlosfw.app.errors import report_interruption, report_user_error
+    from nlosfw.app.interrupts import as_interruption, signals_raise
 
     try:
-        if args[:1] == ["plugins"]:
-            from nlosfw.app.plugins_command import plugins_command
-            from nlosfw.plugins import load_plugins
-
-            return plugins_command(load_plugins())
-        if args[:1] == ["report"]:
-            from nlosfw.app.report import report_command
-
-            return report_command(args[1:])
-        from nlosfw.app.hydra_app import main as hydra_main
-
-        return hydra_main(args)
+        with signals_raise():
+            return _dispatch(args)
     except NlosfwError as err:
         report_user_error(err)
-        return USER_ERROR_EXIT_STATUS
+        return err.exit_status
+    except SystemExit as err:  # a Hydra job's exit status (its error already reported)
+        return err.code if isinstance(err.code, int) else (0 if err.code is None else 1)
+    except BaseException as err:  # SIGINT, SIGTERM: one line; anything else goes on
+        interruption = as_interruption(err)
+        if interruption is None:
+            raise
+        report_interruption(interruption)
+        return interruption.exit_status
+
+
+def _dispatch(args: list[str]) -> int:
+    if args[:1] not in (["plugins"], ["report"], ["cache"]) and ("--help" in args or "-h" in args):
+        from nlosfw.app.help import help_text
+        from nlosfw.app.hydra_app import config_dir
+        from nlosfw.plugins import load_plugins
+
+        sys.stdout.write(help_text(load_plugins(), config_dir()) + "\n")
+        return 0
+    if args[:1] == ["plugins"]:
+        from nlosfw.app.plugins_command import plugins_command
+        from nlosfw.plugins import load_plugins
+
+        return plugins_command(load_plugins(), args=args[1:])
+    if args[:1] == ["report"]:
+        from nlosfw.app.report import report_command
+
+        return report_command(args[1:])
+    if args[:1] == ["cache"]:
+        from nlosfw.app.cache_command import cache_command
+
+        return cache_command(args[1:])
+    from nlosfw.app.hydra_app import main as hydra_main
+
+    return hydra_main(args)

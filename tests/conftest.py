@@ -7,9 +7,23 @@ A test that plants a malformed metrics.json on purpose is marked ``malformed_met
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """absl (imported with JAX) logs through a handler bound to the ``sys.stderr`` of the
+    moment it is imported: under pytest, a capture buffer. An in-process run configures
+    Hydra's logging, which closes every handler, and absl's handler closes its stream, so
+    the session's capture breaks ("I/O operation on closed file" at the end of the
+    session). Bind absl's handler to the process's own stderr, which it never closes."""
+    try:
+        from absl import logging as absl_logging
+    except ImportError:
+        return
+    absl_logging.get_absl_handler().python_handler.stream = sys.__stderr__
 
 
 def check_metrics_file(path: Path) -> None:

@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -65,6 +66,13 @@ def set_nan(f):
          "error: simulator.patch_size: must be > 0 metres, got -1.0"),
         (["+simulator.bogus=1"], "error: simulator.bogus: unknown option; valid options: "),
         (["model=interp", "split.spatial_step=0"], "error: split.spatial_step: must be >= 1"),
+        (["model=interp", "split.spatial_fraction=0.3"],
+         "error: split.spatial_fraction: applies to pattern random only"),
+        (["model=interp", "split.pattern=random", "split.spatial_fraction=1.5"],
+         "error: split.spatial_fraction: must be in (0, 1] or null, got 1.5"),
+        (["split.pattern=spiral"], "error: split.pattern: must be one of 'grid', 'random', "
+                                   "got 'spiral'"),
+        (["acquisition=dirty"], "error: unknown acquisition 'dirty'; valid: clean, noisy"),
         (["scene.time.bins=0"], "error: scene.time.bins: must be a positive number of bins, "
                                 "got 0"),
         (["scene.time.bin_width=-0.01"], "error: scene.time.bin_width: must be a positive"),
@@ -183,18 +191,21 @@ def test_documented_sweeps_pass_the_preflight(workdir, monkeypatch, config_name,
     assert not (workdir / "outputs").exists() and not (workdir / "multirun").exists()
 
 
+ALL_ARTEFACTS = "output.keep=[capture,phasor_field,fields,model,reconstructions]"
+
+
 def test_full_run_writes_documented_artefacts(workdir):
-    result = nlosfw(*QUICK, "figures.enabled=true", cwd=workdir)
+    result = nlosfw(*QUICK, "figures.enabled=true", ALL_ARTEFACTS, cwd=workdir)
     (run,) = list((workdir / "outputs").glob("*/*"))
     names = {str(p.relative_to(run)) for p in run.rglob("*") if p.is_file()}
     expected = {"config.yaml", "run.log", "metrics.json", "capture.hdf5", "phasor_field.hdf5",
                 "fields/true.hdf5", "fields/raw.hdf5", "fields/interp.hdf5",
                 "reconstructions/true.hdf5", "reconstructions/raw.hdf5",
-                "reconstructions/interp.hdf5", "figures/reconstructions.png"}
+                "reconstructions/interp.hdf5", "figures/reconstructions.png", "report.html"}
     assert expected <= names, expected - names
     assert any(n.startswith("figures/fields_f") for n in names)
     metrics = json.loads((run / "metrics.json").read_text())
-    assert metrics["status"] == "completed" and metrics["schema_version"] == 3
+    assert metrics["status"] == "completed" and metrics["schema_version"] == 5
     assert set(metrics["timings"]) >= {"capture", "transform", "fit", "predict", "reconstruct",
                                        "report", "total"}
     splits = metrics["field"]["interp"]["splits"]
@@ -203,9 +214,74 @@ def test_full_run_writes_documented_artefacts(workdir):
     recon = metrics["reconstruction"]["sources"]
     assert recon["true"]["ssim"] == pytest.approx(1.0)
     assert 0.5 < recon["interp"]["ssim"] <= 1.0
-    assert "nlosfw run →" in result.stdout and "├── scene" in result.stdout  # config tree
     assert "nlosfw run summary" in result.stdout
     assert not list(run.rglob("*.tmp*")), "a temporary file was left behind"
+
+
+def test_console_shows_a_compact_overview_not_the_config_dump(workdir):
+    result = nlosfw(*QUICK, "model.extrapolation=cubic", cwd=workdir)
+    out = result.stdout
+    head = out[:out.index("full configuration: config.yaml and .hydra/")]
+    assert "scene tiny · simulator analytic · transform fft · model interp · imager fft" in out
+    # the options that differ from their defaults, and only those (the cache dir comes from
+    # the environment, figures.enabled and extrapolation from the command line)
+    changed = head.split("changed from the defaults: ")[1].split("\n")[0]
+    assert sorted(changed.split(", ")) == sorted([
+        "model.extrapolation=cubic", "figures.enabled=false",
+        f"cache.dir={workdir / 'cache'}"])
+    assert "├──" not in out and "patch_size" not in out        # no config tree
+    # the plan says how many reconstructions and why
+    assert "→ 9 reconstructions (fft)" in head
+    assert ("= 3 fields [true: the reference, raw: the training samples, interp: the "
+            "baseline] × (all frequencies + 2 single frequencies (training, held out))") in head
+    assert len(head.splitlines()) <= 8, head
+    # and the run made exactly those
+    (run,) = list((workdir / "outputs").glob("*/*"))
+    metrics = json.loads((run / "metrics.json").read_text())["reconstruction"]
+    assert len(metrics["sources"]) * (1 + len(metrics["single_frequency"])) == 9
+    assert "stage capture" not in out                       # stage timings: run.log only
+    assert "stage capture: started" in (run / "run.log").read_text()
+
+
+def test_output_keep_default_keeps_capture_and_model_and_reports_the_size(workdir):
+    result = nlosfw(*QUICK[:1], "model=nearest", *QUICK[2:], cwd=workdir)
+    (run,) = list((workdir / "outputs").glob("*/*"))
+    names = {str(p.relative_to(run)) for p in run.rglob("*") if p.is_file()}
+    assert {"capture.hdf5", "field_model.npz", "metrics.json", "config.yaml"} <= names
+    assert not {n for n in names if n.startswith(("fields/", "reconstructions/"))}
+    assert "phasor_field.hdf5" not in names
+    size = sum(p.stat().st_size for p in run.rglob("*") if p.is_file())
+    match = re.search(r"done \(completed\): .*?, ([0-9.]+) (B|kB|MB) \(large files kept: "
+                      r"capture, model; not written: phasor_field, fields, reconstructions, "
+                      r"see output.keep\)", " ".join(result.stdout.split()))
+    assert match, result.stdout[-600:]
+    shown = float(match.group(1)) * {"B": 1, "kB": 1e3, "MB": 1e6}[match.group(2)]
+    # printed before Hydra's logging closes run.log: within a few percent of the final size
+    assert shown == pytest.approx(size, rel=0.05)
+
+
+def test_output_keep_refuses_unknown_artefacts(workdir, capsys):
+    status, _, err = run_cli([*QUICK, "output.keep=[model,figures]"], capsys)
+    assert status == 2
+    assert err.startswith("error: output.keep[1]: Invalid value 'figures', expected one of "
+                          "[capture, phasor_field, fields, model, reconstructions]"), err
+
+
+def test_library_logging_goes_to_the_log_file_not_the_console(workdir):
+    """JAX logs while it starts (its backend probing): run.log has those records, the
+    console shows none of them."""
+    pytest.importorskip("jax")
+    result = nlosfw(*QUICK[:1], "model=siren_jax", "model.steps=20", "model.hidden=[8]",
+                    *QUICK[2:], cwd=workdir)
+    (run,) = list((workdir / "outputs").glob("*/*"))
+    records = re.findall(r"^\[[^]]+\]\[([^]]+)\]\[(\w+)\] (.*)$",
+                         (run / "run.log").read_text(), flags=re.MULTILINE)
+    foreign = [(name, msg) for name, level, msg in records
+               if not name.startswith("nlosfw") and level not in ("ERROR", "CRITICAL")]
+    assert any(name.startswith("jax") for name, _ in foreign), records
+    console = " ".join((result.stdout + result.stderr).split())
+    for _, message in foreign:
+        assert " ".join(message.split())[:40] not in console, message
 
 
 def test_stop_after_and_capture_from_file(workdir):
@@ -251,6 +327,8 @@ def test_sweep_report_and_resume(workdir):
     csv = (sweep / "report" / "report.csv").read_text().splitlines()
     assert len(csv) == 3 and csv[0].startswith("run,status,scene")
     assert (sweep / "report" / "report.png").stat().st_size > 1000
+    assert "## Quality against model" in (sweep / "report" / "report.md").read_text()
+    assert "<a href=\"../0/report.html\">0</a>" in (sweep / "report" / "report.html").read_text()
     nlosfw("report", str(sweep), cwd=workdir)
     assert (sweep / "report-2" / "report.md").exists()  # the first report is kept
 

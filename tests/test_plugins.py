@@ -218,3 +218,178 @@ def test_the_kit_refuses_choices_not_named_as_their_values():
     with pytest.raises(AssertionError, match=r"option mode: members \['FAST'\] of Renamed "
                                              r"must be named as their values"):
         check_config_round_trip(spec)
+
+
+# --------------------------------------------------------------------------- plugins NAME
+def _command(host, *args, width=500):
+    import io
+
+    from rich.console import Console
+
+    from nlosfw.app.plugins_command import plugins_command
+
+    buffer = io.StringIO()
+    status = plugins_command(host, Console(file=buffer, width=width), args)
+    return status, buffer.getvalue()
+
+
+def _row(text, first):
+    """The whitespace-separated cells of the output line starting with ``first``."""
+    for line in text.splitlines():
+        if " ".join(line.split()).startswith(first + " "):
+            return line.split()
+    raise AssertionError(f"no line starting with {first!r} in:\n{text}")
+
+
+def test_plugins_name_shows_kind_distribution_options_capabilities_plan_and_example():
+    from importlib.metadata import version
+
+    status, out = _command(load_plugins(env={}), "imager:fft")
+    assert status == 0, out
+    assert out.splitlines()[0] == ("imager:fft  Fast RSD: per-plane FFT convolution "
+                                   "(Liu 2020)")
+    assert f"distribution  nlosfw {version('nlosfw')}" in out
+    assert "kind          imager (select it with imager=fft)" in out
+    assert "status        ok" in out
+    # the options: type, default, unit and the first sentence of the field's docstring
+    assert " ".join(_row(out, "chunk_mb")) == (
+        "chunk_mb float 512.0 MiB Memory of one batch of frequency planes; the field's "
+        "spectrum is cached when it fits in half of this.")
+    assert " ".join(_row(out, "time")) == (
+        "time float 0.0 m Virtual time (a path length) of the coherent image; 0 images the "
+        "pulse as it focuses.")
+    assert " ".join(_row(out, "precision"))[:33] == "precision single | double single "
+    assert " ".join(_row(out, "workers")) == "workers int -1 Threads of scipy.fft (-1: all cores)."
+    # the declared capabilities, and the conformance kit's plan from them
+    assert " ".join(_row(out, "progress")).startswith("progress reconstruct(..., on_progress=")
+    assert "run   check_imager_reports_progress[single_spot]" in out
+    assert ("skip  check_imager_point_voxels: needs capability point_voxels, which imager:fft "
+            "does not declare") in out
+    assert "python -m nlosfw imager=fft imager.time=0.0" in out
+    assert "python -m nlosfw.testing imager:fft" in out
+
+
+def test_plugins_name_of_a_network_model_reads_its_config():
+    pytest.importorskip("torch")
+    status, out = _command(load_plugins(env={}), "siren_torch")
+    assert status == 0, out
+    assert " ".join(_row(out, "max_seconds")) == (
+        "max_seconds float 0.0 s Wall-clock budget of the training loop (0: none).")
+    assert " ".join(_row(out, "omega0_first"))[:25] == "omega0_first float 15.0 o"
+    assert "python -m nlosfw model=siren_torch model.steps=3000" in out
+
+
+def test_an_ambiguous_or_unknown_plugin_name_is_one_line(capsys):
+    from nlosfw.cli import main
+
+    assert main(["plugins", "fft"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("error: plugin name 'fft' is used by 2 kinds; give one of: transform:fft, "
+                   "imager:fft\n")
+    assert main(["plugins", "nope"]) == 2
+    assert capsys.readouterr().err.startswith("error: unknown plugin 'nope'; valid: "
+                                              "simulator:analytic, ")
+    assert main(["plugins", "sensor:fft"]) == 2
+    assert capsys.readouterr().err == ("error: unknown plugin kind 'sensor' in 'sensor:fft'; "
+                                       "valid: simulator, transform, model, imager, "
+                                       "capture_format\n")
+    assert main(["plugins", "--bogus"]) == 2
+    assert capsys.readouterr().err.startswith("error: plugins: unrecognized arguments: --bogus")
+
+
+def broken_plugin(factory: str, name: str = "wrecked") -> types.ModuleType:
+    """A plugin module registering simulator ``name`` whose factory is the path ``factory``."""
+
+    @hookimpl
+    def register_simulators(register):
+        register(name, factory, config=DummyConfig, description="a broken plugin")
+
+    module = types.ModuleType(f"plugin_{name}")
+    module.register_simulators = register_simulators
+    return module
+
+
+@pytest.fixture()
+def failing_module(tmp_path, monkeypatch):
+    """An importable module whose import fails on a missing dependency."""
+    (tmp_path / "nlosfw_test_needs_dep.py").write_text(
+        "import surely_missing_dependency_xyz  # noqa\n\nclass Sim:\n    pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    yield "nlosfw_test_needs_dep"
+    sys.modules.pop("nlosfw_test_needs_dep", None)
+
+
+def test_the_listing_finds_a_missing_factory_module_without_importing():
+    host = load_plugins(env={}, extra=[
+        ("dist-w", "w", broken_plugin("nlosfw_no_such_module.sim:Simulator"))])
+    status, out = _command(host)
+    assert status == 0
+    assert " ".join(_row(out, "│ simulator │ wrecked")) == (
+        "│ simulator │ wrecked │ dist-w │ broken: module nlosfw_no_such_module.sim of "
+        "nlosfw_no_such_module.sim:Simulator not found │ a broken plugin │")
+    assert " ".join(_row(out, "│ simulator │ analytic")).startswith(
+        "│ simulator │ analytic │ nlosfw │ ok │")
+    status, out = _command(host, "--check")
+    assert status == 1
+    assert ("broken: simulator plugin 'wrecked' (from dist-w) cannot be imported: No module "
+            "named 'nlosfw_no_such_module'") in " ".join(out.split())
+
+
+def test_check_imports_every_plugin_and_shows_import_errors_and_typos(failing_module):
+    host = load_plugins(env={}, extra=[
+        ("dist-w", "w", broken_plugin(f"{failing_module}:Sim", "needs_dep")),
+        ("dist-t", "t", broken_plugin("nlosfw.simulate.analytic:AnalyticSimulatr", "typo"))])
+    # both modules exist: the quick listing cannot tell, --check and NAME import them
+    _, listed = _command(host)
+    listed = " ".join(listed.split())
+    assert "│ needs_dep │ dist-w │ ok │" in listed and "│ typo │ dist-t │ ok │" in listed
+    status, out = _command(host, "--check")
+    assert status == 1
+    assert " ".join(_row(out, "│ simulator │ needs_dep")) == (
+        "│ simulator │ needs_dep │ dist-w │ broken: simulator plugin 'needs_dep' (from dist-w) "
+        "cannot be imported: No module named 'surely_missing_dependency_xyz' │ a broken plugin │")
+    assert ("broken: simulator plugin 'typo' (from dist-t) cannot be imported: AttributeError: "
+            "module 'nlosfw.simulate.analytic' has no attribute 'AnalyticSimulatr'") in " ".join(
+        _row(out, "│ simulator │ typo"))
+    status, out = _command(host, "simulator:typo")
+    assert status == 1 and "status        broken: simulator plugin 'typo'" in out
+    assert "(options unavailable until the plugin imports)" in out
+
+
+def test_a_run_with_a_broken_plugin_stops_with_one_line_before_any_output(
+        failing_module, tmp_path, monkeypatch, capsys):
+    import nlosfw.plugins
+    from nlosfw.cli import main
+
+    real = nlosfw.plugins.load_plugins
+    extra = [("dist-w", "w", broken_plugin(f"{failing_module}:Sim", "needs_dep"))]
+    monkeypatch.setattr(nlosfw.plugins, "load_plugins", lambda: real(extra=extra))
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulator=needs_dep", "scene=tiny", "model=interp"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("error: simulator plugin 'needs_dep' (from dist-w) cannot be imported: No "
+                   "module named 'surely_missing_dependency_xyz' (see: python -m nlosfw plugins "
+                   "simulator:needs_dep)\n")
+    assert not (tmp_path / "outputs").exists()
+
+
+def test_a_broken_entry_point_shows_as_broken(monkeypatch):
+    class BrokenEntryPoint:
+        name = "broken"
+        dist = types.SimpleNamespace(metadata={"Name": "nlosfw-broken"})
+
+        def load(self):
+            raise ImportError("No module named 'nowhere'")
+
+    real = manager_module.entry_points
+    monkeypatch.setattr(manager_module, "entry_points",
+                        lambda group: [*real(group=group), BrokenEntryPoint()])
+    host = load_plugins(env={})
+    status, out = _command(host)
+    assert status == 0
+    assert " ".join(_row(out, "│ ? │ broken")) == (
+        "│ ? │ broken │ nlosfw-broken │ broken: entry point failed to load: ImportError: No "
+        "module named 'nowhere' │ │")
+    assert _command(host, "--check")[0] == 1
+    status, out = _command(host, "broken")
+    assert status == 1 and "entry point failed to load" in out

@@ -11,10 +11,12 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import DataError
 from nlosfw.model.protocol import (
+    SpatialSampling,
     error_metrics,
     field_metrics,
     heldout_frequency_indices,
     parameter_data_ratio,
+    scattered_field,
     split_field,
 )
 from nlosfw.testing import fixtures
@@ -132,3 +134,94 @@ def test_parameter_data_ratio_matches_thesis_table_4_1():
     assert parameter_data_ratio(3362, split) == pytest.approx(100 * 3362 / 276_480)
     with pytest.raises(DataError):
         parameter_data_ratio(10, 0)
+
+
+@pytest.mark.parametrize("step, side", [(2, 32), (4, 16), (8, 8)])
+def test_sparse_grid_splits(step, side):
+    field = _field(64, 11)
+    split = split_field(field, spatial_step=step)
+    assert split.train_field.grid_shape == (side, side)
+    assert split.spatial_mask.sum() == side * side
+    assert split.undersampling == step * step
+    np.testing.assert_array_equal(split.raw_field(field).values, field.values[:, ::step, ::step])
+
+
+def test_random_split_keeps_a_seeded_fraction_as_scattered_samples():
+    field = _field(32, 11)
+    sampling = SpatialSampling(pattern="random", step=4, seed=3)   # 1/16 of 1024: 64
+    split = split_field(field, sampling)
+    mask = split.spatial_mask
+    assert mask.sum() == 64 and split.undersampling == 16
+    assert split.train_field.values.shape == (split.train_frequencies.size, 1, 64)
+    assert split.train_field.wall_xyz.shape == (1, 64, 3)
+    assert split.train_field.grid_spacing() is None
+    np.testing.assert_array_equal(split.train_field.values[:, 0],
+                                  field.values[split.train_frequencies][:, mask])
+    np.testing.assert_array_equal(split.train_field.wall_xyz[0], field.wall_xyz[mask])
+    # the same seed draws the same samples, another seed others; a fraction overrides 1/step^2
+    np.testing.assert_array_equal(split_field(field, sampling).spatial_mask, mask)
+    other = SpatialSampling(pattern="random", step=4, seed=4).mask((32, 32))
+    assert other.sum() == 64 and not np.array_equal(other, mask)
+    assert SpatialSampling(pattern="random", fraction=0.1).mask((32, 32)).sum() == 102
+    # raw: the full grid, zero where no sample was kept
+    raw = split.raw_field(field)
+    assert raw.grid_shape == (32, 32)
+    np.testing.assert_array_equal(raw.values[:, mask], field.values[:, mask])
+    assert not np.any(raw.values[:, ~mask])
+    # the protocol's sets follow the mask
+    m = field_metrics(field, field.values, split)
+    assert m["heldout_pixels"]["n_samples"] == split.train_frequencies.size * (1024 - 64)
+
+
+def test_spatial_sampling_rejects_bad_options():
+    for kwargs in ({"pattern": "spiral"}, {"step": 0}, {"fraction": 0.0}, {"fraction": 1.5}):
+        with pytest.raises(DataError) as err:
+            SpatialSampling(**kwargs)
+        assert "\n" not in str(err.value)
+    with pytest.raises(DataError, match="mask"):
+        scattered_field(_field(8, 3), np.ones((4, 4), dtype=bool))
+
+
+def test_raw_of_a_random_scan_images_exactly_the_kept_points():
+    """The zero-filled grid that ``raw`` images (fft imager) gives the rsd imager's direct sum
+    over the scattered (1, N) training samples, and the brute-force reference's."""
+    from nlosfw.image.fft import FFTImager
+    from nlosfw.image.rsd import RSDImager
+    from nlosfw.testing import reference
+
+    field = fixtures.point_phasor_field((0.1, -0.05, 0.5), n=12,
+                                        frequencies=np.linspace(4.0, 6.0, 4))
+    split = split_field(field, SpatialSampling(pattern="random", fraction=0.2, seed=1),
+                        spectral="none")
+    scattered = split.train_field
+    voxels = fixtures.tiny_voxels(depths=(0.45, 0.5), n=12)
+    by_fft = FFTImager({"precision": "double"}).reconstruct(split.raw_field(field), voxels)
+    by_rsd = RSDImager().reconstruct(scattered, voxels)
+    np.testing.assert_allclose(by_fft.intensity, by_rsd.intensity, rtol=1e-9,
+                               atol=1e-12 * by_rsd.intensity.max())
+    naive = reference.naive_rsd(scattered, voxels[:, ::4, ::4])
+    np.testing.assert_allclose(by_rsd.intensity[:, ::4, ::4], naive, rtol=1e-9,
+                               atol=1e-12 * naive.max())
+
+
+@pytest.mark.parametrize("step", [2, 4, 8])
+def test_raw_of_a_coarse_grid_is_the_zero_filled_full_grid(step):
+    """The fft imager images a 1/step sub-grid (voxel spacing = wall spacing / step) exactly
+    as the full grid with zeros between the kept samples, and as the rsd imager's sum."""
+    from nlosfw.image.fft import FFTImager
+    from nlosfw.image.rsd import RSDImager
+
+    field = fixtures.point_phasor_field((0.1, -0.05, 0.5), n=16,
+                                        frequencies=np.linspace(4.0, 6.0, 4))
+    split = split_field(field, spatial_step=step, spectral="none")
+    raw = split.raw_field(field)
+    assert raw.grid_shape == (16 // step, 16 // step)
+    zero_filled = field.replace(values=np.where(split.spatial_mask, field.values, 0))
+    voxels = fixtures.tiny_voxels(depths=(0.45, 0.5), n=16)
+    imager = FFTImager({"precision": "double"})
+    coarse = imager.reconstruct(raw, voxels).intensity
+    scale = coarse.max()
+    np.testing.assert_allclose(coarse, imager.reconstruct(zero_filled, voxels).intensity,
+                               rtol=1e-9, atol=1e-12 * scale)
+    np.testing.assert_allclose(coarse, RSDImager().reconstruct(raw, voxels).intensity,
+                               rtol=1e-9, atol=1e-12 * scale)

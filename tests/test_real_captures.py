@@ -19,7 +19,7 @@ from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
 from nlosfw.testing import layouts
 
-FAST = ["model=interp", "figures.enabled=false"]
+FAST = ["model=interp", "figures.enabled=false", "output.keep=[capture,reconstructions]"]
 #: The letter "L" of the acceptance scene: two rectangles 0.5 m from the wall.
 LETTER = [{"type": "rectangle", "position": [-0.1, 0.12, 0.5], "size": [0.2, 0.06]},
           {"type": "rectangle", "position": [-0.17, 0.0, 0.5], "size": [0.06, 0.18]}]
@@ -102,13 +102,13 @@ def test_a_file_run_is_labelled_with_its_file_and_format(workdir, letter_counts,
     from nlosfw.app import figures
 
     titles = []
-    original = figures._recon_figure
+    original = figures.reconstruction_figure
 
-    def recording(recons, scores, truth, title):
+    def recording(recons, scores, truth, title, *labels):
         titles.append(title)
-        return original(recons, scores, truth, title)
+        return original(recons, scores, truth, title, *labels)
 
-    monkeypatch.setattr(figures, "_recon_figure", recording)
+    monkeypatch.setattr(figures, "reconstruction_figure", recording)
     mat = layouts.write_lct(workdir / "data_l.mat", letter_counts)
     out, metrics = run(workdir, "labelled", f"capture.path={mat}", "model=interp",
                        "reconstruction.single_frequency_images=0")
@@ -116,7 +116,8 @@ def test_a_file_run_is_labelled_with_its_file_and_format(workdir, letter_counts,
     assert metrics["run"]["scene"] is None and metrics["run"]["simulator"] is None
     assert metrics["run"]["capture_file"] == str(mat)
     assert metrics["run"]["capture_format"] == "lct"
-    assert titles == ["data_l.mat (lct) from all frequencies"]
+    assert len(titles) == 1 and titles[0].startswith(
+        "capture data_l.mat (lct) · model interp · imager fft\nall ")
     assert "(format lct)" in stdout and "gate (format default)" in stdout
     config = yaml.safe_load((out / "config.yaml").read_text())
     assert "scene" not in config and "simulator" not in config

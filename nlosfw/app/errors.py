@@ -9,7 +9,7 @@ import traceback
 from rich.console import Console
 from rich.markup import escape
 
-from nlosfw.common.errors import one_line
+from nlosfw.common.errors import RunInterrupted, one_line
 
 log = logging.getLogger("nlosfw")
 
@@ -20,3 +20,10 @@ def report_user_error(err: BaseException) -> None:
     if os.environ.get("HYDRA_FULL_ERROR") == "1" or os.environ.get("NLOSFW_DEBUG") == "1":
         console.print(escape("".join(traceback.format_exception(err))), end="")
     console.print(f"[bold red]error:[/] {escape(one_line(err, whole=True))}")
+
+
+def report_interruption(err: RunInterrupted) -> None:
+    """Print ``interrupted by SIGINT`` (or SIGTERM) as one line on stderr."""
+    console = Console(stderr=True, soft_wrap=True, highlight=False)
+    console.print(f"[bold yellow]interrupted[/] by {err.signal_name}: stopped cleanly "
+                  f"(exit status {err.exit_status})")

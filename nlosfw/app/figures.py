@@ -2,8 +2,9 @@
 
 ``fields_f<k>.png``  amplitude, phase and amplitude error of each field at one
                      training and one held-out frequency (as in thesis figs. 4.2-5.5)
-``reconstructions.png``  max-intensity images of every source, their depth maps
-                     and their error against the reconstruction of the true field
+``reconstructions.png``  front views (amplitude, the maximum over depth: what the scores
+                     compare) of every source, their depth maps and their error
+                     against the reconstruction of the true field
 ``reconstructions_f<k>.png``  the same from frequency k alone (thesis figs. 5.1-5.5)
 ``loss.png``         training (and validation) loss of each field model
 """
@@ -18,15 +19,30 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from nlosfw.app.metrics import ImageScores, ReconstructionMetrics
-from nlosfw.app.results import RunResults
+from nlosfw.app.metrics import ImageScores, ReconstructionMetrics, RunInfo
+from nlosfw.app.results import CaptureResult, RunResults
 from nlosfw.app.run_dir import RunContext
 from nlosfw.image.reconstruction import Reconstruction
-from nlosfw.image.scores import normalise
+from nlosfw.image.scores import amplitude, normalise
 from nlosfw.transform.field import PhasorField
 
-_SOURCE_TITLES = {"true": "true field", "raw": "raw (training grid)", "model": "model",
+_SOURCE_TITLES = {"true": "true field", "raw": "raw (training samples)",
                   "interp": "interp baseline"}
+
+
+#: The viewpoint of every reconstruction image, stated on the figures.
+VIEWPOINT = ("view along depth z from the relay wall into the hidden scene; "
+             "x, y in the wall's coordinates (m)")
+
+
+def run_title(info: RunInfo, capture: CaptureResult | None = None) -> str:
+    """What ran, in one line: the scene and simulator (or the capture file), the model
+    and the imager (for figure titles)."""
+    if capture is not None:
+        source = f"{'capture' if capture.path is not None else 'scene'} {capture.label}"
+    else:
+        source = f"scene {info.scene} ({info.simulator})"
+    return f"{source} · model {info.model} · imager {info.imager}"
 
 
 def write_figures(ctx: RunContext, results: RunResults, scores: ReconstructionMetrics,
@@ -36,34 +52,41 @@ def write_figures(ctx: RunContext, results: RunResults, scores: ReconstructionMe
     The fields at each single frequency the reconstructions show, the
     reconstructions (whole band and single frequencies, labelled with their
     ``scores``, beside the scene's ground-truth depth when the capture has one)
-    and the loss curves.
+    and the loss curves; each titled with the run (:func:`run_title`).
     """
+    title = run_title(ctx.metrics.run, results.capture)
+    labels = source_labels(results)
     fields = results.fields.by_source()
     recons = results.reconstructions
     truth_depth = results.capture.truth_depth
-    run = results.capture.label
     for single in recons.single_frequency:
         ctx.write(f"figures/fields_f{single.index}.png",
-                  _saver(partial(_field_figure, fields, single.index, single.split, run), dpi),
+                  _saver(partial(field_figure, fields, single.index,
+                                 f"a {single.split} frequency\n{title}", labels), dpi),
                   kind="figure")
+    band = results.fields.true.frequencies
+    whole = (f"{title}\nall {band.size} frequencies "
+             f"({band.min():.2f}-{band.max():.2f} cycles/m)")
     ctx.write("figures/reconstructions.png",
-              _saver(lambda: _recon_figure(recons.by_source, scores.sources, truth_depth,
-                                           f"{run} from all frequencies"), dpi), kind="figure")
+              _saver(lambda: reconstruction_figure(recons.by_source, scores.sources,
+                                                   truth_depth, whole, labels), dpi),
+              kind="figure")
     for single in recons.single_frequency:
         entry = scores.single_frequency[str(single.index)]
-        title = (f"{run} from f = {entry.frequency:.3f} cycles/m only ({entry.split} "
-                 "frequency)")
+        label = (f"{title}\nthe single {entry.split} frequency f = {entry.frequency:.3f} "
+                 f"cycles/m (λ = {100 / entry.frequency:.1f} cm)")
         ctx.write(f"figures/reconstructions_f{single.index}.png",
-                  _saver(partial(_recon_figure, single.by_source, entry.sources, truth_depth,
-                                 title), dpi), kind="figure")
+                  _saver(partial(reconstruction_figure, single.by_source, entry.sources,
+                                 truth_depth, label, labels), dpi), kind="figure")
     histories = {m.source: m.report.history for m in results.fit.models if m.report.history}
     if histories:
-        ctx.write("figures/loss.png", _saver(lambda: _loss_figure(histories), dpi), kind="figure")
+        ctx.write("figures/loss.png", _saver(lambda: loss_figure(histories, title), dpi),
+                  kind="figure")
 
 
-def _saver(make: Callable[[], Any], dpi: int) -> Callable[[Path], None]:
+def _saver(make: Callable[[], Figure], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        make().savefig(path, dpi=dpi, format="png", bbox_inches="tight")
+        make().savefig(path, dpi=dpi, format="png")
 
     return save
 
@@ -75,98 +98,147 @@ def _extent(field: PhasorField) -> list[float]:
             w[0, 0, 1] - sp[0] / 2, w[-1, 0, 1] + sp[0] / 2]
 
 
-def _field_figure(fields: Mapping[str, PhasorField], index: int, label: str, run: str) -> Any:
+def source_labels(results: RunResults) -> dict[str, str]:
+    """How the figures name each source: the model by its plugin, a ``compare`` label with
+    its plugin (``pe (pe_torch)``), the others by their role."""
+    labels = {m.source: (m.plugin if m.source == "model" else
+                         _SOURCE_TITLES.get(m.source, f"{m.source} ({m.plugin})"))
+              for m in results.fit.models}
+    return {"true": _SOURCE_TITLES["true"], "raw": _SOURCE_TITLES["raw"], **labels}
+
+
+def field_figure(fields: Mapping[str, PhasorField], index: int, title: str,
+                 labels: Mapping[str, str] | None = None) -> Figure:
+    """Amplitude, phase and amplitude error of every field at frequency ``index``.
+
+    One row per field (``true`` first), one column per quantity; the panels of a column
+    share one colour scale and its colorbar. Axes are the relay wall's x, y (m).
+    """
     true = fields["true"]
     sources = list(fields)
+    names = {s: (labels or {}).get(s, _SOURCE_TITLES.get(s, s)) for s in sources}
     amp_max = float(np.abs(true.values[index]).max()) or 1.0
     errors = {s: np.abs(fields[s].values[index] - true.values[index]) / amp_max
               for s in sources if s not in ("true", "raw")}
     err_max = _shared_scale(errors.values())
-    fig = Figure(figsize=(9.5, 3.0 * len(sources)))
+    fig = Figure(figsize=(10.5, 2.9 * len(sources) + 0.9), layout="constrained")
     axes = fig.subplots(len(sources), 3, squeeze=False)
     freq = true.frequencies[index]
-    fig.suptitle(f"{run}: phasor field at f = {freq:.3f} cycles/m (λ = {100 / freq:.1f} cm), "
-                 f"{label} frequency")
+    fig.suptitle(f"phasor fields on the relay wall at f = {freq:.3f} cycles/m "
+                 f"(λ = {100 / freq:.1f} cm), {title}")
+    images = {}
     for row, source in enumerate(sources):
         values = fields[source].values[index]
         ext = _extent(fields[source])
         ax = axes[row]
-        im = ax[0].imshow(np.abs(values) / amp_max, origin="lower", extent=ext, vmin=0,
-                          vmax=1, cmap="magma")
-        ax[0].set_title(f"{_SOURCE_TITLES.get(source, source)}: |P| / max |P_true|")
-        fig.colorbar(im, ax=ax[0], fraction=0.046)
-        im = ax[1].imshow(np.angle(values), origin="lower", extent=ext, vmin=-np.pi,
-                          vmax=np.pi, cmap="twilight")
-        ax[1].set_title("phase (rad)")
-        fig.colorbar(im, ax=ax[1], fraction=0.046)
+        images["amp"] = ax[0].imshow(np.abs(values) / amp_max, origin="lower", extent=ext,
+                                     vmin=0, vmax=1, cmap="magma")
+        ax[0].set_title(f"{names[source]}: amplitude")
+        images["phase"] = ax[1].imshow(np.angle(values), origin="lower", extent=ext,
+                                       vmin=-np.pi, vmax=np.pi, cmap="twilight")
+        ax[1].set_title(f"{names[source]}: phase")
         if source in ("true", "raw"):
             ax[2].axis("off")
+            ax[2].text(0.5, 0.5, "(the reference)" if source == "true" else
+                       "(the training samples:\nno error to show)", ha="center", va="center",
+                       transform=ax[2].transAxes, color="0.4")
             continue
-        im = ax[2].imshow(errors[source], origin="lower", extent=ext, vmin=0, vmax=err_max,
-                          cmap="viridis")
-        ax[2].set_title("|P - P_true| / max |P_true|")
-        fig.colorbar(im, ax=ax[2], fraction=0.046)
+        images["err"] = ax[2].imshow(errors[source], origin="lower", extent=ext, vmin=0,
+                                     vmax=err_max, cmap="viridis")
+        ax[2].set_title(f"{names[source]}: amplitude error")
     for ax in axes.ravel():
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
-    fig.tight_layout()
+    fig.colorbar(images["amp"], ax=axes[:, 0], shrink=0.6, location="bottom",
+                 label="|P| / max |P of the true field|")
+    fig.colorbar(images["phase"], ax=axes[:, 1], shrink=0.6, location="bottom",
+                 label="arg P (rad)")
+    if "err" in images:
+        fig.colorbar(images["err"], ax=axes[:, 2], shrink=0.6, location="bottom",
+                     label="|P - P of the true field| / max |P of the true field|\n"
+                           "(99th percentile = top)")
     return fig
 
 
-def _recon_figure(recons: Mapping[str, Reconstruction], scores: Mapping[str, ImageScores],
-                  truth_depth: np.ndarray | None, title: str) -> Any:
+def reconstruction_figure(recons: Mapping[str, Reconstruction],
+                          scores: Mapping[str, ImageScores], truth_depth: np.ndarray | None,
+                          title: str, labels: Mapping[str, str] | None = None) -> Figure:
+    """Every source's reconstruction side by side, one column each (``true`` first).
+
+    Rows: the brightest voxel over depth (each image normalised to its maximum), the
+    depth of that voxel, and the difference from the true field's image (under ``true``:
+    the scene's ground-truth depth when known). Each row shares one colour scale and one
+    colorbar; the viewpoint (:data:`VIEWPOINT`) is stated under the title.
+    """
     sources = list(recons)
-    reference = normalise(recons["true"].max_intensity_image())
-    images = {s: normalise(recons[s].max_intensity_image()) for s in sources}
+    names = {s: (labels or {}).get(s, _SOURCE_TITLES.get(s, s)) for s in sources}
+    images = {s: normalise(amplitude(recons[s].max_intensity_image())) for s in sources}
+    reference = images["true"]
     errors = {s: np.abs(images[s] - reference) for s in sources if s != "true"}
     err_max = _shared_scale(errors.values())
-    fig = Figure(figsize=(3.3 * len(sources), 9.5))
+    fig = Figure(figsize=(3.1 * len(sources) + 1.2, 9.6), layout="constrained")
     axes = fig.subplots(3, len(sources), squeeze=False)
     vox = recons["true"].voxels
     ext = [vox[0, 0, 0, 0], vox[0, 0, -1, 0], vox[0, 0, 0, 1], vox[0, -1, 0, 1]]
     depths = recons["true"].depths
+    depth_scale = {"cmap": "viridis", "vmin": float(depths.min()), "vmax": float(depths.max())}
+    mappable = {}
     for col, source in enumerate(sources):
-        ssim = None if source not in scores else scores[source].ssim
-        label = "" if ssim is None or source == "true" else f"  (SSIM {ssim:.3f})"
-        axes[0, col].imshow(images[source], origin="lower", extent=ext, cmap="hot", vmin=0,
-                            vmax=1)
-        axes[0, col].set_title(f"{_SOURCE_TITLES.get(source, source)}{label}\n"
-                               "max intensity over depth")
+        mappable["intensity"] = axes[0, col].imshow(images[source], origin="lower", extent=ext,
+                                                    cmap="hot", vmin=0, vmax=1)
+        score = _score_label(scores.get(source), source)
+        axes[0, col].set_title(names[source] + (f"\n{score}" if score else ""), fontsize=10)
         depth = recons[source].depth_map(threshold=0.1)
-        im = axes[1, col].imshow(depth, origin="lower", extent=ext, cmap="viridis",
-                                 vmin=depths.min(), vmax=depths.max())
-        axes[1, col].set_title("depth of the maximum (m)")
-        fig.colorbar(im, ax=axes[1, col], fraction=0.046)
+        mappable["depth"] = axes[1, col].imshow(depth, origin="lower", extent=ext,
+                                                **depth_scale)
+        axes[1, col].set_title(f"{names[source]}: depth")
         if source == "true":
-            _truth_panel(fig, axes[2, col], truth_depth, depths, ext)
+            _truth_panel(axes[2, col], truth_depth, depth_scale, ext)
             continue
-        im = axes[2, col].imshow(errors[source], origin="lower", extent=ext, cmap="viridis",
-                                 vmin=0, vmax=err_max)
-        axes[2, col].set_title("|image - true field's image|")
-        fig.colorbar(im, ax=axes[2, col], fraction=0.046)
+        mappable["error"] = axes[2, col].imshow(errors[source], origin="lower", extent=ext,
+                                                cmap="viridis", vmin=0, vmax=err_max)
+        axes[2, col].set_title(f"{names[source]}: |image - true's|")
     for ax in axes.ravel():
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
-    fig.suptitle(f"reconstructions of {title}")
-    fig.tight_layout()
+    fig.colorbar(mappable["intensity"], ax=axes[0, :], shrink=0.9,
+                 label="amplitude (√intensity), max over depth\n(each image / its maximum)")
+    fig.colorbar(mappable["depth"], ax=axes[1, :], shrink=0.9,
+                 label="depth of the brightest voxel (m)\n(blank: below 10 % of the maximum)")
+    if "error" in mappable:
+        fig.colorbar(mappable["error"], ax=axes[2, :], shrink=0.9,
+                     label="|image - true field's image|\n(99th percentile = top)")
+    fig.suptitle(f"reconstructions from {title}\n{VIEWPOINT}")
     return fig
 
 
-def _truth_panel(fig: Any, ax: Any, truth_depth: np.ndarray | None, depths: np.ndarray,
+def _score_label(scores: ImageScores | None, source: str) -> str:
+    """'PSNR 31.2 dB, SSIM 0.812 vs true' for a scored source other than the reference
+    (nothing otherwise)."""
+    if scores is None or source == "true":
+        return ""
+    parts = [f"PSNR {scores.psnr:.1f} dB" if scores.psnr is not None else "",
+             f"SSIM {scores.ssim:.3f}" if scores.ssim is not None else ""]
+    shown = ", ".join(p for p in parts if p)
+    return f"{shown} vs true" if shown else ""
+
+
+def _truth_panel(ax: Any, truth_depth: np.ndarray | None, depth_scale: Mapping[str, Any],
                  extent: list[float]) -> None:
-    """The scene's ground-truth depth as seen from the wall (when the capture carries one).
+    """The scene's ground-truth depth as seen from the wall (when the capture carries one),
+    on the depth row's colour scale.
 
     The maps cover the wall, which is also the extent of the voxel planes.
     """
     if truth_depth is None:
         ax.axis("off")
+        ax.text(0.5, 0.5, "(no ground truth:\na captured scene)", ha="center", va="center",
+                transform=ax.transAxes, color="0.4")
         return
     depth = np.asarray(truth_depth, dtype=float).T          # (X, Y) -> (Y, X) image
     depth = np.where(depth > 0, depth, np.nan)
-    im = ax.imshow(depth, origin="lower", extent=extent, cmap="viridis",
-                   vmin=depths.min(), vmax=depths.max())
-    ax.set_title("ground truth: depth seen\nfrom the wall (m)")
-    fig.colorbar(im, ax=ax, fraction=0.046)
+    ax.imshow(depth, origin="lower", extent=extent, **depth_scale)
+    ax.set_title("ground truth: depth\n(depth row's colour scale)")
 
 
 def _shared_scale(maps: Any) -> float:
@@ -175,9 +247,11 @@ def _shared_scale(maps: Any) -> float:
     return max(values + [1e-12])
 
 
-def _loss_figure(histories: dict[str, list[dict[str, float]]]) -> Any:
-    fig = Figure(figsize=(6.5, 4))
+def loss_figure(histories: Mapping[str, list[dict[str, float]]], title: str) -> Figure:
+    """Training (and validation) loss of each field model against the step."""
+    fig = Figure(figsize=(6.5, 4.3), layout="constrained")
     ax = fig.subplots()
+    ax.set_title(f"training loss\n{title}", fontsize=10)
     for source, history in histories.items():
         steps = [h.get("step", i) for i, h in enumerate(history)]
         ax.plot(steps, [h.get("loss", np.nan) for h in history], label=f"{source} train")
@@ -189,5 +263,4 @@ def _loss_figure(histories: dict[str, list[dict[str, float]]]) -> Any:
     ax.set_ylabel("loss (normalised MSE)")
     ax.legend()
     ax.grid(alpha=0.3)
-    fig.tight_layout()
     return fig

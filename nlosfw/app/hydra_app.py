@@ -10,8 +10,11 @@ Three things happen before Hydra takes over:
    Hydra refuses ``+`` for a group that already has a default, so the ``+`` is
    dropped there and the override selects the option as ``group=name`` does;
 3. the configuration is composed with Hydra's compose API and validated (every group
-   choice, every plugin option, the scene, the run settings; one composition per swept
-   value), so a mistake ends with one line and exit status 2 before any output exists.
+   choice, every plugin option, the scene, the run settings, the memory the run needs;
+   one composition per swept value), and the output directories are checked (writable,
+   no live run or earlier run in the way, a resumed sweep's configuration unchanged: see
+   :mod:`nlosfw.app.output_dirs`), so a mistake ends with one line and exit status 2
+   before any output exists.
 """
 
 from __future__ import annotations
@@ -29,10 +32,12 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, NoReturn
 
-from nlosfw.app.settings import SELECTOR_GROUPS, RunConfig, run_settings
+from nlosfw.app.budget import check_memory
+from nlosfw.app.output_dirs import check_output_dirs
+from nlosfw.app.settings import OPTIONAL_GROUPS, SELECTOR_GROUPS, RunConfig, run_settings
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem, schema_class
-from nlosfw.plugins import PluginHost
+from nlosfw.plugins import PluginHost, PluginSpec
 from nlosfw.plugins.kinds import RUN_KINDS
 
 log = logging.getLogger(__name__)
@@ -120,7 +125,7 @@ def parse_command_line(args: Sequence[str]) -> argparse.Namespace:
     parser.add_argument("--info", "-i", nargs="?", const="all",
                         choices=["all", "config", "defaults", "defaults-tree", "plugins",
                                  "searchpath"])
-    parsed = parser.parse_args(list(args))
+    parsed = parser.parse_intermixed_args(list(args))  # flags anywhere, as Hydra allows
     modes = [flag for flag, given in (("--run", parsed.run), ("--multirun", parsed.multirun),
                                       ("--cfg", parsed.cfg), ("--info", parsed.info),
                                       ("--shell-completion", parsed.shell_completion)) if given]
@@ -140,11 +145,12 @@ def ensure_resolvers() -> None:
 
 
 def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "config",
-              multirun: bool = False) -> None:
+              multirun: bool = False, outputs: bool = True) -> None:
     """Compose and validate the config for every swept value; raise a one-line NlosfwError.
 
     Swept values come from the command line and, for multirun, from the
-    ``hydra.sweeper.params`` a preset or primary config declares.
+    ``hydra.sweeper.params`` a preset or primary config declares. With ``outputs`` (a
+    command that runs, not ``--cfg`` or ``--info``) the output directories are checked too.
     """
     from hydra import compose, initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
@@ -168,7 +174,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                                    job_name="nlosfw"):
             loader = GlobalHydra.instance().config_loader()
             for key, values in [(o.key_or_group, _values(o)) for o in parsed]:
-                _check_group_choice(key, values, loader)
+                _check_group_choice(key, values, loader, host)
 
             def composed(combo: list[str], with_hydra: bool = False) -> Any:
                 try:
@@ -177,15 +183,16 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                 except (HydraException, OmegaConfBaseException) as err:
                     raise composition_error(err) from None
 
+            first = fixed + [f"{key}={values[0]}" for key, values in sweeps if values]
+            declared: dict[str, Any] = {}
             if multirun:
                 given = {o.get_key_element() for o in parsed}
-                first = fixed + [f"{key}={values[0]}" for key, values in sweeps]
-                declared = composed(first, with_hydra=True).hydra.sweeper.params or {}
+                declared = dict(composed(first, with_hydra=True).hydra.sweeper.params or {})
                 for key, value in declared.items():
                     if key in given:
                         continue
                     (ov,) = OverridesParser.create().parse_overrides([f"{key}={value}"])
-                    _check_group_choice(ov.key_or_group, _values(ov), loader)
+                    _check_group_choice(ov.key_or_group, _values(ov), loader, host)
                     sweeps.append((key, _values(ov)))
             combos = itertools.product(*[[f"{key}={v}" for v in values]
                                          for key, values in sweeps])
@@ -196,6 +203,9 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                 log.warning("checked the first %d of %d sweep combinations before starting; "
                             "the others are checked when their run starts",
                             _MAX_PREFLIGHT_COMPOSITIONS, total)
+            if outputs:
+                check_output_dirs(composed, list(overrides), first,
+                                  [f"{k}={v}" for k, v in declared.items()], multirun)
     finally:
         GlobalHydra.instance().clear()
 
@@ -236,6 +246,7 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         if command:
             raise PluginError(f"{group} plugin '{spec.name}' needs packages that are not "
                               f"installed; run: {command}")
+        _check_imports(spec)
         spec.make_config(_plugin_options(node, spec.config_class()))
     for label, options in settings.compare.items():
         node = dict(options)
@@ -244,11 +255,13 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         if command:
             raise PluginError(f"compare.{label}: model plugin '{spec.name}' needs packages that "
                               f"are not installed; run: {command}")
+        _check_imports(spec)
         try:
             spec.make_config(node)
         except ConfigError as err:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
+    check_memory(cfg)  # before anything sized by the configuration is allocated
     from nlosfw.app.capture_source import check_files, load_file_capture, options_of
 
     if settings.capture.path is None:
@@ -277,7 +290,8 @@ def main(argv: Sequence[str]) -> int:
     register_configs(host)
     ensure_resolvers()
     if not (args.help or args.hydra_help or args.shell_completion or args.version):
-        preflight(args.overrides, host, args.config_name or "config", bool(args.multirun))
+        preflight(args.overrides, host, args.config_name or "config", bool(args.multirun),
+                  outputs=not (args.cfg or args.info or args.resolve))
     decorated = hydra.main(config_path=str(config_dir()), config_name="config",
                            version_base="1.3")(_task)
     saved = sys.argv
@@ -294,11 +308,24 @@ def _task(cfg: Any) -> float | None:
     from nlosfw.app.errors import report_user_error
     from nlosfw.app.pipeline import run_pipeline
 
+    logging.captureWarnings(True)  # library warnings go to run.log, not the console
     try:
         return run_pipeline(cfg)
     except NlosfwError as err:
         report_user_error(err)
-        raise SystemExit(2) from None
+        raise SystemExit(err.exit_status) from None
+    except MemoryError as err:  # the estimate let it through: still one line
+        report_user_error(NlosfwError(f"out of memory ({one_line(err)}); make the run "
+                                      "smaller (the sizes, or fewer sweep jobs at once)"))
+        raise SystemExit(1) from None
+
+
+def _check_imports(spec: PluginSpec) -> None:
+    """A one-line PluginError when a selected plugin's code cannot be imported (a typo in its
+    factory path, an import error, a missing dependency), before the run starts."""
+    problem = spec.import_problem()
+    if problem:
+        raise PluginError(f"{problem} (see: python -m nlosfw plugins {spec.qualified_name})")
 
 
 def _plugin_options(node: Any, config_class: type) -> Any:
@@ -316,15 +343,18 @@ def _values(override: Any) -> list[str]:
     return [] if value is None else [str(value)]
 
 
-def _check_group_choice(key: str, values: list[str], loader: Any) -> None:
-    """Refuse an unknown scene, plugin or preset name (``loader``: Hydra's ConfigLoader)."""
+def _check_group_choice(key: str, values: list[str], loader: Any, host: PluginHost) -> None:
+    """Refuse an unknown scene, plugin or preset name (``loader``: Hydra's ConfigLoader),
+    and a registered plugin whose config could not be stored because it is broken."""
     if key not in SELECTOR_GROUPS:
         return
     options = loader.get_group_options(key)
     for value in values:
-        if value in ("null", "None") and key == "experiment":
+        if value in ("null", "None") and key in OPTIONAL_GROUPS:
             continue
         if value not in options:
+            if key in _PLUGIN_GROUPS and (key, value) in host.registry:
+                _check_imports(host.registry.get(key, value))
             raise _unknown_choice(key, value, sorted(options))
 
 
@@ -334,3 +364,52 @@ def _unknown_choice(group: str, value: str, options: list[str]) -> ConfigError:
         group in _PLUGIN_GROUPS) else ""
     valid = ", ".join(options) or "(none)"
     return ConfigError("", f"unknown {noun} '{value}'; valid: {valid}{hint}")
+
+
+def compose_run_config(overrides: Sequence[str], host: PluginHost,
+                       config_name: str = "config") -> dict[str, Any]:
+    """The resolved configuration of one run, checked as the command line checks it.
+
+    ``overrides`` are the command line's (``+group=name`` included); a sweep, a flag or
+    a ``hydra.*`` setting is refused with a one-line :class:`ConfigError`.
+    """
+    from hydra import compose, initialize_config_dir
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    overrides = normalise_overrides([str(o) for o in overrides])
+    for text in overrides:
+        if text.startswith("-"):
+            raise ConfigError("overrides", f"{text!r} is a command-line flag; give only "
+                              "overrides such as 'model=interp'")
+    try:
+        parsed = OverridesParser.create().parse_overrides(overrides)
+    except HydraException as err:
+        raise ConfigError("overrides", f"cannot parse: {one_line(err, whole=True)}") from None
+    for ov, text in zip(parsed, overrides, strict=True):
+        if ov.is_sweep_override():
+            raise ConfigError("overrides", f"{text!r} is a sweep; one call runs one "
+                              "configuration: call it once per value, or sweep with "
+                              "python -m nlosfw -m ...")
+        if ov.key_or_group.split("/")[0].split(".")[0] == "hydra":
+            raise ConfigError("overrides", f"{text!r}: Hydra's own settings do not apply here "
+                              "(choose the run directory with output_dir=)")
+    register_configs(host)
+    ensure_resolvers()
+    preflight(overrides, host, config_name)
+    GlobalHydra.instance().clear()
+    try:
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3",
+                                   job_name="nlosfw"):
+            try:
+                cfg = compose(config_name=config_name, overrides=list(overrides))
+            except (HydraException, OmegaConfBaseException) as err:
+                raise composition_error(err) from None
+    finally:
+        GlobalHydra.instance().clear()
+    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    assert isinstance(plain, dict)  # a composed config is a mapping
+    return {str(k): v for k, v in plain.items()}

@@ -7,6 +7,10 @@ README are generated from these classes (:mod:`nlosfw.common.typed_json`).
 
 Every change to the layout (a key added, removed, renamed or retyped) is made here and
 bumps :data:`SCHEMA_VERSION`; ``tests/test_metrics_schema.py`` fails until it is bumped.
+
+Two runs of the same configuration and seed on the CPU write the same metrics.json except
+for the fields listed in :data:`TIMING_FIELDS` (wall-clock times and the start time); every
+other artefact of a run is byte-identical (``tests/hostile/test_determinism.py``).
 """
 
 from __future__ import annotations
@@ -23,13 +27,24 @@ from nlosfw.common.errors import DataError
 from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[3]
+SchemaVersion = Literal[5]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 3
+SCHEMA_VERSION: Final[SchemaVersion] = 5
 
-Status = Literal["running", "completed", "stopped", "failed"]
-"""``running`` only while the run is in progress: metrics.json is written when it ends."""
+Status = Literal["running", "completed", "stopped", "failed", "interrupted"]
+"""``running`` only while the run is in progress: metrics.json is written when it ends.
+``failed`` and ``interrupted`` (SIGINT, SIGTERM) runs say where and why in ``error``."""
 
+#: The fields of metrics.json that differ between two runs of the same configuration and
+#: seed (dotted paths; ``*`` stands for any key): wall-clock times and the start time.
+TIMING_FIELDS: Final = (
+    "run.started",
+    "timings",
+    "field.*.fit.seconds",
+    "field.*.predict_seconds",
+    "reconstruction.sources.*.seconds",
+    "reconstruction.single_frequency.*.sources.*.seconds",
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -39,7 +54,10 @@ class RunInfo:
 
     dir: str
     nlosfw_version: str
-    started: str = documented("local start time, ISO 8601 (%Y-%m-%dT%H:%M:%S%z)")
+    started: str = documented("local start time, ISO 8601 (%Y-%m-%dT%H:%M:%S%z); a timing")
+    config_hash: str = documented("SHA-256 of the configuration without the run-control "
+                                  "options (cache, limits, output.overwrite): a resumed "
+                                  "sweep skips a finished run only when it matches")
     scene: str | None = documented("the simulated scene (null for a run from a file)")
     simulator: str | None = documented("its simulator (null for a run from a file)")
     capture_file: str | None = optional("the capture file read (capture.path)")
@@ -95,11 +113,27 @@ class TransformMetrics:
 
 
 @dataclass(frozen=True, kw_only=True)
+class SplitMetrics:
+    """Which samples the field models trained on (the run's ``split``)."""
+
+    pattern: Literal["grid", "random"]
+    spatial_step: int = documented("grid: every k-th wall sample in x and y")
+    spatial_fraction: float | None = optional("random: the fraction of wall samples kept")
+    seed: int | None = optional("random: the seed that drew the samples")
+    wall_samples: int = documented("wall samples of the full capture")
+    train_samples: int = documented("wall samples the models trained on (and raw images)")
+    undersampling: float = documented("wall_samples / train_samples (4, 16, 64 for steps "
+                                      "2, 4, 8)")
+    train_frequencies: int
+    heldout_frequencies: int
+
+
+@dataclass(frozen=True, kw_only=True)
 class FitMetrics:
     """How a field model's fit went."""
 
     steps: int
-    seconds: float
+    seconds: float = documented("wall-clock time of the fit; a timing")
     final_loss: float | None
     best_val_loss: float | None
     stopped_early: bool
@@ -160,10 +194,12 @@ class FieldMetrics:
     """One field model of the run (``model``, ``interp`` or a ``compare`` label)."""
 
     plugin: str
+    seed: int | None = optional("the model's seed option (neural models: initialisation and "
+                                "batches)")
     n_parameters: int
     training_values: int = documented("real values trained on (2 per complex sample)")
     parameters_per_value: float
-    predict_seconds: float | None = optional()
+    predict_seconds: float | None = optional("wall-clock time of the prediction; a timing")
     fit: FitMetrics
     splits: SplitErrors | None = optional()
     denoising: DenoisingMetrics | None = optional()
@@ -171,13 +207,20 @@ class FieldMetrics:
 
 @dataclass(frozen=True, kw_only=True)
 class ImageScores:
-    """A reconstruction's max-intensity image against the true field's, both normalised
-    to 1 (null where undefined: PSNR of identical images, SSIM of tiny ones)."""
+    """A reconstruction against the full capture's (source ``true``), on amplitudes (the
+    square root of the intensity) each normalised to its maximum, with scikit-image's
+    PSNR and SSIM at their defaults (null where undefined: PSNR of identical images,
+    SSIM of images under 7 pixels a side)."""
 
-    rmse: float | None
-    psnr: float | None
-    ssim: float | None
-    seconds: float | None = optional("time to reconstruct")
+    rmse: float | None = documented("of the front view: the maximum over depth")
+    psnr: float | None = documented("dB, of the front view")
+    ssim: float | None = documented("of the front view")
+    volume_psnr: float | None = documented("dB, of the whole (z, y, x) volume")
+    volume_ssim: float | None = documented("of the whole (z, y, x) volume")
+    depth_rmse_m: float | None = optional(
+        "RMS error (m) of the depth of each column's brightest voxel against the scene's "
+        "true depth, over the pixels with a surface (scenes with ground truth)")
+    seconds: float | None = optional("time to reconstruct; a timing")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -206,8 +249,17 @@ class ReconstructionMetrics:
 
 
 @dataclass(frozen=True, kw_only=True)
+class RunError:
+    """Why a run did not finish: the stage it was in and the one-line reason."""
+
+    stage: str | None = documented("the stage that was running (null: before the first)")
+    message: str = documented("the one-line error, or the signal that interrupted the run")
+    signal: str | None = optional("SIGINT or SIGTERM, for an interrupted run")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Timings:
-    """Seconds per stage that ran, and in total."""
+    """Seconds per stage that ran, and in total (all timings)."""
 
     capture: float | None = optional()
     transform: float | None = optional()
@@ -227,9 +279,11 @@ class RunMetrics:
     run: RunInfo
     capture: CaptureMetrics | None = optional()
     transform: TransformMetrics | None = optional()
+    split: SplitMetrics | None = optional()
     field: dict[str, FieldMetrics] | None = optional(
         "by source: model, interp and every compare label", key="source")
     reconstruction: ReconstructionMetrics | None = optional()
+    error: RunError | None = optional("where and why a failed or interrupted run ended")
     timings: Timings = dataclasses.field(default_factory=Timings)
 
     def to_json(self) -> dict[str, Any]:
@@ -266,6 +320,30 @@ class RunMetrics:
     def image_scores(self, source: str) -> ImageScores | None:
         """The reconstruction scores of one source, if it was imaged."""
         return None if self.reconstruction is None else self.reconstruction.sources.get(source)
+
+
+def without_timings(data: Mapping[str, Any]) -> dict[str, Any]:
+    """A copy of a metrics.json object without the :data:`TIMING_FIELDS`: equal for two runs
+    of the same configuration and seed on the CPU."""
+
+    def drop(node: Any, path: list[str]) -> Any:
+        if not isinstance(node, Mapping):
+            return node
+        head, rest = path[0], path[1:]
+        keys = list(node) if head == "*" else [head]
+        out = dict(node)
+        for key in keys:
+            if key in out:
+                if rest:
+                    out[key] = drop(out[key], rest)
+                else:
+                    del out[key]
+        return out
+
+    result: Any = json.loads(json.dumps(data))
+    for dotted in TIMING_FIELDS:
+        result = drop(result, dotted.split("."))
+    return dict(result)
 
 
 def metrics_schema() -> dict[str, Any]:

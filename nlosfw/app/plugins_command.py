@@ -1,32 +1,225 @@
-"""``python -m nlosfw plugins``: a table of every registered plugin."""
+"""``python -m nlosfw plugins [NAME | --check]``: the installed plugins, or one in detail.
+
+The listing checks that each plugin's factory and config modules can be found without
+importing them (:meth:`~nlosfw.plugins.PluginSpec.find_problem`), so it stays fast and
+imports no heavy backend; ``--check`` and ``plugins NAME`` import them fully. A plugin
+whose code cannot be found or imported is shown as broken, with the reason.
+"""
 
 from __future__ import annotations
 
+import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any, NoReturn
+
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
-from nlosfw.plugins import PluginHost
+from nlosfw.common.config_docs import OptionDoc, option_docs
+from nlosfw.common.errors import ConfigError
+from nlosfw.plugins import CAPABILITIES, PluginHost, PluginSpec
+
+#: Exit status of ``plugins --check`` and ``plugins NAME`` when a plugin is broken.
+BROKEN_EXIT_STATUS = 1
+
+USAGE = """\
+python -m nlosfw plugins            every installed plugin, its distribution and status
+python -m nlosfw plugins --check    the same, importing every plugin (exit 1 if one is broken)
+python -m nlosfw plugins NAME       one plugin: options, capabilities, conformance checks
+                                    (KIND:NAME where two kinds use the name, e.g. imager:fft)"""
 
 
-def plugins_table(host: PluginHost) -> Table:
-    """Kind, name, distribution, whether its dependencies import (else the pip command)."""
+@dataclass(frozen=True)
+class Status:
+    """Whether a plugin can be used: ``ok``, ``missing`` (a pip command) or ``broken``."""
+
+    state: str
+    detail: str = ""
+
+    def markup(self) -> str:
+        if self.state == "ok":
+            return "[green]ok[/]"
+        colour = "yellow" if self.state == "missing" else "red"
+        return f"[{colour}]{self.state}: {escape(self.detail)}[/]"
+
+
+def plugin_status(spec: PluginSpec, full: bool = False) -> Status:
+    """The plugin's status: missing requirements first, then its code found (``full``:
+    imported)."""
+    command = spec.install_command()
+    if command:
+        return Status("missing", command)
+    problem = spec.import_problem() if full else spec.find_problem()
+    return Status("broken", problem) if problem else Status("ok")
+
+
+def plugins_table(host: PluginHost, full: bool = False) -> Table:
+    """Kind, name, distribution, status (ok, missing: the pip command, broken: why)."""
     table = Table(title="nlosfw plugins", title_justify="left")
     table.add_column("kind", style="cyan", no_wrap=True)
     table.add_column("name", style="bold")
     table.add_column("distribution")
-    table.add_column("dependencies")
+    table.add_column("status", overflow="fold")
     table.add_column("description", overflow="fold")
     for spec in host.registry.specs():
-        command = spec.install_command()
-        status = f"[red]missing: {command}[/]" if command else "[green]ok[/]"
-        table.add_row(spec.kind.value, spec.name, spec.distribution, status, spec.description)
+        table.add_row(spec.kind.value, spec.name, spec.distribution,
+                      plugin_status(spec, full).markup(), escape(spec.description))
     for name, reason in sorted(host.broken.items()):
-        table.add_row("?", name, reason.split(":", 1)[0], "[red]failed to load[/]", reason)
+        dist, _, why = reason.partition(": ")
+        table.add_row("?", name, dist, f"[red]broken: entry point failed to load: "
+                                       f"{escape(why)}[/]", "")
     return table
 
 
-def plugins_command(host: PluginHost, console: Console | None = None) -> int:
-    """Print the table; exit status 0."""
+def plugins_command(host: PluginHost, console: Console | None = None,
+                    args: Sequence[str] = ()) -> int:
+    """Run ``plugins [NAME | --check | --help]``; returns the exit status."""
     console = console or Console()
-    console.print(plugins_table(host))
-    return 0
+    parsed = _parse(args)
+    if parsed.help:
+        console.print(USAGE, highlight=False, markup=False)
+        return 0
+    if parsed.name:
+        return _show_one(host, parsed.name, console)
+    console.print(plugins_table(host, full=parsed.check))
+    if not parsed.check:
+        console.print("Details of one plugin: python -m nlosfw plugins NAME; import every "
+                      "plugin: python -m nlosfw plugins --check", highlight=False)
+        return 0
+    broken = [s for s in host.registry.specs() if plugin_status(s, True).state == "broken"]
+    return BROKEN_EXIT_STATUS if broken or host.broken else 0
+
+
+def plugin_details(spec: PluginSpec) -> list[Any]:
+    """What ``plugins NAME`` prints for ``spec`` (imports the plugin): rich renderables."""
+    status = plugin_status(spec, full=True)
+    out: list[Any] = [
+        f"[bold]{spec.qualified_name}[/]  {escape(spec.description)}",
+        f"  kind          {spec.kind.value} (select it with {spec.kind.value}={spec.name})",
+        f"  distribution  {spec.distribution} {_version(spec.distribution)}",
+        f"  entry point   {spec.entry_point or '-'}",
+        f"  factory       {escape(_describe(spec.factory))}",
+        f"  status        {status.markup()}",
+    ]
+    options: tuple[OptionDoc, ...] = ()
+    if status.state == "ok":
+        options = option_docs(spec.config_class())
+        out.append(_options_table(spec, options))
+    else:
+        out.append("  (options unavailable until the plugin imports)")
+    out.append(_capabilities_text(spec))
+    out.append(_plan_text(spec))
+    out.append("[bold]example[/]")
+    out.append(f"  {escape(example_command(spec, options))}")
+    out.append(f"  python -m nlosfw.testing {spec.qualified_name}       # run its conformance "
+               "checks")
+    return out
+
+
+def example_command(spec: PluginSpec, options: Sequence[OptionDoc]) -> str:
+    """A command that selects the plugin and sets one of its numeric options."""
+    command = f"python -m nlosfw {spec.kind.value}={spec.name}"
+    numeric = next((o for o in options if o.name not in ("seed", "device")
+                    and o.type in ("int", "float") and o.default is not None), None)
+    if numeric is not None:
+        command += f" {spec.kind.value}.{numeric.name}={numeric.default}"
+    return command
+
+
+# --------------------------------------------------------------------------- helpers
+def _show_one(host: PluginHost, name: str, console: Console) -> int:
+    if name in host.broken and not any(s.name == name for s in host.registry.specs()):
+        console.print(f"[bold]{escape(name)}[/]: [red]broken: entry point failed to load: "
+                      f"{escape(host.broken[name])}[/]")
+        return BROKEN_EXIT_STATUS
+    spec = host.registry.find(name)
+    for item in plugin_details(spec):
+        console.print(item, highlight=False)
+    return 0 if plugin_status(spec, full=True).state != "broken" else BROKEN_EXIT_STATUS
+
+
+def _options_table(spec: PluginSpec, options: Sequence[OptionDoc]) -> Table:
+    table = Table(title=f"options ({spec.kind.value}.<option>=<value>)", title_justify="left",
+                  box=None, pad_edge=False, title_style="bold")
+    table.add_column("option", style="cyan", no_wrap=True)
+    table.add_column("type")
+    table.add_column("default")
+    table.add_column("unit")
+    table.add_column("description", overflow="fold")
+    for o in options:
+        table.add_row(o.name, escape(o.type), escape(_yaml(o.default)), escape(o.unit),
+                      escape(o.summary or "(undocumented)"))
+    return table
+
+
+def _capabilities_text(spec: PluginSpec) -> str:
+    origin = "declared" if spec.declared_capabilities is not None else \
+        "declares none: the kind's defaults"
+    meanings = CAPABILITIES.get(spec.kind.value, {})
+    lines = [f"[bold]capabilities[/] ({origin})"]
+    for capability in sorted(spec.capabilities, key=lambda c: c.value):
+        lines.append(f"  {capability.value:<17} {escape(meanings.get(capability, ''))}")
+    return "\n".join(lines)
+
+
+def _plan_text(spec: PluginSpec) -> str:
+    from nlosfw.common.errors import NlosfwError
+    from nlosfw.testing import check_plan
+
+    try:
+        plan = check_plan(spec)
+    except NlosfwError as err:
+        return f"[bold]conformance kit[/]: [red]{escape(str(err))}[/]"
+    lines = [f"[bold]conformance kit[/]: {len(plan.applied)} checks apply, "
+             f"{len(plan.skipped)} skipped"]
+    lines += [f"  run   {escape(p.name)}" for p in plan.applied]
+    lines += [f"  skip  {escape(p.name)}: {escape(p.skip_reason)}" for p in plan.skipped]
+    return "\n".join(lines)
+
+
+def _version(distribution: str) -> str:
+    try:
+        return version(distribution)
+    except PackageNotFoundError:
+        return "(version unknown: not an installed distribution)"
+
+
+def _describe(factory: Any) -> str:
+    if isinstance(factory, str):
+        return factory
+    paths = getattr(factory, "import_paths", lambda: ())()
+    if paths:
+        return f"{type(factory).__name__} ({', '.join(paths)})"
+    return f"{getattr(factory, '__module__', '?')}:{getattr(factory, '__qualname__', factory)}"
+
+
+def _yaml(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, list):
+        return "[" + ", ".join(_yaml(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_yaml(v)}" for k, v in value.items()) + "}"
+    return str(value)
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> NoReturn:
+        raise ConfigError("", f"plugins: {message}; usage: python -m nlosfw plugins "
+                              "[NAME | --check]")
+
+
+def _parse(args: Sequence[str]) -> argparse.Namespace:
+    parser = _Parser(prog="python -m nlosfw plugins", add_help=False, allow_abbrev=False)
+    parser.add_argument("name", nargs="?")
+    parser.add_argument("--check", action="store_true")
+    parser.add_argument("--help", "-h", action="store_true")
+    parsed = parser.parse_args(list(args))
+    if parsed.name and parsed.check:
+        parser.error("give NAME or --check, not both")
+    return parsed

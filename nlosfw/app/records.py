@@ -10,6 +10,7 @@ from typing import Any
 import yaml
 
 from nlosfw.app.metrics import RunMetrics
+from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError
 
 
@@ -49,6 +50,6 @@ def _yaml(path: Path) -> Any:
     if not path.exists():
         return None
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
+        return yaml_safe.load(path.read_text(encoding="utf-8"))  # bounded: no alias bombs
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
         raise DataError(f"{path}: unreadable ({' '.join(str(err).split())})") from None

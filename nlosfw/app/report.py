@@ -1,10 +1,22 @@
 """``python -m nlosfw report DIR``: aggregate every run under DIR (a sweep) into one report.
 
-Writes ``report.csv`` (one row per run), ``report.md`` (the same as a markdown
-table, plus thesis comparison tables when presets carry reference numbers) and
-``report.png`` (held-out field error and reconstruction SSIM per run, model
-against the interp baseline) into ``DIR/report/`` (or ``report-2``, ... if that
-exists: earlier reports are never overwritten).
+Writes into ``DIR/report/`` (or ``report-2``, ... if that exists: earlier reports are
+never overwritten):
+
+* ``report.csv``: one row per run (its scene or capture file, sparsity, seed, field
+  errors and reconstruction scores);
+* ``study.csv``: the runs grouped over seeds (:mod:`nlosfw.app.study`): per condition,
+  sparsity and source, the mean, standard deviation, minimum and maximum of each score;
+* ``report.png``: reconstruction quality against the swept parameter, one line per
+  field model with ``raw`` and ``interp`` on every panel. A sweep over sparsity gets the
+  study's figure (PSNR, SSIM, depth RMSE against the undersampling factor, spread over
+  seeds, :func:`nlosfw.app.study.study_figure`); any other sweep the quality plot of
+  :mod:`nlosfw.app.quality` (SSIM, PSNR and the held-out field error against the swept
+  key);
+* ``report.md``: the figure's numbers and every run as markdown tables, plus thesis
+  comparison tables when presets carry reference numbers;
+* ``report.html``: all of it in one self-contained page, linking each run's own
+  ``report.html``.
 """
 
 from __future__ import annotations
@@ -14,14 +26,25 @@ import csv
 import io
 import logging
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 from rich.console import Console
 from rich.table import Table
 
-from nlosfw.app.metrics import ErrorMetrics, FieldMetrics, ImageScores, SplitErrors
+from nlosfw.app.html_report import sweep_report
+from nlosfw.app.metrics import ErrorMetrics, FieldMetrics, ImageScores, SplitErrors, SplitMetrics
+from nlosfw.app.quality import (
+    QualityTable,
+    quality_figure,
+    quality_points,
+    quality_table,
+    quality_tables,
+    sweep_layout,
+)
 from nlosfw.app.records import RunRecord, find_runs, read_run
+from nlosfw.app.study import SCORES, study_csv_rows, study_figure, study_rows, study_table
 from nlosfw.app.tables import markdown_table
 from nlosfw.app.thesis import thesis_comparison
 from nlosfw.common.errors import ConfigError, DataError
@@ -58,6 +81,30 @@ def _image(source: str, get: Callable[[ImageScores], Any]) -> Column:
     return column
 
 
+def _split(get: Callable[[SplitMetrics], Any]) -> Column:
+    """A column from the run's split (empty where the run stopped before it)."""
+    def column(record: RunRecord) -> Any:
+        split = record.metrics.split
+        return None if split is None else get(split)
+
+    return column
+
+
+def _noise(record: RunRecord) -> Any:
+    capture = record.metrics.capture
+    return None if capture is None or not capture.noise else capture.noise.get("model")
+
+
+def _scores(source: str) -> tuple[tuple[str, Column], ...]:
+    """The reconstruction scores of ``source``, one column each."""
+    return tuple((f"{source}_{name}", _image(source, partial(_attr, name=name)))
+                 for name in SCORES)
+
+
+def _attr(scores: ImageScores, name: str) -> Any:
+    return getattr(scores, name)
+
+
 #: Columns of the report, in order: (column name, its value in a run's record).
 COLUMNS: tuple[tuple[str, Column], ...] = (
     ("run", lambda r: r.name),
@@ -66,8 +113,13 @@ COLUMNS: tuple[tuple[str, Column], ...] = (
     ("simulator", lambda r: r.metrics.run.simulator),
     ("capture_file", lambda r: r.metrics.run.capture_file),
     ("capture_format", lambda r: r.metrics.run.capture_format),
+    ("noise", _noise),
     ("model", lambda r: r.metrics.run.model),
+    ("seed", _field("model", lambda e: e.seed)),
     ("imager", lambda r: r.metrics.run.imager),
+    ("pattern", _split(lambda s: s.pattern)),
+    ("undersampling", _split(lambda s: s.undersampling)),
+    ("train_samples", _split(lambda s: s.train_samples)),
     ("overrides", lambda r: " ".join(r.overrides)),
     ("n_parameters", _field("model", lambda e: e.n_parameters)),
     ("parameters_per_value", _field("model", lambda e: e.parameters_per_value)),
@@ -79,11 +131,10 @@ COLUMNS: tuple[tuple[str, Column], ...] = (
     ("interp_heldout_pixels_nmse_db", _nmse("interp", lambda s: s.heldout_pixels)),
     ("interp_heldout_freqs_nmse_db", _nmse("interp", lambda s: s.heldout_frequencies)),
     ("interp_all_nmse_db", _nmse("interp", lambda s: s.all)),
-    ("model_ssim", _image("model", lambda s: s.ssim)),
-    ("interp_ssim", _image("interp", lambda s: s.ssim)),
-    ("raw_ssim", _image("raw", lambda s: s.ssim)),
-    ("model_psnr", _image("model", lambda s: s.psnr)),
-    ("interp_psnr", _image("interp", lambda s: s.psnr)),
+    *_scores("model"),
+    *_scores("interp"),
+    *_scores("raw"),
+    ("true_depth_rmse_m", _image("true", lambda s: s.depth_rmse_m)),
     ("total_seconds", lambda r: r.metrics.timings.total),
 )
 
@@ -102,9 +153,13 @@ def report_rows(records: Sequence[RunRecord]) -> list[dict[str, str]]:
 
 
 def to_csv(rows: list[dict[str, str]]) -> str:
+    return csv_text([c for c, _ in COLUMNS], [[row[c] for c, _ in COLUMNS] for row in rows])
+
+
+def csv_text(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=[c for c, _ in COLUMNS])
-    writer.writeheader()
+    writer = csv.writer(buffer)
+    writer.writerow(header)
     writer.writerows(rows)
     return buffer.getvalue()
 
@@ -112,35 +167,6 @@ def to_csv(rows: list[dict[str, str]]) -> str:
 def to_markdown(rows: list[dict[str, str]], columns: Sequence[str] | None = None) -> str:
     columns = list(columns or [c for c, _ in COLUMNS])
     return markdown_table(columns, [[row.get(c, "") for c in columns] for row in rows])
-
-
-def comparison_figure(records: Sequence[RunRecord], path: Path) -> None:
-    """Held-out NMSE (model vs interp) and reconstruction SSIM per run, as a PNG."""
-    import numpy as np
-    from matplotlib.figure import Figure
-
-    labels = [f"{r.name}\n{r.metrics.run.model or ''}" for r in records]
-    x = np.arange(len(records))
-
-    def series(column: Column) -> np.ndarray:
-        return np.array([np.nan if (v := column(r)) is None else v for r in records],
-                        dtype=float)
-
-    fig = Figure(figsize=(max(8, 1.2 * len(records) + 4), 4.5))
-    axes = fig.subplots(1, 2)
-    width = 0.38
-    for offset, source in ((-width / 2, "model"), (width / 2, "interp")):
-        axes[0].bar(x + offset, series(_nmse(source, lambda s: s.heldout_pixels)), width,
-                    label=source)
-        axes[1].bar(x + offset, series(_image(source, lambda s: s.ssim)), width, label=source)
-    axes[0].set_ylabel("held-out pixels NMSE (dB, lower is better)")
-    axes[1].set_ylabel("reconstruction SSIM vs true field (higher is better)")
-    for ax in axes:
-        ax.set_xticks(x, labels, rotation=45, ha="right", fontsize=8)
-        ax.legend()
-        ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, format="png")
 
 
 def _free_dir(root: Path) -> Path:
@@ -152,23 +178,55 @@ def _free_dir(root: Path) -> Path:
     return target
 
 
-def write_report(root: Path) -> tuple[Path, list[dict[str, str]]]:
-    """Write report.csv, report.md, report.png for the runs under ``root``; return the dir."""
+def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str, str]]]:
+    """Write report.csv, report.md, report.png and report.html for the runs under ``root``
+    into a new
+    report directory (returned, with the table's rows); ``x`` is the override key on the
+    quality plot's x axis (default: chosen by :func:`nlosfw.app.quality.sweep_layout`)."""
     runs = find_runs(root)
     if not runs:
         raise DataError(f"{root}: holds no run (no metrics.json below it)")
     records = [read_run(r, root) for r in runs]
     rows = report_rows(records)
+    layout = sweep_layout(records, x)
+    points = quality_points(records, layout)
+    study = study_rows(records)
+    # a sweep over sparsity is a study: its figure and table aggregate the seeds per
+    # condition and sparsity; any other sweep gets the quality plot against its key
+    by_sparsity = x is None and len({(r.pattern, r.undersampling) for r in study}) > 1
     out = _free_dir(root)
     out.mkdir(parents=True)
     write_text(out / "report.csv", to_csv(rows))
-    markdown = f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n" + to_markdown(rows)
-    tables = thesis_comparison(records)
-    if tables:
-        markdown += "\n## Next to the thesis\n\n" + tables
+    write_text(out / "study.csv", csv_text(*study_csv_rows(study)))
+    markdown = f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n"
+    if by_sparsity:
+        header, cells = study_table(study)
+        tables = [QualityTable(heading="reconstruction quality against sparsity, mean ± "
+                                       "standard deviation over seeds",
+                               header=tuple(header), rows=tuple(tuple(c) for c in cells))]
+        markdown += ("## Reconstruction quality against sparsity\n\n"
+                     "![reconstruction quality against sparsity](report.png)\n\n"
+                     "Scores against the full capture's reconstruction (amplitudes, each "
+                     "normalised to its maximum; scikit-image PSNR and SSIM at their "
+                     "defaults), mean ± standard deviation over the runs of each row "
+                     "(seeds); `true` is the full capture itself.\n\n"
+                     + markdown_table(header, cells) + "\n")
+    else:
+        tables = quality_tables(points, layout)
+        markdown += (f"## Quality against {layout.x_label}\n\n![quality against "
+                     f"{layout.x_label}](report.png)\n\n{quality_table(points, layout)}\n")
+    markdown += f"## Every run\n\n{to_markdown(rows)}"
+    thesis_tables = thesis_comparison(records)
+    if thesis_tables:
+        markdown += "\n## Next to the thesis\n\n" + thesis_tables
     write_text(out / "report.md", markdown)
     with atomic_path(out / "report.png") as tmp:
-        comparison_figure(records, tmp)
+        if by_sparsity:
+            study_figure(study, tmp)
+        else:
+            quality_figure(points, layout).savefig(tmp, dpi=110, format="png")
+    write_text(out / "report.html", sweep_report(root, out, records, rows,
+                                                 (out / "report.png").read_bytes(), tables))
     return out, rows
 
 
@@ -176,15 +234,19 @@ def report_command(argv: Sequence[str]) -> int:
     parser = argparse.ArgumentParser(prog="python -m nlosfw report",
                                      description="Aggregate the runs of a sweep directory.")
     parser.add_argument("directory", help="a sweep (multirun) directory or any parent of runs")
+    parser.add_argument("--x", metavar="KEY", default=None,
+                        help="the swept override on the quality plot's x axis (default: the "
+                             "numeric swept key with the most values, else another swept key)")
     args = parser.parse_args(list(argv))
     root = Path(args.directory).expanduser()
     if not root.is_dir():
         raise ConfigError("directory", f"{root} is not a directory")
-    out, rows = write_report(root)
+    out, rows = write_report(root, args.x)
     console = Console()
     table = Table(title=f"{len(rows)} runs under {root}", title_justify="left")
-    shown = ("run", "status", "scene", "model", "model_heldout_pixels_nmse_db",
-             "interp_heldout_pixels_nmse_db", "model_ssim", "interp_ssim", "fit_seconds")
+    shown = ("run", "status", "scene", "model", "seed", "undersampling", "raw_psnr",
+             "interp_psnr", "model_psnr", "raw_ssim", "interp_ssim", "model_ssim",
+             "fit_seconds")
     for column in shown:
         table.add_column(column)
     for row in rows:

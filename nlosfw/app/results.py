@@ -7,8 +7,9 @@ fit -> :class:`FitResult` (the :class:`~nlosfw.model.FieldSplit` and one
 run's numbers are :class:`nlosfw.app.metrics.RunMetrics`.
 
 A *source* is a field's role in the run: ``true`` (the full field), ``raw`` (its
-training-grid samples at every frequency), ``model``, ``interp`` and the ``compare``
-labels. Mappings by source keep that order and are read-only.
+training samples at every frequency, :meth:`~nlosfw.model.FieldSplit.raw_field`),
+``model``, ``interp`` and the ``compare`` labels. Mappings by source keep that order
+and are read-only.
 """
 
 from __future__ import annotations
@@ -21,8 +22,10 @@ from typing import Literal
 
 import numpy as np
 
+from nlosfw.app.metrics import RunMetrics
 from nlosfw.capture.data import Capture
 from nlosfw.capture.preprocess import AppliedStep
+from nlosfw.common.errors import DataError
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.model.interface import FieldModel, FitReport
 from nlosfw.model.protocol import FieldSplit
@@ -172,3 +175,48 @@ class RunResults:
     fit: FitResult
     fields: ImagedFields
     reconstructions: Reconstructions
+
+
+@dataclass(frozen=True, eq=False)
+class StageResults:
+    """What the stages of one run produced, as far as it went (None: the stage did not run,
+    because ``stop_after`` ended the run earlier or a stage failed)."""
+
+    capture: CaptureResult | None = None
+    transform: TransformResult | None = None
+    fit: FitResult | None = None
+    fields: ImagedFields | None = None
+    reconstructions: Reconstructions | None = None
+
+    def complete(self) -> RunResults | None:
+        """All of them as :class:`RunResults`, or None when a stage did not run."""
+        if (self.capture is None or self.transform is None or self.fit is None
+                or self.fields is None or self.reconstructions is None):
+            return None
+        return RunResults(capture=self.capture, transform=self.transform, fit=self.fit,
+                          fields=self.fields, reconstructions=self.reconstructions)
+
+
+@dataclass(frozen=True, eq=False)
+class RunOutput:
+    """One finished run from Python (:func:`nlosfw.run`): where it wrote, its configuration,
+    its metrics and what its stages produced."""
+
+    dir: Path
+    """The run directory (metrics.json, report.html, figures, ...)."""
+    config: Mapping[str, object]
+    """The resolved configuration (as in the run's config.yaml)."""
+    metrics: RunMetrics
+    stages: StageResults
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "config", _frozen_mapping(self.config))
+
+    @property
+    def results(self) -> RunResults:
+        """Every stage's results; a DataError when ``stop_after`` ended the run early."""
+        complete = self.stages.complete()
+        if complete is None:
+            raise DataError(f"{self.dir}: the run stopped after {self.metrics.run.stopped_after}; "
+                            "its stages' results so far are in .stages")
+        return complete

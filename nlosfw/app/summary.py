@@ -47,9 +47,12 @@ def summary_table(metrics: RunMetrics) -> Table:
                           f"phase err. {_fmt(values.phase_error)} rad")
     sources = {} if metrics.reconstruction is None else metrics.reconstruction.sources
     for source, scores in sources.items():
+        depth = ("" if scores.depth_rmse_m is None
+                 else f", depth RMSE {_fmt(scores.depth_rmse_m)} m")
         table.add_row("reconstruction", f"{source} vs true",
-                      f"SSIM {_fmt(scores.ssim)}, PSNR {_fmt(scores.psnr)} dB, "
-                      f"RMSE {_fmt(scores.rmse)}, {_fmt(scores.seconds)} s")
+                      f"PSNR {_fmt(scores.psnr)} dB, SSIM {_fmt(scores.ssim)}, "
+                      f"RMSE {_fmt(scores.rmse)}; volume PSNR {_fmt(scores.volume_psnr)} dB, "
+                      f"SSIM {_fmt(scores.volume_ssim)}{depth}; {_fmt(scores.seconds)} s")
     timings = {k: v for k, v in dataclasses.asdict(metrics.timings).items() if v is not None}
     table.add_row("timings", "stages (s)", ", ".join(f"{k} {_fmt(v)}" for k, v in timings.items()))
     return table

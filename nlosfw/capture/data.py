@@ -15,6 +15,7 @@ import numpy as np
 
 from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat, VolumeFormat
 from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.capture.scene_info import check_scene_info
 from nlosfw.common.errors import DataError
 
 #: The fields of a capture in y-tal's order; each is one top-level HDF5 dataset.
@@ -127,6 +128,8 @@ class Capture:
             value = getattr(self, name)
             if value is not None and value.shape != (3,):
                 raise DataError(f"{name}: must have shape (3,), got {value.shape}")
+            if value is not None and not np.all(np.isfinite(value)):
+                raise DataError(f"{name}: must be finite, got {value.tolist()}")
         sensor_shape = self._check_grid("sensor", self.sensor_grid_xyz, self.sensor_grid_format,
                                         self.sensor_grid_normals)
         laser_shape = self._check_grid("laser", self.laser_grid_xyz, self.laser_grid_format,
@@ -155,6 +158,7 @@ class Capture:
         ):
             raise DataError("t_accounts_first_and_last_bounces: true needs sensor_xyz and "
                             "laser_xyz")
+        check_scene_info(self.scene_info)
 
     @staticmethod
     def _check_grid(which: str, xyz: np.ndarray, fmt: GridFormat,
@@ -173,9 +177,16 @@ class Capture:
             raise DataError(f"{which}_grid_format: UNKNOWN; valid: N_3, X_Y_3")
         if not np.all(np.isfinite(xyz)):
             raise DataError(f"{name}: contains NaN or inf")
-        if normals is not None and normals.shape != xyz.shape:
-            raise DataError(f"{which}_grid_normals: shape {normals.shape} does not match "
-                            f"{name} {xyz.shape}")
+        if normals is not None:
+            if normals.shape != xyz.shape:
+                raise DataError(f"{which}_grid_normals: shape {normals.shape} does not match "
+                                f"{name} {xyz.shape}")
+            if not np.all(np.isfinite(normals)):
+                raise DataError(f"{which}_grid_normals: contains NaN or inf")
+            zero = int(np.count_nonzero(np.linalg.norm(normals, axis=-1) < 1e-12))
+            if zero:
+                raise DataError(f"{which}_grid_normals: {zero} of them have zero length; "
+                                "every normal needs a direction")
         return tuple(xyz.shape[:-1])
 
     # ------------------------------------------------------------- properties

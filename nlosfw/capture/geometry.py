@@ -43,6 +43,15 @@ class CaptureGeometry:
     t_accounts_first_and_last_bounces: bool = False
     """Whether the device-to-wall legs are included in the time axis."""
 
+    def __post_init__(self) -> None:
+        for name in ("laser_point", "laser_xyz", "sensor_xyz"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            arr = np.asarray(value, dtype=float)
+            if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+                raise DataError(f"{name}: must be 3 finite numbers, got {arr.tolist()}")
+
     def device_path(self, wall_points: np.ndarray) -> np.ndarray:
         """Length of the device legs for light measured at ``wall_points`` (..., 3).
 

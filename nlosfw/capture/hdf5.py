@@ -22,8 +22,7 @@ from nlosfw.capture.data import YTAL_FIELDS, Capture
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError, one_line
-from nlosfw.common.files import atomic_path
-from nlosfw.common.hdf5 import write_header
+from nlosfw.common.hdf5 import new_file, write_header
 
 log = logging.getLogger(__name__)
 
@@ -56,7 +55,7 @@ def write_capture(path: str | Path, capture: Capture, compression: int = 0,
     """
     if not 0 <= compression <= 9:
         raise DataError(f"compression: must be a gzip level 0-9, got {compression}")
-    with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
+    with new_file(path, overwrite=overwrite) as f:
         if nlosfw_attributes:
             write_header(f, NLOSFW_CAPTURE_TYPE)
         for key in YTAL_FIELDS:
@@ -183,6 +182,8 @@ def _scene_info(value: Any, path: Path) -> dict:
     if isinstance(value, (bytes, str)):
         try:
             value = yaml_safe.load(value)
+        except yaml_safe.LimitExceeded as err:
+            raise DataError(f"{path}: field 'scene_info' is refused: {err}") from None
         except Exception as err:  # yaml raises many error types
             raise DataError(f"{path}: field 'scene_info' is not valid YAML ({one_line(err)})"
                             ) from None

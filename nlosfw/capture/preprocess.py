@@ -46,7 +46,8 @@ class Gate:
     bins: int | None = None
     """Zero bins 0 .. bins-1 of the time axis as read (0: no gate)."""
     metres: float | None = None
-    """Zero the bins that start before this optical path length (m, the capture's time axis)."""
+    """[m] Zero the bins that start before this optical path length (the capture's time
+    axis)."""
 
     def __post_init__(self) -> None:
         require(self.bins is None or self.metres is None, "bins",
@@ -68,7 +69,7 @@ class TimeCrop:
     bins: tuple[int, int] | None = None
     """[start, stop) in bins of the time axis as read."""
     metres: tuple[float, float] | None = None
-    """[start, stop) in metres of optical path: the bins that overlap it are kept."""
+    """[m] Start and stop (of optical path): the bins that overlap [start, stop) are kept."""
 
     def __post_init__(self) -> None:
         require(self.bins is None or self.metres is None, "bins",
@@ -92,9 +93,9 @@ class BinWidth:
     """Override the bin width read from the file. Give ``ps`` or ``metres``, not both."""
 
     ps: float | None = None
-    """Picoseconds per bin (metres = ps * 1e-12 * c)."""
+    """[ps] Time per bin (metres = ps * 1e-12 * c)."""
     metres: float | None = None
-    """Metres of optical path per bin."""
+    """[m] Optical path per bin."""
 
     def __post_init__(self) -> None:
         require(self.ps is None or self.metres is None, "ps",
@@ -118,7 +119,10 @@ class Preprocessing:
     or bin width) means: the capture format's default, else nothing."""
 
     gate: Gate = dataclasses.field(default_factory=Gate)
+    """Zero the first bins (the direct reflection off the wall): ``gate.bins`` or
+    ``gate.metres`` of path from the time origin."""
     time_crop: TimeCrop = dataclasses.field(default_factory=TimeCrop)
+    """Keep a window of the time axis: ``time_crop.bins`` or ``time_crop.metres``."""
     bin: int | None = None
     """Spatial binning: sum each k x k block of scan points into one (1: none)."""
     stride: int | None = None
@@ -128,9 +132,11 @@ class Preprocessing:
     transpose: bool | None = None
     """Swap the scan axes x and y (a mirror about the grid's diagonal)."""
     bin_width: BinWidth = dataclasses.field(default_factory=BinWidth)
+    """Override the bin width the file states: ``bin_width.ps`` or ``bin_width.metres``."""
     tofgrid: str | None = None
-    """A .mat file whose variable ``tofgrid`` holds per-pixel delays in picoseconds, removed
-    by shifting each histogram left by floor(delay / bin width) bins; '' for none."""
+    """A .mat file whose variable ``tofgrid`` holds per-pixel delays (picoseconds, as the
+    f-k dataset ships them), removed by shifting each histogram left by
+    floor(delay / bin width) bins; '' for none."""
     background: str | None = None
     """A capture of the same scan without the hidden scene, subtracted bin by bin."""
 

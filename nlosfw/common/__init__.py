@@ -10,6 +10,7 @@ from nlosfw.common.config import (
     config_from_mapping,
     config_to_dict,
     require,
+    require_finite,
 )
 from nlosfw.common.cores import available_cores
 from nlosfw.common.errors import (
@@ -22,10 +23,12 @@ from nlosfw.common.errors import (
     one_line,
 )
 from nlosfw.common.files import atomic_path, write_text
+from nlosfw.common.progress import ProgressCallback, accepts_progress
 from nlosfw.common.version import __version__
 
 __all__ = [
     "__version__",
+    "accepts_progress",
     "atomic_path",
     "available_cores",
     "Choice",
@@ -38,7 +41,9 @@ __all__ = [
     "NlosfwError",
     "one_line",
     "PluginError",
+    "ProgressCallback",
     "require",
+    "require_finite",
     "USER_ERROR_EXIT_STATUS",
     "write_text",
 ]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import math
 from collections.abc import Mapping
 from typing import Any, ClassVar, TypeVar
 
@@ -69,6 +70,20 @@ def require(condition: bool, option: str, problem: str) -> None:
     """
     if not condition:
         raise ConfigError(option, problem)
+
+
+def require_finite(config: Any) -> None:
+    """Raise :class:`ConfigError` for the first number of ``config`` (a dataclass instance;
+    its own fields and tuples of numbers, not nested configs) that is NaN or infinite.
+
+    Call it first in ``__post_init__``: comparisons with NaN are false, so range checks
+    alone let it through.
+    """
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        values = value if isinstance(value, (tuple, list)) else (value,)
+        if any(isinstance(v, float) and not math.isfinite(v) for v in values):
+            raise ConfigError(f.name, f"must be finite, got {value}")
 
 
 def _plain(value: Any) -> Any:

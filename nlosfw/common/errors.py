@@ -1,13 +1,17 @@
 """Errors a user can fix.
 
 Every subclass of :class:`NlosfwError` is reported by the command line as a
-single line (no traceback) with exit status 2. Anything else is a bug.
+single line (no traceback) with its ``exit_status``: 2 for input and configuration
+mistakes, 1 for a storage failure (a full disk). Anything else is a bug.
+:class:`RunInterrupted` is not an error: it is how SIGINT and SIGTERM stop a run.
 """
 
 from __future__ import annotations
 
 #: Exit status of the command line for errors the user can fix.
 USER_ERROR_EXIT_STATUS = 2
+#: Exit status of the command line when storage fails (a full disk).
+STORAGE_ERROR_EXIT_STATUS = 1
 
 
 def one_line(err: BaseException, whole: bool = False) -> str:
@@ -26,6 +30,9 @@ def one_line(err: BaseException, whole: bool = False) -> str:
 
 class NlosfwError(Exception):
     """Base class of errors caused by input, configuration or environment."""
+
+    #: The command line's exit status for this error.
+    exit_status: int = USER_ERROR_EXIT_STATUS
 
 
 class ConfigError(NlosfwError, ValueError):
@@ -56,3 +63,33 @@ class PluginError(NlosfwError):
 
 class FitError(NlosfwError):
     """A field model failed to train (diverged, empty data, not fitted)."""
+
+
+class StorageError(NlosfwError, OSError):
+    """A file could not be written: the disk is full, or the directory is not writable.
+
+    Nothing partial is left behind; the message names the path (and, for a full disk,
+    the space needed and the space free).
+    """
+
+    exit_status = STORAGE_ERROR_EXIT_STATUS
+
+
+class RunInterrupted(BaseException):
+    """SIGINT or SIGTERM arrived: stop, clean up and exit with 128 + the signal number.
+
+    A :class:`BaseException` (like :class:`KeyboardInterrupt`) so that ``except
+    Exception`` in a plugin does not swallow it.
+    """
+
+    def __init__(self, signum: int) -> None:
+        import signal
+
+        self.signum = int(signum)
+        self.signal_name = signal.Signals(self.signum).name
+        super().__init__(f"interrupted by {self.signal_name}")
+
+    @property
+    def exit_status(self) -> int:
+        """128 + the signal number (130 for SIGINT, 143 for SIGTERM), as shells report."""
+        return 128 + self.signum

@@ -1,11 +1,15 @@
 """Helpers of nlosfw's own HDF5 files (phasor fields, reconstructions).
 
 Each file carries the attributes ``nlosfw_type`` (what it holds) and
-``format_version``; metadata is stored as a YAML string.
+``format_version``; metadata is stored as a YAML string. Every HDF5 file nlosfw writes
+(captures too) is built by :func:`new_file`.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -14,8 +18,33 @@ import numpy as np
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError
+from nlosfw.common.files import write_bytes
 
 FORMAT_VERSION = 1
+
+
+@contextlib.contextmanager
+def new_file(path: str | Path, overwrite: bool = False) -> Iterator[h5py.File]:
+    """An HDF5 file open for writing, published atomically as ``path`` when the block ends.
+
+    The file is built in memory and its bytes written with plain Python I/O: libhdf5
+    cannot recover from a failed write (a full disk) and crashes the process when it later
+    frees the file, while here a full disk is found before anything is written (the exact
+    size is known) or ends in a one-line :class:`~nlosfw.common.errors.StorageError`, with
+    no partial file. The price is the file's size in memory while it is written. An
+    existing ``path`` is kept unless ``overwrite``.
+    """
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise DataError(f"{path}: already exists; refusing to overwrite it")
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
+        yield f
+    view = buffer.getbuffer()
+    try:
+        write_bytes(path, view, overwrite=overwrite)
+    finally:
+        view.release()
 
 
 def write_header(f: h5py.File, kind: str) -> None:
@@ -70,6 +99,8 @@ def read_yaml(f: h5py.File, key: str, path: Path) -> dict:
         raise DataError(f"{path}: field '{key}' is not a YAML string")
     try:
         value = yaml_safe.load(raw)
+    except yaml_safe.LimitExceeded as err:
+        raise DataError(f"{path}: field '{key}' is refused: {err}") from None
     except Exception as err:  # yaml errors
         raise DataError(f"{path}: field '{key}' is not valid YAML ({err})") from None
     return value or {}

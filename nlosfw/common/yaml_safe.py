@@ -3,7 +3,10 @@
 y-tal dumps ``scene_info`` with PyYAML's full dumper, so numpy arrays appear as
 ``!!python/object/apply:numpy...`` nodes. :func:`load` accepts exactly those
 numpy constructions (arrays, dtypes, scalars) from a whitelist and nothing else:
-no arbitrary Python object is ever built from a file.
+no arbitrary Python object is ever built from a file. It also bounds what a file can
+make it build: the text's size, the nesting depth, and the number of values once every
+alias is expanded (an "alias bomb" of a few hundred bytes otherwise expands to gigabytes
+when the result is copied or written out); :class:`LimitExceeded` says which.
 """
 
 from __future__ import annotations
@@ -13,6 +16,11 @@ from typing import Any
 
 import numpy as np
 import yaml
+
+#: Limits of :func:`load`: characters of text, nesting depth, values with aliases expanded.
+MAX_CHARACTERS = 128_000_000
+MAX_DEPTH = 100
+MAX_VALUES = 5_000_000
 
 _APPLY = "tag:yaml.org,2002:python/object/apply:"
 _NAME = "tag:yaml.org,2002:python/name:"
@@ -40,8 +48,72 @@ def _numpy_attr(dotted: str) -> Any:
     return getattr(multiarray, name)
 
 
+class LimitExceeded(yaml.YAMLError):
+    """The YAML is refused: too long, too deeply nested, or its aliases expand too far."""
+
+
 class _Loader(yaml.SafeLoader):
-    pass
+    """Safe YAML with y-tal's numpy nodes, nesting depth and alias expansion bounded."""
+
+    def __init__(self, stream: str) -> None:
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent: yaml.Node | None, index: Any) -> yaml.Node | None:
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                raise LimitExceeded(f"nested more than {MAX_DEPTH} levels deep")
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def compose_document(self) -> yaml.Node | None:
+        node = super().compose_document()
+        _check_expansion(node)
+        return node
+
+
+def _check_expansion(root: yaml.Node | None) -> None:
+    """Refuse a node graph that is cyclic, or has more than MAX_VALUES values (or more than
+    MAX_DEPTH levels) once its aliases (shared nodes) are expanded."""
+    if root is None:
+        return
+    size: dict[int, int] = {}
+    height: dict[int, int] = {}
+    on_path: set[int] = set()
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        children = _children(node)
+        if done:
+            on_path.discard(key)
+            size[key] = 1 + sum(size[id(c)] for c in children)
+            height[key] = 1 + max((height[id(c)] for c in children), default=0)
+            if size[key] > MAX_VALUES:
+                raise LimitExceeded(f"its aliases expand to more than {MAX_VALUES:,} values "
+                                    "(an alias bomb?)")
+            if height[key] > MAX_DEPTH:
+                raise LimitExceeded(f"its aliases expand to more than {MAX_DEPTH} levels of "
+                                    "nesting")
+            continue
+        if key in size:
+            continue
+        if key in on_path:
+            raise LimitExceeded("an alias refers to a node that contains it (a recursive "
+                                "structure)")
+        on_path.add(key)
+        stack.append((node, True))
+        stack.extend((c, False) for c in children if id(c) not in size)
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.SequenceNode):
+        return list(node.value)
+    if isinstance(node, yaml.MappingNode):
+        return [n for pair in node.value for n in pair]
+    return []
 
 
 def _construct_tuple(loader: yaml.SafeLoader, node: yaml.Node) -> tuple:
@@ -83,7 +155,10 @@ _Loader.add_multi_constructor(_APPLY, _construct_apply)
 
 
 def load(text: str | bytes) -> Any:
-    """Parse YAML that may hold y-tal's numpy nodes; refuses any other Python object."""
+    """Parse YAML that may hold y-tal's numpy nodes; refuses any other Python object, and
+    raises :class:`LimitExceeded` beyond the limits above."""
+    if len(text) > MAX_CHARACTERS:
+        raise LimitExceeded(f"longer than {MAX_CHARACTERS:,} characters")
     if isinstance(text, bytes):
         text = text.decode("utf-8")
     return yaml.load(text, Loader=_Loader)

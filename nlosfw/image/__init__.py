@@ -5,13 +5,20 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these."""
 
 
+from nlosfw.common.progress import ProgressCallback
 from nlosfw.image.depths import automatic_depths, depth_span, depth_step
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
 from nlosfw.image.fk import FKImager
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.lct import FBPImager, LCTImager, LCTImagerConfig, LightConeConfig
 from nlosfw.image.propagation import PropagationConfig, PropagationImager
-from nlosfw.image.reconstruction import Reconstruction, cell_centres, plane_voxels, volume_voxels
+from nlosfw.image.reconstruction import (
+    Reconstruction,
+    cell_centres,
+    plane_voxels,
+    volume_voxels,
+    wall_voxels,
+)
 from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
 from nlosfw.image.rsd import RSDImager, RSDImagerConfig
 from nlosfw.image.rsd_kernel import (
@@ -22,7 +29,16 @@ from nlosfw.image.rsd_kernel import (
     phasor_steps,
     wall_field,
 )
-from nlosfw.image.scores import image_metrics, normalise, psnr, rmse, ssim
+from nlosfw.image.scores import (
+    amplitude,
+    depth_rmse,
+    image_metrics,
+    normalise,
+    psnr,
+    reconstruction_scores,
+    rmse,
+    ssim,
+)
 from nlosfw.image.transient import (
     Falloff,
     TransientImager,
@@ -31,8 +47,10 @@ from nlosfw.image.transient import (
 )
 
 __all__ = [
+    "amplitude",
     "automatic_depths",
     "cell_centres",
+    "depth_rmse",
     "depth_span",
     "depth_step",
     "Falloff",
@@ -54,10 +72,12 @@ __all__ = [
     "phasor_series",
     "phasor_steps",
     "plane_voxels",
+    "ProgressCallback",
     "PropagationConfig",
     "PropagationImager",
     "psnr",
     "read_reconstruction",
+    "reconstruction_scores",
     "Reconstruction",
     "rmse",
     "RSDImager",
@@ -67,5 +87,6 @@ __all__ = [
     "TransientImagerConfig",
     "volume_voxels",
     "wall_field",
+    "wall_voxels",
     "write_reconstruction",
 ]

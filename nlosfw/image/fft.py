@@ -27,6 +27,7 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
+from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image.grids import apply_ops, plane_grid, undo_ops, wall_grid
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
 from nlosfw.image.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
@@ -49,7 +50,7 @@ class FFTImagerConfig(PropagationConfig):
     workers: int = -1
     """Threads of scipy.fft (-1: all cores)."""
     chunk_mb: float = 512.0
-    """Memory (MiB) of one batch of frequency planes; the field's spectrum is cached when it
+    """[MiB] Memory of one batch of frequency planes; the field's spectrum is cached when it
     fits in half of this."""
 
     def __post_init__(self) -> None:
@@ -120,8 +121,8 @@ class FFTImager(PropagationImager):
         return voxels
 
     # ------------------------------------------------------------------ imaging
-    def _intensity(self, field: PhasorField, voxels: np.ndarray,
-                   coeffs: np.ndarray) -> np.ndarray:
+    def _intensity(self, field: PhasorField, voxels: np.ndarray, coeffs: np.ndarray,
+                   on_progress: ProgressCallback | None = None) -> np.ndarray:
         cfg = self.config
         cdtype = np.complex64 if cfg.precision == "single" else np.complex128
         ops, (wy0, wx0), (dy, dx) = wall_grid(field)
@@ -131,6 +132,7 @@ class FFTImager(PropagationImager):
         planes = voxels.reshape((-1,) + voxels.shape[-3:])
         out = np.empty((coeffs.shape[0],) + planes.shape[:-1], dtype=np.float64)
         cache: dict[tuple[int, ...], np.ndarray] = {}
+        progress = ProgressCounter(len(planes), on_progress)
         for i, plane in enumerate(planes):
             pops, (vy0, vx0), (vdy, vdx), z = plane_grid(plane, i)
             canon = apply_ops(plane, pops, axes=(0, 1))
@@ -139,6 +141,7 @@ class FFTImager(PropagationImager):
             image = self._plane(_PlaneJob(values, field.frequencies, canon, z, ay, ax, m,
                                           geometry, coeffs, cache, cdtype))
             out[:, i] = undo_ops(image, pops, axes=(1, 2))
+            progress.advance()
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
 
     def _plane(self, job: _PlaneJob) -> np.ndarray:

@@ -9,6 +9,7 @@ from typing import ClassVar
 import numpy as np
 
 from nlosfw.common.config import Configurable
+from nlosfw.common.progress import ProgressCallback
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.transform.field import PhasorField
 
@@ -24,8 +25,15 @@ class Imager(Configurable, ABC):
     config_class: ClassVar[type] = ImagerConfig
 
     @abstractmethod
-    def reconstruct(self, field: PhasorField, voxels: np.ndarray) -> Reconstruction:
-        """Intensity at ``voxels``: a plane (Y, X, 3), planes (Z, Y, X, 3) or points (N, 3)."""
+    def reconstruct(self, field: PhasorField, voxels: np.ndarray,
+                    on_progress: ProgressCallback | None = None) -> Reconstruction:
+        """Intensity at ``voxels``: a plane (Y, X, 3), planes (Z, Y, X, 3) or points (N, 3).
+
+        ``on_progress(done, total)``, when given, is called each time a block of the work
+        (a depth plane, a block of voxels) finishes, the last time with ``done == total``
+        (:mod:`nlosfw.common.progress`; declare the ``progress`` capability). An imager
+        without the keyword still works: the pipeline then shows no per-block progress.
+        """
 
 
 #: The interface class of each plugin kind (by :class:`~nlosfw.plugins.PluginKind` value).

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from nlosfw.common.errors import DataError
+from nlosfw.transform.field import PhasorField
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,3 +123,24 @@ def cell_centres(bounds: tuple[float, float], n: int) -> np.ndarray:
     lo, hi = float(bounds[0]), float(bounds[1])
     step = (hi - lo) / n
     return lo + (np.arange(n) + 0.5) * step
+
+
+def wall_voxels(field: PhasorField, depths: Any) -> np.ndarray:
+    """Planes at ``depths`` (m) on the wall grid of ``field``, shape (Z, Y, X, 3).
+
+    The planes span the wall's grid cells (each voxel faces one wall sample), as every
+    run images them; a field whose wall samples are not a regular grid gets a DataError.
+    """
+    depths = np.atleast_1d(np.asarray(depths, dtype=float))
+    if depths.ndim != 1 or depths.size == 0 or not np.all(np.isfinite(depths) & (depths > 0)):
+        raise DataError(f"depths: need one or more finite depths > 0 (m, in front of the "
+                        f"wall), got {np.asarray(depths).tolist()}")
+    spacing = field.grid_spacing()
+    if spacing is None:
+        raise DataError("field: its wall samples are not a regular grid; give explicit voxels "
+                        "to an imager that accepts points")
+    dy, dx = spacing
+    ny, nx = field.grid_shape
+    wall = field.wall_xyz
+    x0, y0 = wall[0, 0, 0] - dx / 2, wall[0, 0, 1] - dy / 2
+    return volume_voxels(depths, (x0, x0 + nx * dx), (y0, y0 + ny * dy), (ny, nx))

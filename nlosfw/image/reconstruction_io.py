@@ -4,18 +4,22 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import h5py
-
 from nlosfw.common.errors import DataError
-from nlosfw.common.files import atomic_path
-from nlosfw.common.hdf5 import open_typed, read_dataset, read_yaml, write_header, write_yaml
+from nlosfw.common.hdf5 import (
+    new_file,
+    open_typed,
+    read_dataset,
+    read_yaml,
+    write_header,
+    write_yaml,
+)
 from nlosfw.image.reconstruction import Reconstruction
 
 
 def write_reconstruction(path: str | Path, recon: Reconstruction,
                          overwrite: bool = False) -> Path:
     """Write ``recon`` atomically; an existing file is kept unless ``overwrite``."""
-    with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
+    with new_file(path, overwrite=overwrite) as f:
         write_header(f, "Reconstruction")
         f.create_dataset("intensity", data=recon.intensity)
         f.create_dataset("voxels", data=recon.voxels)

@@ -22,6 +22,7 @@ import numpy as np
 
 from nlosfw.common.config import require
 from nlosfw.common.cores import available_cores
+from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
 from nlosfw.image.rsd_kernel import laser_phase, path_multiplier, phasor_steps, wall_field
 from nlosfw.transform.field import PhasorField
@@ -32,7 +33,7 @@ class RSDImagerConfig(PropagationConfig):
     """Options of the ``rsd`` imager."""
 
     chunk_mb: float = 2.0
-    """Memory (MiB) of one block of voxel x wall-sample kernels, per worker (cache-sized blocks
+    """[MiB] Memory of one block of voxel x wall-sample kernels, per worker (cache-sized blocks
     are fastest; total memory is about workers x this plus the output)."""
     workers: int = -1
     """Threads working on separate voxel blocks (-1: all cores)."""
@@ -50,8 +51,8 @@ class RSDImager(PropagationImager):
     config_class = RSDImagerConfig
     imager_name = "rsd"
 
-    def _intensity(self, field: PhasorField, voxels: np.ndarray,
-                   coeffs: np.ndarray) -> np.ndarray:
+    def _intensity(self, field: PhasorField, voxels: np.ndarray, coeffs: np.ndarray,
+                   on_progress: ProgressCallback | None = None) -> np.ndarray:
         values = wall_field(field).reshape(field.n_frequencies, -1)          # (F, S)
         wall = field.wall_xyz.reshape(-1, 3)
         points = voxels.reshape(-1, 3)
@@ -59,12 +60,14 @@ class RSDImager(PropagationImager):
         block = int(max(1, self.config.chunk_mb * 2**20 // (wall.shape[0] * 64)))
         starts = range(0, points.shape[0], block)
         out = np.empty((coeffs.shape[0], points.shape[0]), dtype=np.float64)
+        progress = ProgressCounter(len(starts), on_progress)   # advanced from every worker
 
         def run(share: range) -> None:
             for start in share:                     # blocks write disjoint output columns
                 vox = points[start:start + block]
                 out[:, start:start + vox.shape[0]] = self._block(field, values, wall, vox,
                                                                  coeffs)
+                progress.advance()
 
         workers = available_cores() if self.config.workers == -1 else self.config.workers
         workers = min(workers, len(starts))

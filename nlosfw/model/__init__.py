@@ -11,7 +11,20 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these."""
 
 
-from nlosfw.model.engine import PREDICT_CHUNK, Engine, NetworkBuild
+from nlosfw.model.engine import PREDICT_CHUNK, Engine, NetworkBuild, SmoothnessBatch
+from nlosfw.model.inr_networks import (
+    FIELD_NETWORKS,
+    HASH_PRIMES,
+    FieldNetwork,
+    FinerFieldConfig,
+    FourierFieldConfig,
+    HashGridFieldConfig,
+    HashGridLayout,
+    WireFieldConfig,
+    field_network_state,
+    hash_grid_layout,
+    wire_widths,
+)
 from nlosfw.model.interface import FieldModel, FieldModelConfig, FitReport, TrainingStep
 from nlosfw.model.interp import InterpConfig, InterpFieldModel
 from nlosfw.model.model_files import read_model_file, write_model_file
@@ -25,13 +38,17 @@ from nlosfw.model.neural_config import (
 from nlosfw.model.normalisation import FieldNormalisation, estimate_delay
 from nlosfw.model.protocol import (
     FieldSplit,
+    SpatialPattern,
+    SpatialSampling,
     error_metrics,
     field_metrics,
     heldout_frequency_indices,
     hull_mask,
     parameter_data_ratio,
+    scattered_field,
     split_field,
 )
+from nlosfw.model.smoothness import FrequencySmoothness, second_difference_matrix
 from nlosfw.model.thesis_networks import (
     FAMILY_CONFIGS,
     PRESETS,
@@ -67,18 +84,28 @@ __all__ = [
     "FAMILY_CONFIGS",
     "field_inputs",
     "field_metrics",
+    "FIELD_NETWORKS",
     "FieldMode",
     "FieldModel",
     "FieldModelConfig",
+    "FieldNetwork",
     "FieldNormalisation",
     "FieldShape",
     "FieldSplit",
+    "FinerFieldConfig",
     "FitReport",
     "forward_numpy",
+    "FourierFieldConfig",
     "FrequencyInput",
+    "FrequencySmoothness",
+    "hash_grid_layout",
+    "HASH_PRIMES",
+    "HashGridFieldConfig",
+    "HashGridLayout",
     "heldout_frequency_indices",
     "hull_mask",
     "init_parameters",
+    "field_network_state",
     "InterpConfig",
     "InterpFieldModel",
     "learning_rate",
@@ -100,13 +127,20 @@ __all__ = [
     "read_model_file",
     "reference_state",
     "resolve_architecture",
+    "second_difference_matrix",
     "SirenFieldConfig",
+    "SmoothnessBatch",
+    "scattered_field",
+    "SpatialPattern",
+    "SpatialSampling",
     "split_field",
     "TanhFieldConfig",
+    "thesis_architecture",
     "THESIS_NETWORKS",
     "THESIS_TEST_CONFIG",
-    "thesis_architecture",
     "ThesisNetwork",
     "TrainingStep",
+    "wire_widths",
+    "WireFieldConfig",
     "write_model_file",
 ]

@@ -15,7 +15,8 @@ Data layout. Multi mode (``n_networks`` 0): inputs ``x`` (N, in_dim), targets ``
 (N, 2). Single mode (``n_networks`` K > 0): K independent copies of the network,
 every state array with a leading axis K; inputs ``x`` (P, in_dim) shared by the K
 networks, targets ``y`` (K, P, 2). Batch indices always index the N (or P) axis.
-The loss is the mean squared error over every element of the batch (and network).
+The loss is the mean squared error over every element of the batch (and network),
+plus, when the trainer passes a :class:`SmoothnessBatch`, its weighted penalty.
 """
 
 from __future__ import annotations
@@ -33,6 +34,22 @@ from nlosfw.model.neural_config import FieldShape, NeuralFieldConfig
 
 #: Rows per forward pass when predicting or validating (bounds memory).
 PREDICT_CHUNK = 1 << 16
+
+
+@dataclass(frozen=True)
+class SmoothnessBatch:
+    """One step's regularisation across frequency (:mod:`nlosfw.model.smoothness`).
+
+    The engine evaluates the network at ``x`` and adds ``weight * mean((D @ out)^2)`` to the
+    loss, ``out`` being the outputs as (A, M, 2): in multi mode ``x`` is (A * M, in_dim)
+    frequency-major (A frequencies at the same M points) and the outputs are reshaped;
+    in single mode ``x`` is (M, in_dim) and the K = A networks give (K, M, 2).
+    """
+
+    x: np.ndarray
+    matrix: np.ndarray
+    """D, (B, A) float32: each row a second difference across the A frequencies."""
+    weight: float
 
 
 @dataclass(frozen=True)
@@ -106,8 +123,10 @@ class Engine(ABC):
         """``a`` as an array of the backend on the device (floating point as float32)."""
 
     @abstractmethod
-    def step(self, idx: np.ndarray | None, lr: float) -> Any:
-        """One Adam step on the batch ``idx`` (None: all data); returns a loss handle."""
+    def step(self, idx: np.ndarray | None, lr: float, smooth: SmoothnessBatch | None = None
+             ) -> Any:
+        """One Adam step on the batch ``idx`` (None: all data), with the penalty of ``smooth``
+        added to the loss; returns a handle of the data loss (the mean squared error)."""
 
     @abstractmethod
     def mean_loss(self, handles: list[Any]) -> float:

@@ -10,6 +10,15 @@ By default the field is first demodulated by its common path delay (the same
 normalisation the neural models use, :func:`nlosfw.model.normalisation.estimate_delay`),
 so that the comparison isolates what the networks add.
 
+Scattered wall samples (a random scan: a field with one row of wall points, see
+:mod:`nlosfw.model.protocol`) are interpolated in frequency by the same spline and in
+space by Clough-Tocher's piecewise-cubic C1 interpolant on the samples' Delaunay
+triangulation (:class:`scipy.interpolate.CloughTocher2DInterpolator`, what
+``griddata(method="cubic")`` uses), on the complex, demodulated field, every frequency
+at once. Outside the samples' convex hull (or with fewer than three samples, or
+collinear ones) a query takes the nearest sample's value; ``extrapolation: cubic`` needs
+a rectilinear grid and is refused for scattered samples.
+
 Outside the training hull (``extrapolation``):
 
 * ``nearest`` (default): query coordinates and frequencies are clamped to the
@@ -29,7 +38,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import CloughTocher2DInterpolator, CubicSpline
+from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from nlosfw.common.config import Choice
 from nlosfw.common.errors import DataError, FitError
@@ -106,49 +116,95 @@ class _Samples:
     delay: float = 0.0
 
 
+@dataclass(frozen=True, eq=False)
+class _Scattered:
+    """The stored field of scattered samples: demodulated values (F, N) at points (N, 2)
+    and increasing frequencies f, with their triangulation (None: nearest only)."""
+
+    values: np.ndarray
+    points: np.ndarray
+    f: np.ndarray
+    delay: float = 0.0
+    triangulation: Delaunay | None = None
+
+
+def _triangulation(points: np.ndarray) -> Delaunay | None:
+    """The Delaunay triangulation of the points, or None when there is none (fewer than
+    three points, or all on one line)."""
+    if points.shape[0] < 3:
+        return None
+    try:
+        return Delaunay(points)
+    except QhullError:
+        return None
+
+
 class InterpFieldModel(FieldModel):
-    """Tensor-product cubic spline of the complex field over (y, x, f); see the module doc."""
+    """Tensor-product cubic spline of the complex field over (y, x, f), or Clough-Tocher
+    over scattered samples; see the module doc."""
 
     config_class = InterpConfig
 
     def __init__(self, config: Any = None) -> None:
         super().__init__(config)
-        self._samples: _Samples | None = None
+        self._samples: _Samples | _Scattered | None = None
 
-    def _stored(self) -> _Samples:
+    def _stored(self) -> _Samples | _Scattered:
         if self._samples is None:
             raise FitError("interp: call fit() or load() before predict() or save()")
         return self._samples
 
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Any = None) -> FitReport:
-        """Store the field on its (sorted) rectilinear grid; ``validation`` is unused."""
+        """Store the field on its (sorted) rectilinear grid, or its scattered samples;
+        ``validation`` is unused."""
         check_training_field(field, "interp")
+        f = field.frequencies
+        of = np.argsort(f)
+        if f.size > 1 and np.any(np.diff(f[of]) <= 0):
+            raise DataError("interp: the training field's frequencies repeat a value")
         axes = _rectilinear_axes(field.wall_xyz)
         if axes is None:
-            raise DataError("interp: the training field's wall points must form a rectilinear "
-                            "grid (x along columns, y along rows)")
-        xs, ys = axes
-        f = field.frequencies
-        ox, oy, of = np.argsort(xs), np.argsort(ys), np.argsort(f)
-        for name, a in (("x", xs[ox]), ("y", ys[oy]), ("frequencies", f[of])):
-            if a.size > 1 and np.any(np.diff(a) <= 0):
-                raise DataError(f"interp: the training field's {name} repeat a value")
-        values = field.values[of][:, oy][:, :, ox].astype(np.complex128)
-        delay = estimate_delay(values, f[of]) if self.config.demodulate else 0.0
-        self._samples = _Samples(values * np.exp(2j * np.pi * f[of] * delay)[:, None, None],
-                                 xs[ox], ys[oy], f[of], delay)
+            self._samples = self._scattered(field, of)
+        else:
+            xs, ys = axes
+            ox, oy = np.argsort(xs), np.argsort(ys)
+            for name, a in (("x", xs[ox]), ("y", ys[oy])):
+                if a.size > 1 and np.any(np.diff(a) <= 0):
+                    raise DataError(f"interp: the training field's {name} repeat a value")
+            values = field.values[of][:, oy][:, :, ox].astype(np.complex128)
+            delay = estimate_delay(values, f[of]) if self.config.demodulate else 0.0
+            self._samples = _Samples(values * np.exp(2j * np.pi * f[of] * delay)[:, None, None],
+                                     xs[ox], ys[oy], f[of], delay)
         if on_step is not None:
             on_step(TrainingStep(step=1, total_steps=1, loss=0.0))
         return FitReport(steps=1, seconds=0.0, final_loss=0.0)
 
+    def _scattered(self, field: PhasorField, order: np.ndarray) -> _Scattered:
+        """The field's wall samples as scattered points (any layout of wall points)."""
+        if self.config.extrapolation == Extrapolation.cubic:
+            raise FitError("interp: extrapolation cubic needs the training samples on a "
+                           "rectilinear grid; these are scattered (use extrapolation nearest)")
+        points = field.wall_xyz[..., :2].reshape(-1, 2)
+        if np.unique(points, axis=0).shape[0] != points.shape[0]:
+            raise DataError("interp: the training field has two samples at the same wall point")
+        f = field.frequencies[order]
+        values = field.values[order].reshape(f.size, -1).astype(np.complex128)
+        delay = estimate_delay(values, f) if self.config.demodulate else 0.0
+        return _Scattered(values * np.exp(2j * np.pi * f * delay)[:, None], points, f, delay,
+                          _triangulation(points))
+
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
-        """The spline at wall points (..., 2) and frequencies (F,) -> complex (F, ...)."""
+        """The interpolant at wall points (..., 2) and frequencies (F,) -> complex (F, ...)."""
         xy, f = check_query(wall_xy, frequencies, "interp")
         stored = self._stored()
         mode = self.config.extrapolation
         pts = xy.reshape(-1, 2)
         wf = spline_weights(stored.f, f, mode)                    # (F', F)
+        if isinstance(stored, _Scattered):
+            out = _scattered_predict(stored, wf @ stored.values, pts)
+            out *= np.exp(-2j * np.pi * f * stored.delay)[:, None]
+            return out.reshape((f.size, *xy.shape[:-1]))
         wx = spline_weights(stored.x, pts[:, 0], mode)             # (P, X)
         wy = spline_weights(stored.y, pts[:, 1], mode)             # (P, Y)
         out = np.empty((f.size, pts.shape[0]), dtype=np.complex128)
@@ -169,6 +225,11 @@ class InterpFieldModel(FieldModel):
 
     def save(self, path: str | Path) -> None:
         stored = self._stored()
+        if isinstance(stored, _Scattered):
+            write_model_file(path, "interp", self.config,
+                             {"values": stored.values, "points": stored.points, "f": stored.f},
+                             {"delay": stored.delay})
+            return
         write_model_file(path, "interp", self.config,
                          {"values": stored.values, "x": stored.x, "y": stored.y, "f": stored.f},
                          {"delay": stored.delay})
@@ -180,13 +241,39 @@ class InterpFieldModel(FieldModel):
         header, arrays = read_model_file(path, "interp")
         try:
             model = cls(config_from_mapping(InterpConfig, header["config"], "model"))
-            values, x, y, f = (arrays[k] for k in ("values", "x", "y", "f"))
             delay = float(header.get("delay", 0.0))
+            if "points" in arrays:
+                values, points, f = (arrays[k] for k in ("values", "points", "f"))
+            else:
+                values, x, y, f = (arrays[k] for k in ("values", "x", "y", "f"))
         except Exception as err:
             raise DataError(f"model file {path}: invalid interp file ({type(err).__name__})"
                             ) from None
+        if "points" in arrays:
+            if (points.ndim != 2 or points.shape[1] != 2
+                    or values.shape != (f.size, points.shape[0])
+                    or not np.all(np.isfinite(values))):
+                raise DataError(f"model file {path}: values of shape {values.shape} do not "
+                                f"match {f.size} frequencies and points {points.shape}")
+            model._samples = _Scattered(values.astype(np.complex128), points, f, delay,
+                                        _triangulation(points))
+            return model
         if values.shape != (f.size, y.size, x.size) or not np.all(np.isfinite(values)):
             raise DataError(f"model file {path}: values of shape {values.shape} do not match "
                             f"the axes ({f.size}, {y.size}, {x.size})")
         model._samples = _Samples(values.astype(np.complex128), x, y, f, delay)
         return model
+
+
+def _scattered_predict(stored: _Scattered, values: np.ndarray, points: np.ndarray
+                       ) -> np.ndarray:
+    """Scattered samples' ``values`` (F, N) interpolated at ``points`` (P, 2) -> (F, P):
+    Clough-Tocher inside the samples' hull, the nearest sample outside it."""
+    out = np.full((values.shape[0], points.shape[0]), np.nan, dtype=np.complex128)
+    if stored.triangulation is not None:
+        out[:] = CloughTocher2DInterpolator(stored.triangulation, values.T)(points).T
+    outside = np.isnan(out[0].real)
+    if np.any(outside):
+        _, nearest = cKDTree(stored.points).query(points[outside])
+        out[:, outside] = values[:, nearest]
+    return out

@@ -17,6 +17,7 @@ from typing import Any
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import ConfigError
 from nlosfw.model.interface import FieldModelConfig
+from nlosfw.transform.field import PhasorField
 
 
 class FieldMode(Choice):
@@ -77,7 +78,7 @@ class NeuralFieldConfig(FieldModelConfig):
     """Evaluations without a validation improvement before stopping (0: never stop early).
     The weights of the best evaluation are kept in every case."""
     max_seconds: float = 0.0
-    """Wall-clock budget of the training loop in seconds (0: none)."""
+    """[s] Wall-clock budget of the training loop (0: none)."""
     margin: float = 0.9
     """Inputs and targets are scaled into [-margin, margin], inside the open interval (-1, 1)."""
     divergence_factor: float = 1e3
@@ -92,6 +93,15 @@ class NeuralFieldConfig(FieldModelConfig):
     (a common path delay) before fitting, and undo it on prediction: the field then turns
     far fewer times across the band (a normalisation of the targets; exact, no information
     lost)."""
+    frequency_smoothness: float = 0.0
+    """Weight of the regularisation across frequency (0: off): the mean squared second
+    difference of the normalised field between neighbouring frequencies (at the mean
+    training spacing), at random wall points, added to the loss. The field is smooth
+    in frequency; this keeps a network from wiggling between training frequencies
+    (:mod:`nlosfw.model.smoothness`). Needs 3 or more training frequencies."""
+    smoothness_points: int = 64
+    """Random wall points of that penalty per step (multi mode: each at its own random
+    frequency of the band; single mode: every network at the same points)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -115,6 +125,11 @@ class NeuralFieldConfig(FieldModelConfig):
         require(self.divergence_factor > 1, "divergence_factor",
                 f"must be > 1, got {self.divergence_factor}")
         require(self.threads >= 0, "threads", f"must be >= 0, got {self.threads}")
+        require(self.frequency_smoothness >= 0 and math.isfinite(self.frequency_smoothness),
+                "frequency_smoothness", f"must be >= 0 (0: off), got "
+                f"{self.frequency_smoothness}")
+        require(self.smoothness_points >= 1, "smoothness_points",
+                f"must be >= 1, got {self.smoothness_points}")
 
 
 @dataclass(frozen=True)
@@ -131,7 +146,8 @@ class FieldShape:
 
     mode: FieldMode
     grid_shape: tuple[int, int] | None = None
-    """(Y, X) of the training wall grid."""
+    """(Y, X) of the training wall grid; for scattered samples (a field with one row of
+    N irregular wall points) the square grid of about as many, (s, s) with s = round(sqrt N)."""
     n_frequencies: int | None = None
     """Training frequencies."""
 
@@ -144,6 +160,15 @@ class FieldShape:
     def out_dim(self) -> int:
         """Output columns (Re, Im)."""
         return 2
+
+    @classmethod
+    def of(cls, mode: FieldMode, field: PhasorField) -> FieldShape:
+        """The shape of a training field (a grid, or scattered samples)."""
+        ny, nx = field.grid_shape
+        if ny == 1 and nx > 1 and field.grid_spacing() is None:     # scattered samples
+            side = max(1, int(round(math.sqrt(nx))))
+            return cls(mode, (side, side), field.n_frequencies)
+        return cls(mode, (ny, nx), field.n_frequencies)
 
     def to_dict(self) -> dict[str, Any]:
         return {"mode": FieldMode(self.mode).value,

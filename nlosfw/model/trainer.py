@@ -39,6 +39,7 @@ from nlosfw.model.neural_config import (
     Preset,
 )
 from nlosfw.model.normalisation import FieldNormalisation
+from nlosfw.model.smoothness import FrequencySmoothness
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
@@ -188,7 +189,7 @@ class NeuralFieldModel(FieldModel):
         cfg: NeuralFieldConfig = self.config
         single = cfg.mode == FieldMode.single
         norm = FieldNormalisation.fit(field, cfg.margin, cfg.demodulate)
-        shape = FieldShape(cfg.mode, field.grid_shape, field.n_frequencies)
+        shape = FieldShape.of(cfg.mode, field)
         rng = np.random.default_rng([cfg.seed, 0x6261746368])  # "batch" stream
         x, y = self._samples(norm, field)
         n = x.shape[0]
@@ -225,8 +226,13 @@ class NeuralFieldModel(FieldModel):
         engine.set_data(tx, ty, val_x, val_y)
         self._shape, self._norm, self._engine = shape, norm, engine
         self._train_frequencies = field.frequencies.copy() if single else None
+        smooth = FrequencySmoothness.of(
+            cfg.frequency_smoothness, cfg.smoothness_points, x[:, :2],
+            norm.freqs(field.frequencies), single,
+            np.random.default_rng([cfg.seed, 0x736D6F6F7468]))  # "smooth" stream
         try:
-            self.report = self._train(engine, tx.shape[0], val_x is not None, rng, on_step)
+            self.report = self._train(engine, tx.shape[0], val_x is not None, rng, on_step,
+                                      smooth)
         except BaseException:
             # a failed (diverged, interrupted) fit leaves no half-trained model behind
             self._shape = self._norm = self._engine = self._train_frequencies = None
@@ -244,7 +250,8 @@ class NeuralFieldModel(FieldModel):
         return field_inputs(xy, norm.freqs(field.frequencies)), y.reshape(-1, 2)
 
     def _train(self, engine: Engine, n_train: int, has_val: bool, rng: np.random.Generator,
-               on_step: Callable[[TrainingStep], None] | None) -> FitReport:
+               on_step: Callable[[TrainingStep], None] | None,
+               smooth: FrequencySmoothness | None = None) -> FitReport:
         cfg: NeuralFieldConfig = self.config
         batch = cfg.batch_size if 0 < cfg.batch_size < n_train else 0
         stream = _IndexStream(n_train, batch, rng) if batch else None
@@ -256,7 +263,8 @@ class NeuralFieldModel(FieldModel):
         bad_evals, stopped_early, loss, val = 0, False, math.nan, None
         step, paused = 0, 0.0           # paused: time spent in on_step, not training
         while step < cfg.steps:
-            handle = engine.step(stream.next() if stream else None, learning_rate(cfg, step))
+            handle = engine.step(stream.next() if stream else None, learning_rate(cfg, step),
+                                 smooth.batch() if smooth else None)
             handles.append(handle)
             step += 1
             if step == 1:

@@ -22,6 +22,7 @@ from nlosfw.plugins.networks import (
     NetworkRegistrar,
     NetworkSpec,
     network_model,
+    register_field_networks,
     register_thesis_networks,
     thesis_network_model,
 )
@@ -50,6 +51,7 @@ __all__ = [
     "import_object",
     "load_plugins",
     "network_model",
+    "register_field_networks",
     "register_thesis_networks",
     "thesis_network_model",
 ]

@@ -57,6 +57,20 @@ def register_field_models(register: Any) -> None:
         description="Cubic interpolation of the complex field in x, y and frequency (baseline)",
         capabilities=[C.MULTI_FREQUENCY, C.SINGLE_FREQUENCY, C.SAVE_LOAD],
     )
+    register(
+        "rsd_prior",
+        "nlosfw.model.rsd_prior:RSDPriorFieldModel",
+        config="nlosfw.model.rsd_prior:RSDPriorConfig",
+        description="Non-negative hidden albedo fitted by FISTA, propagated to the wall (RSD)",
+        test_config={"iterations": 150, "amplitude": "point", "l1_weight": 0.001,
+                     "workers": 1},
+        # physical_prior: it fits only fields a hidden scene can produce, so the kit fits
+        # it on a point scatterer's field (the kit's point fixture has no surface normal:
+        # amplitude "point"). No single_frequency: one frequency cannot place the scene in
+        # depth. Not neural: the fit is deterministic (the seed only starts the power
+        # iteration).
+        capabilities=[C.MULTI_FREQUENCY, C.SAVE_LOAD, C.PHYSICAL_PRIOR],
+    )
 
 
 @hookimpl
@@ -67,7 +81,8 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.rsd:RSDImagerConfig",
         description="Direct Rayleigh-Sommerfeld sum over any voxel set",
         test_config={"chunk_mb": 1.0},
-        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.POINT_VOXELS, C.RSD],
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.POINT_VOXELS, C.RSD,
+                      C.PROGRESS],
     )
     register(
         "fft",
@@ -75,7 +90,7 @@ def register_imagers(register: Any) -> None:
         config="nlosfw.image.fft:FFTImagerConfig",
         description="Fast RSD: per-plane FFT convolution (Liu 2020)",
         test_config={"workers": 2},
-        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.RSD],
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.RSD, C.PROGRESS],
     )
     # the classical confocal imagers, on the field's transient (nlosfw.image.transient)
     register(
@@ -83,21 +98,21 @@ def register_imagers(register: Any) -> None:
         "nlosfw.image.lct:LCTImager",
         config="nlosfw.image.lct:LCTImagerConfig",
         description="Light-cone transform with a Wiener filter (O'Toole 2018), confocal",
-        capabilities=[C.CONFOCAL, C.PLANE_VOXELS],
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
     )
     register(
         "fk",
         "nlosfw.image.fk:FKImager",
         config="nlosfw.image.transient:TransientImagerConfig",
         description="f-k (Stolt) migration (Lindell 2019), confocal",
-        capabilities=[C.CONFOCAL, C.PLANE_VOXELS],
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
     )
     register(
         "fbp",
         "nlosfw.image.lct:FBPImager",
         config="nlosfw.image.lct:LightConeConfig",
         description="Backprojection with a Laplacian filter along depth, confocal",
-        capabilities=[C.CONFOCAL, C.PLANE_VOXELS],
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
     )
 
 

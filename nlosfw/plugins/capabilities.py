@@ -41,9 +41,11 @@ class Capability(str, Enum):
     SINGLE_FREQUENCY = "single_frequency"
     SAVE_LOAD = "save_load"
     NEURAL = "neural"
+    PHYSICAL_PRIOR = "physical_prior"
     # imagers
     PLANE_VOXELS = "plane_voxels"
     POINT_VOXELS = "point_voxels"
+    PROGRESS = "progress"
     RSD = "rsd"
     # capture formats
     READABLE = "readable"
@@ -85,6 +87,10 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
                             "the wall",
         C.SAVE_LOAD: "save() writes one file that load() restores exactly",
         C.NEURAL: "trained from a random initialisation: the seed changes the fitted model",
+        C.PHYSICAL_PRIOR: "represents only fields a hidden scene can produce through the "
+                          "field's capture geometry (not any smooth function): the kit fits "
+                          "it on a point scatterer's exact field instead of a sum of plane "
+                          "waves",
         C.GPU: "can train on a GPU with device=auto (descriptive: no check needs it)",
     }),
     "imager": MappingProxyType({
@@ -93,6 +99,8 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
         C.PLANE_VOXELS: "voxels in planes parallel to the wall on the wall's grid, "
                         "(Y, X, 3) or (Z, Y, X, 3)",
         C.POINT_VOXELS: "any voxel list (N, 3)",
+        C.PROGRESS: "reconstruct(..., on_progress=callback) reports (done, total) as blocks of "
+                    "voxels finish, the last time with done == total",
         C.RSD: "its image is the field's Rayleigh-Sommerfeld image (the reference RSD's); "
                "classical imagers (lct, fk, fbp) image the field's transient otherwise",
     }),

@@ -22,6 +22,7 @@ from enum import Enum
 from typing import Any
 
 from nlosfw.common.errors import PluginError
+from nlosfw.model.inr_networks import FIELD_NETWORKS
 from nlosfw.model.neural_config import NeuralFieldConfig, Preset
 from nlosfw.model.thesis_networks import THESIS_NETWORKS, THESIS_TEST_CONFIG, presets_of
 from nlosfw.model.trainer import NeuralFieldModel
@@ -85,6 +86,11 @@ class NetworkSpec(LazyFactory):
         if "model" not in self._bound:
             self._bound["model"] = network_model(self)
         return self._bound["model"]
+
+    def import_paths(self) -> tuple[str, ...]:
+        """The engine's, the factory's and the config's import paths."""
+        return tuple(p for p in (ENGINES[self.engine][0], self.factory, self.config)
+                     if isinstance(p, str))
 
 
 def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
@@ -181,6 +187,16 @@ def register_thesis_networks(register: Callable[..., None], engine: str, factory
                  presets=presets_of(name),
                  capabilities=(*NETWORK_CAPABILITIES, Capability.SINGLE_FREQUENCY),
                  expected_failures=_THESIS_KNOWN_FAILURES.get(name))
+
+
+def register_field_networks(register: Callable[..., None], engine: str, factory: str) -> None:
+    """Register fourier, wire, finer and hashgrid (issue 12) for ``engine``, all built by
+    ``factory`` (which reads the network from its config's class)."""
+    for name, network in FIELD_NETWORKS.items():
+        register(name, engine=engine, factory=factory, config=network.config,
+                 description=f"{network.description}, {_ENGINE_TITLES[engine]}",
+                 test_config=dict(network.test_config),
+                 capabilities=(*NETWORK_CAPABILITIES, Capability.SINGLE_FREQUENCY))
 
 
 def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFieldModel]:

@@ -22,11 +22,16 @@ from nlosfw.plugins.kinds import PluginKind
 T = TypeVar("T")
 
 
+def module_of(path: str) -> str:
+    """The module part of ``"package.module:attr"`` (or ``"package.module.attr"``)."""
+    module_name, _, attr = path.partition(":")
+    return module_name if attr else path.rpartition(".")[0]
+
+
 def import_object(path: str) -> Any:
     """Import ``"package.module:attr"`` (or ``"package.module.attr"``)."""
-    module_name, _, attr = path.partition(":")
-    if not attr:
-        module_name, _, attr = path.rpartition(".")
+    module_name = module_of(path)
+    attr = path[len(module_name) + 1:]
     module = importlib.import_module(module_name)
     obj: Any = module
     for part in attr.split("."):
@@ -40,6 +45,11 @@ class LazyFactory(ABC):
     @abstractmethod
     def load(self) -> Any:
         """The factory (imports what it needs)."""
+
+    def import_paths(self) -> tuple[str, ...]:
+        """The ``"module:attr"`` paths :meth:`load` imports (checked, without importing them,
+        when plugins are listed); default none."""
+        return ()
 
 
 @dataclass(frozen=True)
@@ -110,8 +120,51 @@ class PluginSpec:
             return ""
         return "pip install " + " ".join(_quote(req) for _, req in missing)
 
+    def import_paths(self) -> tuple[str, ...]:
+        """Every ``"module:attr"`` path the factory and the config are imported from."""
+        paths = []
+        if isinstance(self.factory, str):
+            paths.append(self.factory)
+        elif isinstance(self.factory, LazyFactory):
+            paths.extend(self.factory.import_paths())
+        if isinstance(self.config, str):
+            paths.append(self.config)
+        return tuple(dict.fromkeys(paths))
+
+    def find_problem(self) -> str:
+        """Why the factory's or the config's module cannot be found ('' when all are found).
+
+        Uses :func:`importlib.util.find_spec`, which imports the parent packages of each
+        module but not the module itself, so no heavy backend is imported.
+        """
+        for path in self.import_paths():
+            module = module_of(path)
+            try:
+                found = importlib.util.find_spec(module) is not None
+            except ModuleNotFoundError:   # a parent package is missing
+                found = False
+            except Exception as err:  # a parent package that fails to import, a bad name
+                return f"module {module} of {path} cannot be found: {type(err).__name__}: {err}"
+            if not found:
+                return f"module {module} of {path} not found"
+        return ""
+
+    def import_problem(self) -> str:
+        """Why the factory or the config cannot be imported ('' when both import).
+
+        Imports them (and with them any heavy backend): for ``plugins --check`` and
+        ``plugins NAME``, and before a run uses the plugin.
+        """
+        try:
+            self.load()
+            self.config_class()
+        except PluginError as err:
+            return str(err)
+        return ""
+
     def load(self) -> Any:
-        """The factory, imported on first use; a one-line error says what to install."""
+        """The factory, imported on first use; a one-line error says what to install, or
+        why the factory cannot be imported."""
         if not isinstance(self.factory, (str, LazyFactory)):
             return self.factory
         command = self.install_command()
@@ -119,13 +172,15 @@ class PluginSpec:
             modules = ", ".join(m for m, _ in self.missing_requirements())
             raise PluginError(f"{self.kind.value} plugin '{self.name}' needs {modules}, which is "
                               f"not installed; run: {command}")
-        if isinstance(self.factory, LazyFactory):
-            return self.factory.load()
         try:
+            if isinstance(self.factory, LazyFactory):
+                return self.factory.load()
             return import_object(self.factory)
-        except ImportError as err:
+        except PluginError:
+            raise
+        except Exception as err:  # any failure importing a plugin's code is the plugin's bug
             raise PluginError(f"{self.kind.value} plugin '{self.name}' (from {self.distribution}) "
-                              f"cannot be imported: {err}") from None
+                              f"cannot be imported: {_reason(err)}") from err
 
     def config_class(self) -> type:
         """The config dataclass (imports ``config`` if it is a path, else the factory)."""
@@ -134,9 +189,9 @@ class PluginSpec:
         if isinstance(self.config, str):
             try:
                 return import_object(self.config)
-            except ImportError as err:
+            except Exception as err:
                 raise PluginError(f"{self.kind.value} plugin '{self.name}': config class "
-                                  f"{self.config} cannot be imported: {err}") from None
+                                  f"{self.config} cannot be imported: {_reason(err)}") from err
         return self.config
 
     def make_config(self, options: Mapping[str, Any] | None = None) -> Any:
@@ -173,6 +228,25 @@ class Registry:
         except KeyError:
             valid = ", ".join(self.names(kind)) or "(none installed)"
             raise PluginError(f"unknown {kind.value} plugin '{name}'; valid: {valid}") from None
+
+    def find(self, text: str) -> PluginSpec:
+        """The plugin named ``kind:name`` or ``name``; a one-line :class:`PluginError` for an
+        unknown name, or a bare name that several kinds use (it lists the qualified ones)."""
+        if ":" in text:
+            kind, _, name = text.partition(":")
+            valid_kinds = [k.value for k in PluginKind]
+            if kind not in valid_kinds:
+                raise PluginError(f"unknown plugin kind '{kind}' in '{text}'; valid: "
+                                  f"{', '.join(valid_kinds)}")
+            return self.get(kind, name)
+        matches = [spec for spec in self.specs() if spec.name == text]
+        if len(matches) == 1:
+            return matches[0]
+        if matches:
+            raise PluginError(f"plugin name '{text}' is used by {len(matches)} kinds; give one "
+                              f"of: {', '.join(s.qualified_name for s in matches)}")
+        valid = ", ".join(s.qualified_name for s in self.specs()) or "(none installed)"
+        raise PluginError(f"unknown plugin '{text}'; valid: {valid}")
 
     def names(self, kind: PluginKind | str) -> list[str]:
         kind = PluginKind(kind)
@@ -270,6 +344,13 @@ def _as_tuple(capabilities: Any) -> Any:
     if isinstance(capabilities, (str, Capability)) or not isinstance(capabilities, Iterable):
         return capabilities
     return tuple(capabilities)
+
+
+def _reason(err: Exception) -> str:
+    """An import failure in one line: ImportError's own message, else the type and message."""
+    if isinstance(err, ImportError):
+        return str(err)
+    return f"{type(err).__name__}: {err}"
 
 
 def _quote(requirement: str) -> str:

@@ -35,7 +35,7 @@ class AnalyticConfig(SimulatorConfig):
     """Options of the analytic simulator."""
 
     patch_size: float = 0.01
-    """Largest quadrature element (m) for rectangles and heightfields."""
+    """[m] Largest quadrature element for rectangles and heightfields."""
     max_pairs: int = 1_000_000
     """Element-sensor pairs evaluated at once (bounds memory to about 150 bytes per pair)."""
 

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from nlosfw.capture.geometry import device_legs
-from nlosfw.common.config import Choice, config_from_mapping, require
+from nlosfw.common.config import Choice, config_from_mapping, require, require_finite
 
 #: Geometry item types understood by :mod:`nlosfw.simulate.geometry`.
 GEOMETRY_TYPES = ("rectangle", "box", "mesh", "patch", "point", "heightfield")
@@ -24,13 +24,14 @@ class WallConfig:
     """The relay wall: a rectangle in the plane z = 0 facing +z."""
 
     size: tuple[float, float] = (2.0, 2.0)
-    """Extent in metres along x and y."""
+    """[m] Extent along x and y."""
     resolution: tuple[int, int] = (64, 64)
     """Number of sensor points along x and y (cell-centred)."""
     center: tuple[float, float] = (0.0, 0.0)
-    """Centre of the wall (x, y) in metres."""
+    """[m] Centre of the wall (x, y)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(all(s > 0 for s in self.size), "size", f"must be > 0 metres, got {self.size}")
         require(all(r >= 1 for r in self.resolution), "resolution",
                 f"must be >= 1 sensor per axis, got {self.resolution}")
@@ -62,16 +63,19 @@ class CaptureSetup:
     """Where the laser hits the wall and where the devices are."""
 
     type: CaptureType = CaptureType.single_spot
+    """``single_spot``: one laser spot and a grid of sensor points; ``confocal``: laser and
+    sensor at each point."""
     laser_spot: tuple[float, float] = (0.0, 0.0)
-    """Laser spot (x, y) on the wall for single-spot captures."""
+    """[m] Laser spot (x, y) on the wall for single-spot captures."""
     laser_position: tuple[float, float, float] = (-0.5, 0.0, 0.25)
-    """Position of the laser device (m)."""
+    """[m] Position of the laser device."""
     sensor_position: tuple[float, float, float] = (-0.5, 0.0, 0.25)
-    """Position of the sensor device (m)."""
+    """[m] Position of the sensor device."""
     device_legs: bool = False
     """Count the device-to-wall legs in the time axis (t_accounts_first_and_last_bounces)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.laser_position[2] > 0, "laser_position",
                 "must be in front of the wall (z > 0)")
         require(self.sensor_position[2] > 0, "sensor_position",
@@ -80,13 +84,17 @@ class CaptureSetup:
 
 @dataclass(frozen=True)
 class TimeAxis:
-    """Histogram bins of optical path length, all in metres."""
+    """Histogram bins of optical path length."""
 
     bins: int = 2048
+    """Number of time bins."""
     bin_width: float = 0.003
+    """[m] Width of a bin in optical path length (c times its duration)."""
     start: float = 0.0
+    """[m] Optical path length at the start of the first bin."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.bins > 0, "bins", f"must be a positive number of bins, got {self.bins}")
         require(self.bin_width > 0, "bin_width",
                 f"must be a positive number of metres, got {self.bin_width}")
@@ -103,11 +111,11 @@ class GeometryItem:
     type: str = "rectangle"
     """One of rectangle, box, mesh, patch, point, heightfield."""
     position: tuple[float, float, float] = (0.0, 0.0, 1.0)
-    """Centre of the item (m)."""
+    """[m] Centre of the item."""
     size: tuple[float, ...] = (0.5, 0.5)
     """rectangle/patch/heightfield: (width, height); box: (width, height, depth); mesh: ignored."""
     rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    """Rotation in degrees about x, then y, then z, around the item's centre."""
+    """[deg] Rotation about x, then y, then z, around the item's centre."""
     albedo: float = 1.0
     """Diffuse albedo in [0, 1]; for a point, its effective scattering area (m^2)."""
     path: str | None = None
@@ -118,6 +126,7 @@ class GeometryItem:
     """Shape-specific parameters (e.g. a heightfield's bumps)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.type in GEOMETRY_TYPES, "type",
                 f"unknown geometry type {self.type!r}; valid: {', '.join(GEOMETRY_TYPES)}")
         require(self.albedo >= 0, "albedo", f"must be >= 0, got {self.albedo}")
@@ -146,14 +155,16 @@ class NoiseConfig:
     """Measurement noise applied after rendering (see :mod:`nlosfw.simulate.noise`)."""
 
     model: NoiseModel = NoiseModel.none
+    """``none`` or ``poisson`` photon counts."""
     photons: float = 1e6
     """Expected number of signal photons in the whole capture (poisson)."""
     dark_counts: float = 0.0
     """Expected dark counts per sensor over the whole time window (poisson)."""
     jitter_ps: float = 0.0
-    """Standard deviation of Gaussian timing jitter in picoseconds (any model)."""
+    """[ps] Standard deviation of Gaussian timing jitter (any model)."""
 
     def __post_init__(self) -> None:
+        require_finite(self)
         require(self.photons > 0, "photons", f"must be > 0, got {self.photons}")
         require(self.dark_counts >= 0, "dark_counts", f"must be >= 0, got {self.dark_counts}")
         require(self.jitter_ps >= 0, "jitter_ps", f"must be >= 0, got {self.jitter_ps}")
@@ -164,11 +175,17 @@ class Scene:
     """Everything a simulator needs to produce a :class:`~nlosfw.capture.Capture`."""
 
     name: str = "custom"
+    """The scene's name (recorded in metrics.json and figure titles)."""
     wall: WallConfig = field(default_factory=WallConfig)
+    """The relay wall and its sensor grid."""
     capture: CaptureSetup = field(default_factory=CaptureSetup)
+    """Laser spot, devices and capture type."""
     time: TimeAxis = field(default_factory=TimeAxis)
+    """The histogram's time axis."""
     geometry: tuple[GeometryItem, ...] = ()
+    """The hidden objects."""
     noise: NoiseConfig = field(default_factory=NoiseConfig)
+    """Measurement noise added after rendering."""
     ground_truth_resolution: tuple[int, int] | None = None
     """Resolution (x, y) of the ground-truth maps; default the sensor grid's."""
 

@@ -1,6 +1,7 @@
 """``python -m nlosfw.testing NAME [NAME ...] [--plan] [pytest options]``.
 
-Prints the plan of each named plugin (``name`` or ``kind:name``): the checks its
+Prints the plan of each named plugin (``name`` or ``kind:name``, or a distribution's
+name for every plugin it registers): the checks its
 declared capabilities select and those skipped, with reasons; then, unless
 ``--plan``, runs them with pytest (other options, e.g. ``-x`` or ``-k``, go to
 pytest). Exit status: pytest's, or 2 with one line for an unknown plugin name.
@@ -34,14 +35,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m nlosfw.testing",
                                      description="Run nlosfw's conformance kit on plugins.")
     parser.add_argument("names", nargs="+", metavar="NAME",
-                        help="plugin name (siren_torch) or kind:name (imager:fft)")
+                        help="plugin name (siren_torch), kind:name (imager:fft), or a "
+                             "distribution (nlosfw-example-imager): all its plugins")
     parser.add_argument("--plan", action="store_true",
                         help="only print which checks apply and which are skipped, and why")
     args, pytest_args = parser.parse_known_args(argv)
     try:
         registry = load_plugins().registry
         specs = select_specs(registry, names=args.names)
-        found = {n for s in specs for n in (s.name, s.qualified_name)}
+        found = {n for s in specs for n in (s.name, s.qualified_name, s.distribution)}
         unknown = [n for n in args.names if n not in found]
         if unknown:
             valid = ", ".join(s.qualified_name for s in registry.specs())

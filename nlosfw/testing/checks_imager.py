@@ -13,7 +13,9 @@ frequencies around 4 cycles/m; voxels are planes parallel to the wall whose
 * moving the point parallel to the wall moves the peak by the same number of voxels;
 * voxels at or behind the wall give a one-line DataError; output shapes follow the voxels;
 * ``point_voxels``: a plain voxel list (N, 3) around the point gives the reference RSD's
-  values there (normalised correlation >= 0.99) and peaks at the point.
+  values there (normalised correlation >= 0.99) and peaks at the point;
+* ``progress``: ``reconstruct(..., on_progress=...)`` reports (done, total) with done
+  non-decreasing up to total, and gives the same image as without the callback.
 
 Imagers declare the geometries they image (``single_spot``, ``confocal``; each check
 runs once per declared one), the voxel layouts they accept (``plane_voxels``,
@@ -159,6 +161,29 @@ def check_imager_point_voxels(spec: PluginSpec, confocal: bool) -> None:
             f"at {target}")
 
 
+@requires(Capability.PROGRESS, any_of=GEOMETRIES)
+def check_imager_reports_progress(spec: PluginSpec, confocal: bool) -> None:
+    """``on_progress(done, total)`` is called with one total, 0 < done <= total, done never
+    decreasing and the last call done == total; the image equals the one made without it."""
+    field = _field(_target(*TARGET_INDEX), confocal)
+    voxels = fixtures.aligned_voxels(fixtures.rect_wall_grid(SHAPE, SPACING), DEPTHS)
+    imager = spec.create(dict(spec.test_config))
+    calls: list[tuple[int, int]] = []
+    image = imager.reconstruct(field, voxels,
+                               on_progress=lambda done, total: calls.append((done, total)))
+    name = spec.qualified_name
+    assert calls, f"{name}: on_progress was never called"
+    totals = {total for _, total in calls}
+    done = [d for d, _ in calls]
+    assert len(totals) == 1 and min(totals) >= 1, f"{name}: totals {sorted(totals)}; expected one"
+    assert all(0 < d <= calls[0][1] for d in done) and done == sorted(done), (
+        f"{name}: done values {done} must rise within 1..{calls[0][1]}")
+    assert done[-1] == calls[0][1], f"{name}: the last call {calls[-1]} must have done == total"
+    plain = imager.reconstruct(field, voxels).intensity
+    np.testing.assert_array_equal(image.intensity, plain,
+                                  err_msg=f"{name}: on_progress changed the image")
+
+
 IMAGER_CHECKS = (
     check_imager_focuses_point,
     check_imager_matches_reference,
@@ -166,4 +191,5 @@ IMAGER_CHECKS = (
     check_imager_rejects_voxels_behind_wall,
     check_imager_output_shapes,
     check_imager_point_voxels,
+    check_imager_reports_progress,
 )

@@ -3,7 +3,10 @@
 Each check fits the plugin with its registered ``test_config`` (a small step
 budget) on fields computed in closed form (:func:`~nlosfw.testing.fixtures.smooth_field`,
 a sum of plane waves) and asserts numbers against that closed form, never
-against the plugin's own output.
+against the plugin's own output. A model declaring ``physical_prior`` represents only
+fields a hidden scene can produce, which a sum of plane waves is not: its checks use
+the exact field of a point scatterer instead (:func:`~nlosfw.testing.fixtures.point_field`),
+held out at the same frequency.
 
 Fit tolerances are chosen per model family (``family`` attribute of the model
 class, or its registered name); a third-party model may declare a class
@@ -37,7 +40,7 @@ from nlosfw.transform.field import PhasorField
 
 #: Relative L2 error (on every sample of the fixture field, held-out frequencies
 #: included) that a model of each family must reach with its ``test_config``.
-FIT_TOLERANCE = {"interp": 0.02, "siren": 0.08, "pe": 0.15, "tanh": 0.15}
+FIT_TOLERANCE = {"interp": 0.02, "siren": 0.08, "pe": 0.15, "tanh": 0.15, "rsd_prior": 0.05}
 #: Seeds of check_fits_smooth_field (its score is the median over them).
 FIT_SEEDS = (0, 1, 2)
 #: Tolerance of families not listed above.
@@ -46,11 +49,24 @@ DEFAULT_TOLERANCE = 0.2
 MAX_TOLERANCE = 0.3
 
 
-def fit_fixture(single: bool = False) -> PhasorField:
-    """The smooth field the fit check learns: 12 x 12 wall points, 10 frequencies
-    (``single``: only the fifth, 2.89 cycles/m)."""
-    field = fixtures.smooth_field(n=12, frequencies=np.linspace(2.0, 4.0, 10), seed=1)
+#: The point scatterer of the fixture of ``physical_prior`` models (m).
+PHYSICAL_TARGET = (0.1, -0.05, 0.5)
+
+
+def fit_fixture(single: bool = False, physical: bool = False) -> PhasorField:
+    """The field the fit check learns: 12 x 12 wall points on a 1 m wall, 10 frequencies
+    (``single``: only the fifth, 2.89 cycles/m); a smooth sum of plane waves, or
+    (``physical``) the exact field of a point scatterer at :data:`PHYSICAL_TARGET`."""
+    freqs = np.linspace(2.0, 4.0, 10)
+    if physical:
+        field = fixtures.point_field(PHYSICAL_TARGET, (12, 12), 1 / 12, freqs)
+    else:
+        field = fixtures.smooth_field(n=12, frequencies=freqs, seed=1)
     return field.select([4]) if single else field
+
+
+def _physical(spec: PluginSpec) -> bool:
+    return Capability.PHYSICAL_PRIOR in spec.capabilities
 
 
 def _family(spec: PluginSpec) -> str:
@@ -68,13 +84,14 @@ def _tolerance(spec: PluginSpec) -> float:
 
 def _fitted(spec: PluginSpec, field: PhasorField | None = None, **options: Any) -> Any:
     model = spec.create({**spec.test_config, **options})
-    model.fit(fit_fixture() if field is None else field)
+    model.fit(fit_fixture(physical=_physical(spec)) if field is None else field)
     return model
 
 
 @requires(each=FREQUENCY_MODES)
 def check_fits_smooth_field(spec: PluginSpec, single: bool) -> None:
-    """Learns a sum of plane waves over (x, y, f) to the family's tolerance.
+    """Learns a sum of plane waves over (x, y, f) (``physical_prior``: a point scatterer's
+    field) to the family's tolerance.
 
     Multi-frequency: trained on 9 of the 10 frequencies (every pixel); scored on all
     10 (the held-out frequency lies inside the band). Single-frequency: trained and
@@ -82,7 +99,7 @@ def check_fits_smooth_field(spec: PluginSpec, single: bool) -> None:
     Training from a random initialisation is itself random, so the score is the
     median over three seeds: one unlucky initialisation neither passes nor fails a model.
     """
-    field = fit_fixture(single)
+    field = fit_fixture(single, _physical(spec))
     train = field if single else split_field(field, spatial_step=1, spectral="interleaved",
                                              spectral_fraction=0.1).train_field
     errors = []
@@ -96,7 +113,7 @@ def check_fits_smooth_field(spec: PluginSpec, single: bool) -> None:
         errors.append(error_metrics(field.values, pred)["relative_l2"])
     err = float(np.median(errors))
     tol = _tolerance(spec)
-    what = "one-frequency" if single else "plane-wave"
+    what = "one-frequency" if single else "point-scatterer" if _physical(spec) else "plane-wave"
     assert err <= tol, (f"{spec.qualified_name}: median relative L2 error {err:.4f} (seeds "
                         f"{FIT_SEEDS}: {np.round(errors, 4).tolist()}) on a smooth {what} "
                         f"field exceeds {tol} (with its test_config)")
@@ -110,7 +127,7 @@ def check_predicts_unseen_points(spec: PluginSpec, single: bool) -> None:
     Also: a prediction at the training samples matches the closed-form field at
     least roughly (relative error < 0.5), so a model cannot ignore its inputs.
     """
-    field = fit_fixture(single)
+    field = fit_fixture(single, _physical(spec))
     model = _fitted(spec, field)
     rng = np.random.default_rng(3)
     pts = rng.uniform(-0.55, 0.55, (7, 5, 2))          # inside and just outside the hull
@@ -132,7 +149,7 @@ def check_predicts_unseen_points(spec: PluginSpec, single: bool) -> None:
 def check_save_load_round_trip(spec: PluginSpec, single: bool) -> None:
     """save -> load -> predict gives identical output; foreign and corrupt files are refused."""
     factory = spec.load()
-    field = fit_fixture(single)
+    field = fit_fixture(single, _physical(spec))
     model = _fitted(spec, field)
     pts = fixtures.wall_grid(9)[..., :2]
     freqs = field.frequencies if single else np.array([2.1, 3.05, 3.9])
@@ -162,7 +179,7 @@ def check_bad_input_rejected(spec: PluginSpec, single: bool) -> None:
     fresh = spec.create(dict(spec.test_config))
     pts = fixtures.wall_grid(4)[..., :2]
     one_line_error(spec, "predict before fit", lambda: fresh.predict(pts, np.array([2.0])))
-    field = fit_fixture(single)
+    field = fit_fixture(single, _physical(spec))
     zero = field.replace(values=np.zeros_like(field.values))
     one_line_error(spec, "fitting an all-zero field",
                     lambda: spec.create(dict(spec.test_config)).fit(zero))
@@ -190,14 +207,14 @@ def check_parameter_count(spec: PluginSpec, single: bool) -> None:
     must equal the declared count.
     """
     factory = spec.load()
-    model = _fitted(spec, fit_fixture(single))
+    model = _fitted(spec, fit_fixture(single, _physical(spec)))
     n = model.n_parameters
     assert isinstance(n, (int, np.integer)) and n > 0, (
         f"{spec.qualified_name}: n_parameters must be a positive integer, got {n!r}")
     presets = getattr(factory, "presets", None)
     if presets is None:
         return
-    one = fit_fixture(single=True)
+    one = fit_fixture(single=True, physical=_physical(spec))
     for name, preset in presets().items():
         options = {**dict(preset.options), "steps": 2, "eval_every": 1, "device": "cpu"}
         m = spec.create(options)
@@ -217,7 +234,7 @@ def check_parameter_count(spec: PluginSpec, single: bool) -> None:
 def check_seed_changes_fit(spec: PluginSpec, single: bool) -> None:
     """A neural model starts from a random initialisation drawn from its seed: seeds 0 and
     1 fit different models (predictions differ by more than 1e-4 relative)."""
-    field = fit_fixture(single)
+    field = fit_fixture(single, _physical(spec))
     pts = fixtures.wall_grid(9)[..., :2]
     first, second = (_fitted(spec, field, seed=seed).predict(pts, field.frequencies)
                      for seed in (0, 1))

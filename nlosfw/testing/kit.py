@@ -53,7 +53,8 @@ def check_plan(spec: PluginSpec) -> CheckPlan:
 
 def select_specs(registry: Registry | None = None, kinds: Iterable[str] | None = None,
                  names: Iterable[str] | None = None) -> list[PluginSpec]:
-    """Registered plugins, optionally only some kinds or names (``name`` or ``kind:name``)."""
+    """Registered plugins, optionally only some kinds or names (``name``, ``kind:name``, or
+    a distribution's name for every plugin it registers)."""
     if registry is None:
         from nlosfw.plugins.manager import load_plugins
 
@@ -62,7 +63,8 @@ def select_specs(registry: Registry | None = None, kinds: Iterable[str] | None =
     wanted_names = set(names) if names is not None else None
     return [spec for spec in registry.specs()
             if (wanted_kinds is None or spec.kind in wanted_kinds)
-            and (wanted_names is None or {spec.name, spec.qualified_name} & wanted_names)]
+            and (wanted_names is None
+                 or {spec.name, spec.qualified_name, spec.distribution} & wanted_names)]
 
 
 def check_cases(registry: Registry | None = None, kinds: Iterable[str] | None = None,

@@ -46,16 +46,16 @@ class FFTTransformConfig(PhasorTransformConfig):
     """
 
     frequencies: tuple[float, ...] = ()
-    """Explicit frequencies (cycles per metre of path); empty: use the band below."""
+    """[1/m] Explicit frequencies (cycles per metre of path); empty: use the band below."""
     n_frequencies: int = 151
     """Number of frequencies spread linearly over the band (the thesis uses 151)."""
     f_min: float | None = None
-    """Lowest frequency of the band; default f_max / 4."""
+    """[1/m] Lowest frequency of the band; default f_max / 4."""
     f_max: float | None = None
-    """Highest frequency of the band; default the aliasing limit 1/(2 m Δ) for wall grid
-    spacing Δ (m = 1 single-spot, 2 confocal)."""
+    """[1/m] Highest frequency of the band; default the aliasing limit 1/(2 m Δ) for wall
+    grid spacing Δ (m = 1 single-spot, 2 confocal)."""
     grid_spacing: float | None = None
-    """Wall spacing Δ (m) for the default band and the aliasing warning; default the
+    """[m] Wall spacing Δ for the default band and the aliasing warning; default the
     capture's (set it to the spacing of a denser grid the field will be upsampled to)."""
     remove_device_legs: bool = True
     """Take the device-to-wall legs out of the phase when the capture's time axis has them."""

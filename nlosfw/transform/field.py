@@ -20,6 +20,9 @@ class PhasorField:
     ``weights`` are the spectral weights of the virtual illumination (one per
     frequency; ``None`` means all ones) that an imager applies when it sums
     frequencies. ``geometry`` says how the field was captured.
+
+    Scattered wall samples (an irregular scan) are a field with one row: ``wall_xyz``
+    (1, N, 3) and ``values`` (F, 1, N); :meth:`grid_spacing` is None for them.
     """
 
     values: np.ndarray

@@ -4,18 +4,22 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import h5py
-
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import DataError
-from nlosfw.common.files import atomic_path
-from nlosfw.common.hdf5 import open_typed, read_dataset, read_yaml, write_header, write_yaml
+from nlosfw.common.hdf5 import (
+    new_file,
+    open_typed,
+    read_dataset,
+    read_yaml,
+    write_header,
+    write_yaml,
+)
 from nlosfw.transform.field import PhasorField
 
 
 def write_phasor_field(path: str | Path, field: PhasorField, overwrite: bool = False) -> Path:
     """Write ``field`` atomically; an existing file is kept unless ``overwrite``."""
-    with atomic_path(path, overwrite=overwrite) as tmp, h5py.File(tmp, "w") as f:
+    with new_file(path, overwrite=overwrite) as f:
         write_header(f, "PhasorField")
         f.create_dataset("values", data=field.values)
         f.create_dataset("frequencies", data=field.frequencies)
@@ -34,7 +38,10 @@ def read_phasor_field(path: str | Path) -> PhasorField:
         freqs = read_dataset(f, "frequencies", p)
         wall = read_dataset(f, "wall_xyz", p)
         weights = read_dataset(f, "weights", p) if "weights" in f else None
-        geometry = CaptureGeometry.from_dict(read_yaml(f, "geometry", p))
+        try:
+            geometry = CaptureGeometry.from_dict(read_yaml(f, "geometry", p))
+        except DataError as err:
+            raise DataError(f"{p}: {err}") from None
         metadata = read_yaml(f, "metadata", p)
     try:
         return PhasorField(values=values, frequencies=freqs, wall_xyz=wall, geometry=geometry,

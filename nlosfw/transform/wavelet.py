@@ -54,7 +54,7 @@ class WaveletTransformConfig(PhasorTransformConfig):
     """Options of the ``wavelet`` transform (Liu's virtual illumination)."""
 
     wavelength: float | None = None
-    """Central wavelength lambda_c in metres of path; default ``wavelength_factor`` x the grid
+    """[m] Central wavelength lambda_c (of path); default ``wavelength_factor`` x the grid
     spacing, doubled for confocal captures (their path doubles)."""
     wavelength_factor: float = 4.0
     """lambda_c as a multiple of the wall grid spacing Δ when ``wavelength`` is not given
@@ -64,10 +64,10 @@ class WaveletTransformConfig(PhasorTransformConfig):
     sigma_range: float = 3.0
     """Keep the bins within f_c ± sigma_range * sigma_f."""
     frequency_step: float | None = None
-    """Spacing df of the kept bins (cycles/m); default 1/(N delta_t) with
+    """[1/m] Spacing df of the kept bins; default 1/(N delta_t) with
     N >= n_bins + 6 sigma / delta_t."""
     grid_spacing: float | None = None
-    """Wall spacing Δ (m) for ``wavelength_factor`` and the aliasing warning; default the
+    """[m] Wall spacing Δ for ``wavelength_factor`` and the aliasing warning; default the
     capture's."""
     remove_device_legs: bool = True
     """Take the device-to-wall legs out of the phase when the capture's time axis has them."""

@@ -29,6 +29,7 @@ class NearestConfig(FieldModelConfig):
     """Options of the nearest-neighbour model."""
 
     frequency_interpolation: FrequencyInterpolation = FrequencyInterpolation.linear
+    """Between training frequencies: interpolate linearly, or take the nearest one."""
 
 
 @dataclass(frozen=True, eq=False)

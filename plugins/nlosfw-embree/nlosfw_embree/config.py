@@ -31,7 +31,7 @@ class EmbreeConfig(SimulatorConfig):
     batch: int = 4096
     """Surface samples per vectorised batch (memory grows as batch x sensors along y)."""
     ray_offset: float = 1e-4
-    """Distance (m) rays start off a surface, to avoid hitting their own triangle."""
+    """[m] Distance rays start off a surface, to avoid hitting their own triangle."""
 
     def __post_init__(self) -> None:
         require(self.samples >= 1, "samples", f"must be >= 1, got {self.samples}")

@@ -10,7 +10,8 @@ tensorstore and a dozen more packages for the same.
 The module (``factory(config, shape, key)``) maps normalised inputs (N, in_dim)
 float32 to (N, 2) = (Re, Im) or to a complex (N,). Its floating-point arrays are
 trained, except those wrapped in :class:`Fixed` (e.g. a random Fourier matrix);
-array names are their dotted paths (``layers.0.weight``). Step functions are
+array names are their dotted paths (``layers.0.weight``; a Fixed array: its wrapper's
+path, ``features.B``, as torch names a buffer). Step functions are
 jitted once per network structure and reused across model instances. JAX picks
 its own CPU thread count (``threads`` is ignored).
 """
@@ -27,7 +28,7 @@ import numpy as np
 import optax
 
 from nlosfw.common import ConfigError, FitError, one_line
-from nlosfw.model import Engine, NetworkBuild
+from nlosfw.model import Engine, NetworkBuild, SmoothnessBatch
 
 #: Adam exactly as torch.optim.Adam with its defaults (eps outside the square root).
 _ADAM = optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8)
@@ -68,9 +69,19 @@ def _name(path: tuple[Any, ...]) -> str:
 
 
 def _arrays(tree: Any) -> dict[str, Any]:
-    """The array leaves of ``tree`` by dotted path."""
-    return {_name(path): leaf for path, leaf in jax.tree_util.tree_leaves_with_path(tree)
-            if eqx.is_array(leaf)}
+    """The arrays of ``tree`` by dotted path; a :class:`Fixed` array by the path of its
+    wrapper (``features.B``, as torch names a buffer), so files load across engines."""
+    found = {}
+    for path, leaf in jax.tree_util.tree_leaves_with_path(tree, is_leaf=_is_fixed):
+        value = leaf.value if _is_fixed(leaf) else leaf
+        if eqx.is_array(value):
+            found[_name(path)] = value
+    return found
+
+
+def _placed(leaf: Any, value: Any) -> Any:
+    """``leaf`` (an array, or a Fixed one) replaced by the device array ``value``."""
+    return Fixed(value) if _is_fixed(leaf) else value
 
 
 def _trainable_spec(tree: Any) -> Any:
@@ -89,18 +100,29 @@ def _apply(params: Any, rest: Any, x: jax.Array, single: bool) -> jax.Array:
     return eqx.filter_vmap(one)(params, rest) if single else one(params, rest)
 
 
-def _loss(params: Any, rest: Any, x: jax.Array, y: jax.Array, single: bool) -> jax.Array:
-    return jnp.mean(jnp.square(_apply(params, rest, x, single) - y))
+def _loss(params: Any, rest: Any, batch: tuple[Any, Any, Any], single: bool
+          ) -> tuple[jax.Array, jax.Array]:
+    """(Data loss plus the smoothness penalty, data loss); ``batch`` = (inputs, targets,
+    None or the penalty's (inputs, matrix D, weight))."""
+    x, y, smooth = batch
+    loss = jnp.mean(jnp.square(_apply(params, rest, x, single) - y))
+    if smooth is None:
+        return loss, loss
+    sx, matrix, weight = smooth
+    out = _apply(params, rest, sx, single).reshape(matrix.shape[1], -1, 2)
+    return loss + weight * jnp.mean(jnp.square(jnp.tensordot(matrix, out, 1))), loss
 
 
 @eqx.filter_jit
-def _step(params: Any, rest: Any, opt_state: Any, batch: tuple[Any, Any, Any], lr: jax.Array,
-          single: bool) -> tuple[Any, Any, jax.Array]:
-    """One Adam step on ``batch`` = (inputs, targets, row indices or None for all rows)."""
-    x, y, idx = batch
+def _step(params: Any, rest: Any, opt_state: Any, batch: tuple[Any, Any, Any, Any],
+          lr: jax.Array, single: bool) -> tuple[Any, Any, jax.Array]:
+    """One Adam step on ``batch`` = (inputs, targets, row indices or None for all rows,
+    None or the smoothness penalty's (inputs, matrix, weight))."""
+    x, y, idx, smooth = batch
     if idx is not None:
         x, y = jnp.take(x, idx, axis=0), jnp.take(y, idx, axis=-2)
-    loss, grads = jax.value_and_grad(_loss)(params, rest, x, y, single)
+    (_, loss), grads = jax.value_and_grad(_loss, has_aux=True)(params, rest, (x, y, smooth),
+                                                                single)
     updates, opt_state = _ADAM.update(grads, opt_state, params)
     params = jax.tree.map(lambda p, u: p - lr * u, params, updates)
     return params, opt_state, loss
@@ -141,9 +163,9 @@ class JaxEngine(Engine):
         return set(_arrays(eqx.filter(network, _trainable_spec(network), is_leaf=_is_fixed)))
 
     def place(self, network: Any, state: Mapping[str, np.ndarray]) -> None:
-        leaves, treedef = jax.tree_util.tree_flatten_with_path(network)
-        placed = [self.to_device(state[_name(path)]) if eqx.is_array(leaf) else leaf
-                  for path, leaf in leaves]
+        leaves, treedef = jax.tree_util.tree_flatten_with_path(network, is_leaf=_is_fixed)
+        placed = [_placed(leaf, self.to_device(state[_name(path)])) if _name(path) in state
+                  else leaf for path, leaf in leaves]
         model = jax.tree_util.tree_unflatten(treedef, placed)
         self.params, self.rest = eqx.partition(model, _trainable_spec(model), is_leaf=_is_fixed)
         self.opt_state = _ADAM.init(self.params)
@@ -155,10 +177,14 @@ class JaxEngine(Engine):
             a = a.astype(np.float32)
         return jax.device_put(np.ascontiguousarray(a), self.device)
 
-    def step(self, idx: np.ndarray | None, lr: float) -> Any:
+    def step(self, idx: np.ndarray | None, lr: float, smooth: SmoothnessBatch | None = None
+             ) -> Any:
         index = None if idx is None else jax.device_put(idx.astype(np.int32), self.device)
+        penalty = None if smooth is None else (
+            self.to_device(smooth.x), self.to_device(smooth.matrix),
+            jnp.asarray(smooth.weight, dtype=jnp.float32))
         self.params, self.opt_state, loss = _step(
-            self.params, self.rest, self.opt_state, (self.x, self.y, index),
+            self.params, self.rest, self.opt_state, (self.x, self.y, index, penalty),
             jnp.asarray(lr, dtype=jnp.float32), bool(self.n_networks))
         return loss
 

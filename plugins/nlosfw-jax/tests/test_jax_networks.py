@@ -72,7 +72,7 @@ def test_fixed_arrays_are_saved_not_trained_and_outputs_may_be_complex(tmp_path)
     short.save(tmp_path / "a.npz")
     long.save(tmp_path / "b.npz")
     with np.load(tmp_path / "a.npz") as a, np.load(tmp_path / "b.npz") as b:
-        np.testing.assert_array_equal(a["a_proj.value"], b["a_proj.value"])
+        np.testing.assert_array_equal(a["a_proj"], b["a_proj"])
         assert not np.allclose(a["a_weight"], b["a_weight"])
     again = type(long).load(tmp_path / "b.npz")
     pts = fixtures.wall_grid(5)[..., :2]
@@ -87,7 +87,7 @@ def test_single_mode_gives_every_copy_its_own_start(tmp_path):
     assert model.n_networks == 5 and model.n_parameters == 5 * 34
     model.save(tmp_path / "m.npz")
     with np.load(tmp_path / "m.npz") as data:
-        proj = data["a_proj.value"]
+        proj = data["a_proj"]
     assert proj.shape == (5, 2, 8) and not np.allclose(proj[0], proj[1])
 
 

@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from nlosfw.common import ConfigError, FitError, one_line
-from nlosfw.model import Engine, NetworkBuild
+from nlosfw.model import Engine, NetworkBuild, SmoothnessBatch
 
 #: torch's own CPU thread count (one per core), read before any model changes it.
 DEFAULT_THREADS = torch.get_num_threads()
@@ -111,8 +111,10 @@ class TorchEngine(Engine):
     def to_device(self, a: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).to(self.device)
 
-    def step(self, idx: np.ndarray | None, lr: float) -> Any:
+    def step(self, idx: np.ndarray | None, lr: float, smooth: SmoothnessBatch | None = None
+             ) -> Any:
         x, y = self.x, self.y
+        state = {**self.fixed, **self.params}
         with self._threads():
             if idx is not None:
                 index = torch.from_numpy(idx).to(self.device)
@@ -120,8 +122,14 @@ class TorchEngine(Engine):
             for group in self.opt.param_groups:
                 group["lr"] = lr
             self.opt.zero_grad(set_to_none=True)
-            loss = torch.mean(torch.square(self._apply({**self.fixed, **self.params}, x) - y))
-            loss.backward()
+            loss = torch.mean(torch.square(self._apply(state, x) - y))
+            total = loss
+            if smooth is not None:
+                matrix = self.to_device(smooth.matrix)
+                out = self._apply(state, self.to_device(smooth.x))
+                curvature = torch.tensordot(matrix, out.reshape(matrix.shape[1], -1, 2), 1)
+                total = loss + smooth.weight * torch.mean(torch.square(curvature))
+            total.backward()
             self.opt.step()
         return loss.detach()
 

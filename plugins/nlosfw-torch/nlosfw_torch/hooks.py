@@ -7,10 +7,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from nlosfw.plugins import hookimpl, register_thesis_networks
+from nlosfw.plugins import hookimpl, register_field_networks, register_thesis_networks
 
 
 @hookimpl
 def register_networks(register: Any) -> None:
     register_thesis_networks(register, engine="torch",
                              factory="nlosfw_torch.networks:thesis_network")
+    register_field_networks(register, engine="torch", factory="nlosfw_torch.networks:field_network")

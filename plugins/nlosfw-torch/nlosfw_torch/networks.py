@@ -1,27 +1,42 @@
-"""Torch parts networks are built from, and the thesis networks (tanh, PE, SIREN).
+"""Torch parts networks are built from, the thesis networks (tanh, PE, SIREN) and
+fourier, wire, finer and hashgrid (issue 12).
 
 Parts: :class:`Linear` (weights (fan_in, fan_out), the layout the numpy reference
 and the JAX plugin share), :class:`Sine` (sin(omega0 z)), :class:`PositionalEncoding`
-(NeRF's gamma) and :class:`MLP` (linear layers with an activation after each hidden
-one). The factory :func:`thesis_network` builds the thesis networks for the shared
-trainer; they start from the backend-neutral weights of
-:func:`nlosfw.model.reference_state`, so torch and JAX train the same network.
+(NeRF's gamma), :class:`MLP` (linear layers with an activation after each hidden
+one), :class:`FourierFeatures`, :class:`Finer`, :class:`ComplexLinear`,
+:class:`Gabor` and :class:`HashGridEncoding`. The factories :func:`thesis_network`
+and :func:`field_network` build the networks for the shared trainer; they start
+from backend-neutral numpy weights (:func:`nlosfw.model.reference_state`,
+:func:`nlosfw.model.field_network_state`), so torch and JAX train the same network.
 """
 
 from __future__ import annotations
 
+import itertools
+import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import torch
 from torch import nn
 
 from nlosfw.model import (
+    HASH_PRIMES,
     Architecture,
     FieldShape,
+    FinerFieldConfig,
+    FourierFieldConfig,
+    HashGridFieldConfig,
+    HashGridLayout,
     NeuralFieldConfig,
+    WireFieldConfig,
+    field_network_state,
+    hash_grid_layout,
     reference_state,
     thesis_architecture,
+    wire_widths,
 )
 
 
@@ -127,3 +142,184 @@ class ThesisNetwork(MLP):
 def thesis_network(config: NeuralFieldConfig, shape: FieldShape) -> ThesisNetwork:
     """The factory of tanh, pe and siren: the network of ``config``'s class, for ``shape``."""
     return ThesisNetwork(thesis_architecture(config, shape))
+
+
+# --------------------------------------------------------------------------- issue 12 parts
+class FourierFeatures(nn.Module):
+    """[cos 2 pi v B, sin 2 pi v B] of inputs v (N, D), B (D, features) a fixed buffer."""
+
+    B: torch.Tensor
+
+    def __init__(self, in_dim: int, features: int) -> None:
+        super().__init__()
+        self.register_buffer("B", torch.zeros(in_dim, features))
+
+    def forward(self, v: torch.Tensor) -> torch.Tensor:
+        angle = 2 * math.pi * (v @ self.B)
+        return torch.cat([torch.cos(angle), torch.sin(angle)], dim=-1)
+
+
+class Finer(nn.Module):
+    """FINER's sin(omega0 (|z| + 1) z); the factor |z| + 1 is a constant to the gradient
+    unless ``scale_gradient``."""
+
+    def __init__(self, omega0: float, scale_gradient: bool = False) -> None:
+        super().__init__()
+        self.omega0, self.scale_gradient = float(omega0), scale_gradient
+
+    def forward(self, z: torch.Tensor) -> torch.Tensor:
+        scale = torch.abs(z) + 1
+        return torch.sin(self.omega0 * (scale if self.scale_gradient else scale.detach()) * z)
+
+
+class ComplexLinear(nn.Module):
+    """The complex map z W + b on real pairs: [Re z, Im z] (N, 2 fan_in) -> [Re, Im]
+    (N, 2 fan_out), with W = weight[0] + i weight[1] (fan_in, fan_out), b = bias[0] + i bias[1]
+    (a real matrix product: torch's complex kernels are several times slower on CPU)."""
+
+    def __init__(self, fan_in: int, fan_out: int) -> None:
+        super().__init__()
+        self.weight = nn.Parameter(torch.zeros(2, fan_in, fan_out))
+        self.bias = nn.Parameter(torch.zeros(2, fan_out))
+
+    def forward(self, h: torch.Tensor) -> torch.Tensor:
+        re, im = self.weight[0], self.weight[1]
+        matrix = torch.cat([torch.cat([re, im], 1), torch.cat([-im, re], 1)], 0)
+        return h @ matrix + self.bias.reshape(-1)
+
+
+class Gabor(nn.Module):
+    """WIRE's complex Gabor wavelet psi(z) = exp(i omega0 z - |s0 z|^2) of z = re + i im
+    (im None: z real), as real pairs [Re psi, Im psi]."""
+
+    def __init__(self, omega0: float, scale0: float) -> None:
+        super().__init__()
+        self.omega0, self.scale0 = float(omega0), float(scale0)
+
+    def forward(self, re: torch.Tensor, im: torch.Tensor | None = None) -> torch.Tensor:
+        size = torch.square(re) if im is None else torch.square(re) + torch.square(im)
+        log_envelope = -self.scale0 ** 2 * size - (0 if im is None else self.omega0 * im)
+        envelope, phase = torch.exp(log_envelope), self.omega0 * re
+        return torch.cat([envelope * torch.cos(phase), envelope * torch.sin(phase)], dim=-1)
+
+
+class HashGridEncoding(nn.Module):
+    """Multiresolution hash-grid features of the first ``layout.dims`` input columns (in
+    (-1, 1), clamped), d-linearly interpolated per level; other columns are appended."""
+
+    corners: torch.Tensor
+
+    def __init__(self, layout: HashGridLayout) -> None:
+        super().__init__()
+        self.layout = layout
+        self.tables = nn.ParameterList(nn.Parameter(torch.zeros(rows, layout.features))
+                                       for rows in layout.table_sizes)
+        corners = torch.tensor(list(itertools.product((0, 1), repeat=layout.dims)))
+        self.register_buffer("corners", corners, persistent=False)      # (2^d, d)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        d, out = self.layout.dims, []
+        u = ((x[:, :d] + 1) / 2).clamp(0, 1)
+        for n, table in zip(self.layout.resolutions, self.tables, strict=True):
+            cell = torch.clamp(torch.floor(u * n), max=n - 1)
+            frac = (u * n - cell)[:, None, :]                              # (N, 1, d)
+            vertex = cell.long()[:, None, :] + self.corners                # (N, 2^d, d)
+            weight = torch.where(self.corners.bool(), frac, 1 - frac).prod(-1)
+            row = self._row(vertex, n, table.shape[0])
+            out.append((weight[..., None] * table[row]).sum(1))
+        return torch.cat([*out, x[:, d:]], dim=1)
+
+    def _row(self, vertex: torch.Tensor, n: int, rows: int) -> torch.Tensor:
+        """Table rows of grid vertices (..., d): row-major when every vertex has its own row,
+        else the spatial hash (XOR of coordinate x prime) mod ``rows`` (a power of two)."""
+        dense = (n + 1) ** self.layout.dims <= rows
+        row = vertex[..., 0] * HASH_PRIMES[0]
+        for axis in range(1, self.layout.dims):
+            if dense:
+                row = row + vertex[..., axis] * (n + 1) ** axis
+            else:
+                row = torch.bitwise_xor(row, vertex[..., axis] * HASH_PRIMES[axis])
+        return row if dense else torch.bitwise_and(row, rows - 1)
+
+
+# --------------------------------------------------------------------------- issue 12 networks
+class _FromNumpy:
+    """A network whose initial weights are :func:`nlosfw.model.field_network_state`'s."""
+
+    config: NeuralFieldConfig
+    shape: FieldShape
+
+    def initial_state(self, n_networks: int, seed: int) -> dict[str, np.ndarray]:
+        return field_network_state(self.config, self.shape, n_networks, seed)
+
+
+class FourierNetwork(_FromNumpy, nn.Module):
+    """:class:`FourierFeatures`, then a ReLU :class:`MLP`."""
+
+    def __init__(self, config: FourierFieldConfig, shape: FieldShape) -> None:
+        super().__init__()
+        self.config, self.shape = config, shape
+        self.features = FourierFeatures(shape.in_dim, config.features)
+        self.mlp = MLP([2 * config.features, *config.hidden, shape.out_dim],
+                       [nn.ReLU() for _ in config.hidden])
+
+    def forward(self, v: torch.Tensor) -> torch.Tensor:
+        return self.mlp(self.features(v))
+
+
+class FinerNetwork(_FromNumpy, MLP):
+    """An :class:`MLP` with :class:`Finer` activations."""
+
+    def __init__(self, config: FinerFieldConfig, shape: FieldShape) -> None:
+        acts = [Finer(config.omega0_first if i == 0 else config.omega0_hidden,
+                      config.scale_gradient) for i in range(len(config.hidden))]
+        super().__init__([shape.in_dim, *config.hidden, shape.out_dim], acts)
+        self.config, self.shape = config, shape
+
+
+class WireNetwork(_FromNumpy, nn.Module):
+    """A real :class:`Linear`, then :class:`ComplexLinear` layers, :class:`Gabor` after each
+    but the last; returns the complex field (N,) itself."""
+
+    def __init__(self, config: WireFieldConfig, shape: FieldShape) -> None:
+        super().__init__()
+        self.config, self.shape = config, shape
+        dims = wire_widths(config, shape)
+        self.layers = nn.ModuleList([Linear(dims[0], dims[1]), *(
+            ComplexLinear(a, b) for a, b in zip(dims[1:-1], dims[2:], strict=True))])
+        self.gabor = Gabor(config.omega0, config.scale0)
+
+    def forward(self, v: torch.Tensor) -> torch.Tensor:
+        h = self.gabor(self.layers[0](v))                  # real first layer
+        for layer in self.layers[1:-1]:
+            re, im = layer(h).chunk(2, dim=-1)
+            h = self.gabor(re, im)
+        out = self.layers[-1](h)                           # [Re, Im] of the one output
+        return torch.complex(out[:, 0], out[:, 1])
+
+
+class HashGridNetwork(_FromNumpy, nn.Module):
+    """A :class:`HashGridEncoding`, then a ReLU :class:`MLP`."""
+
+    def __init__(self, config: HashGridFieldConfig, shape: FieldShape) -> None:
+        super().__init__()
+        self.config, self.shape = config, shape
+        layout = hash_grid_layout(config, shape)
+        self.encoding = HashGridEncoding(layout)
+        self.mlp = MLP([layout.encoded_dim, *config.hidden, shape.out_dim],
+                       [nn.ReLU() for _ in config.hidden])
+
+    def forward(self, v: torch.Tensor) -> torch.Tensor:
+        return self.mlp(self.encoding(v))
+
+
+_NETWORKS: dict[type, Any] = {FourierFieldConfig: FourierNetwork, WireFieldConfig: WireNetwork,
+                              FinerFieldConfig: FinerNetwork, HashGridFieldConfig: HashGridNetwork}
+
+
+def field_network(config: NeuralFieldConfig, shape: FieldShape) -> nn.Module:
+    """The factory of fourier, wire, finer and hashgrid: the network of ``config``'s class."""
+    for cls, network in _NETWORKS.items():
+        if isinstance(config, cls):
+            return network(config, shape)
+    raise TypeError(f"{type(config).__name__} configures none of fourier, wire, finer, hashgrid")

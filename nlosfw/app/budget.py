@@ -1,0 +1,203 @@
+"""The memory a run will need, estimated from its configuration before anything is allocated.
+
+A wall of 10⁵ × 10⁵ sensors or a billion time bins would otherwise end, after a long wait,
+in a ``MemoryError`` traceback. :func:`check_memory` refuses such a run with one line giving
+the estimate, what dominates it and the memory available; ``limits.allow_large=true`` runs
+it anyway. The estimate adds up the arrays a run holds at once (order of magnitude, on the
+generous side), with S sensors, L laser points, B time bins, F frequencies, D depth planes
+and M field models:
+
+=================  ===========================================================
+the transient      16·B·S·L bytes (float64 histogram while rendering, float32
+                   capture, its HDF5 image), and 4·B·S·L more with noise
+the transform      8·B·S·L (the spectrum) + 16·F·S·L per field (2 with noise)
+the fields         16·F·S·(2 + M) (true, raw, each model's prediction)
+the voxels         8·D·S·(3 + (2 + M)·(1 + single-frequency images)); D, when it is
+                   automatic, at most the time window over half a wall spacing
+training logs      400 bytes per evaluation (steps / eval_every) of neural models
+=================  ===========================================================
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from nlosfw.common.errors import ConfigError
+from nlosfw.common.files import format_bytes
+
+#: Bytes one entry of a neural model's training history takes (a small dict of floats).
+_HISTORY_ENTRY = 400
+
+
+@dataclass(frozen=True)
+class MemoryPart:
+    """One part of the estimate: what it holds, the options that size it, its bytes."""
+
+    what: str
+    why: str
+    nbytes: float
+
+
+def _get(config: Any, dotted: str, default: Any = None) -> Any:
+    node = config
+    for key in dotted.split("."):
+        if node is None or not hasattr(node, "get"):
+            return default
+        node = node.get(key)
+    return default if node is None else node
+
+
+def _capture_shape(config: Any) -> tuple[int, int, int, str] | None:
+    """(B, S, L, why) from ``capture.path`` (the file's header only) or the scene."""
+    path = _get(config, "capture.path")
+    if path is not None:
+        return _file_shape(Path(str(path)).expanduser())
+    res = _get(config, "scene.wall.resolution", (64, 64))
+    bins = int(_get(config, "scene.time.bins", 2048))
+    sensors = math.prod(int(r) for r in res)
+    return bins, sensors, 1, (f"scene.wall.resolution {list(res)} × scene.time.bins {bins}")
+
+
+def _file_shape(path: Path) -> tuple[int, int, int, str] | None:
+    """(B, S, L, why) of a capture file's transient, from its header (nothing read)."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            node = f.get("H") if "H" in f else f.get("data")
+            shape = tuple(int(n) for n in getattr(node, "shape", None) or ())
+    except (OSError, ValueError):
+        return None  # the capture reader explains what is wrong with the file
+    if not shape:
+        return None
+    return shape[0], math.prod(shape[1:]), 1, f"capture.path's transient of shape {list(shape)}"
+
+
+def _n_frequencies(config: Any, bins: int) -> int:
+    given = _get(config, "transform.frequencies")
+    if given:
+        return len(given)
+    count = _get(config, "transform.n_frequencies")
+    return int(count) if count is not None else max(1, bins // 2)  # at most the DFT's bins
+
+
+def _n_depths(config: Any, bins: int) -> int:
+    """Depth planes: as configured, else at most what the automatic rule can choose (planes
+    at least half a wall spacing apart over half the time window, at most its maximum)."""
+    from nlosfw.image.depths import MAX_AUTOMATIC_PLANES
+
+    given = len(_get(config, "reconstruction.depths", ()) or ())
+    count = _get(config, "reconstruction.n_depths")
+    if given or count is not None:
+        return given or int(count)
+    size, res = _get(config, "scene.wall.size"), _get(config, "scene.wall.resolution")
+    width = _get(config, "scene.time.bin_width")
+    if _get(config, "capture.path") is not None or not (size and res and width):
+        return MAX_AUTOMATIC_PLANES
+    spacing = min(float(s) / max(int(r), 1) for s, r in zip(size, res, strict=False))
+    ratio = bins * float(width) / spacing if spacing > 0 else math.inf
+    if not math.isfinite(ratio):  # a non-finite size is refused by the scene's own checks
+        return MAX_AUTOMATIC_PLANES
+    return max(2, min(MAX_AUTOMATIC_PLANES, math.ceil(ratio) + 1))
+
+
+def _history(options: Any) -> float:
+    steps, every = _get(options, "steps"), _get(options, "eval_every", 1)
+    if steps is None:
+        return 0.0
+    return float(steps) / max(int(every), 1) * _HISTORY_ENTRY
+
+
+def estimate_memory(config: Any) -> list[MemoryPart]:
+    """The parts of the memory a run of ``config`` (composed, validated) needs, in bytes."""
+    shape = _capture_shape(config)
+    if shape is None:
+        return []
+    bins, sensors, lasers, why = shape
+    samples = float(bins) * sensors * lasers
+    noisy = _get(config, "scene.noise.model", "none") != "none" and not _get(config,
+                                                                           "capture.path")
+    freqs = _n_frequencies(config, bins)
+    compare = _get(config, "compare", {}) or {}
+    models = 2 + len(compare) if _get(config, "model.name") != "interp" else 1 + len(compare)
+    depths = _n_depths(config, bins)
+    singles = int(_get(config, "reconstruction.single_frequency_images", 2))
+    history = _history(_get(config, "model")) + sum(_history(o) for o in compare.values())
+    per_field = 16.0 * freqs * sensors * lasers
+    return [
+        MemoryPart("the transient H", why, samples * (20 if noisy else 16)),
+        MemoryPart("the phasor transform", f"{why}, {freqs} frequencies",
+                   8 * samples + per_field * (2 if noisy else 1)),
+        MemoryPart("the fields imaged", f"{freqs} frequencies × {sensors * lasers} samples × "
+                   f"{2 + models} fields", 16.0 * freqs * sensors * (2 + models)),
+        MemoryPart("the voxels and images", f"{depths} depth planes × {sensors} voxels each",
+                   8.0 * depths * sensors * (3 + (2 + models) * (1 + singles))),
+        MemoryPart("the training history", "model.steps / model.eval_every", history),
+    ]
+
+
+def available_memory() -> int | None:
+    """Bytes of memory this process can still allocate (MemAvailable, within the cgroup's
+    limit when there is one), or None when unknown."""
+    found = []
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                found.append(int(line.split()[1]) * 1024)
+    except (OSError, ValueError, IndexError):
+        pass
+    cgroup = _cgroup_room()
+    if cgroup is not None:
+        found.append(cgroup)
+    if not found and hasattr(os, "sysconf"):
+        with contextlib.suppress(ValueError, OSError):
+            found.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    return min(found) if found else None
+
+
+def _cgroup_room() -> int | None:
+    """limit - usage of the cgroup (v2, else v1), or None without a limit."""
+    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        try:
+            limit = Path(limit_file).read_text().strip()
+            usage = int(Path(usage_file).read_text().strip())
+        except (OSError, ValueError):
+            continue
+        if limit == "max" or int(limit) >= 1 << 60:
+            return None
+        return max(0, int(limit) - usage)
+    return None
+
+
+def check_memory(config: Any, available: int | None = None) -> None:
+    """Refuse (one-line :class:`ConfigError`) a run whose estimated memory exceeds what is
+    available, unless ``limits.allow_large`` is true. ``available``: bytes (default: this
+    machine's)."""
+    if bool(_get(config, "limits.allow_large", False)):
+        return
+    parts = estimate_memory(config)
+    total = sum(p.nbytes for p in parts)
+    room = available_memory() if available is None else available
+    if room is None or total <= room:
+        return
+    top = max(parts, key=lambda p: p.nbytes)
+    raise ConfigError("", f"this run needs about {format_bytes(total)} of "
+                      f"memory, most of it for {top.what} ({top.why}: "
+                      f"{format_bytes(top.nbytes)}), but {format_bytes(room)} are available; "
+                      "make it smaller, or set limits.allow_large=true to run anyway")
+
+
+def memory_summary(config: Mapping[str, Any]) -> str:
+    """The estimate as one line (for the log)."""
+    parts = estimate_memory(config)
+    total = sum(p.nbytes for p in parts)
+    return f"estimated memory {format_bytes(total)}: " + ", ".join(
+        f"{p.what} {format_bytes(p.nbytes)}" for p in parts if p.nbytes)

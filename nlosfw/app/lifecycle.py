@@ -1,0 +1,393 @@
+"""A run's hold on its directory: a lock while it runs, a marker naming the files it wrote.
+
+A run directory may hold other things than the run: a user's own files (with
+``hydra.run.dir=.``), an earlier run, or a run still in progress. Two files make that
+safe:
+
+``.nlosfw-run.lock``  held (``flock``) by the running process, with its process id: a
+                      second run in the same directory sees a live run and never touches
+                      its files; the kernel drops the lock when the process dies, even by
+                      ``kill -9``.
+``.nlosfw-run.json``  the marker: the run's configuration hash and every file it has
+                      claimed, recorded *before* the file is written. Only files listed
+                      there are ever moved or removed by a later run.
+
+What a later run does with an earlier one (:func:`verdict`): nothing to see: start;
+a live run, or a file in the way that no run claimed: refuse (one line, exit status
+2, nothing changed); an earlier run and ``output.overwrite=true``: remove its files,
+then start; in a multirun (a sweep resumed in its directory) a finished job whose
+configuration hash matches is skipped, an unfinished one is set aside under
+``interrupted-<time>/`` and run again, and a different configuration is refused naming
+the first option that differs; otherwise: refuse.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import enum
+import hashlib
+import json
+import logging
+import os
+import shutil
+import socket
+import time
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TextIO
+
+from nlosfw.common import yaml_safe
+from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.common.files import TEMPORARY_NAME, storage_error, write_text
+
+log = logging.getLogger(__name__)
+
+LOCK_NAME = ".nlosfw-run.lock"
+MARKER_NAME = ".nlosfw-run.json"
+MARKER_FORMAT = "nlosfw-run"
+#: Options that change where or whether a run computes, not what: left out of the hash.
+RUN_CONTROL_OPTIONS = ("cache", "limits", "output.overwrite")
+#: Hydra's own files in a run directory (never claimed, never touched).
+HYDRA_FILES = (".hydra", "run.log")
+#: Statuses of a finished run (one a resumed sweep may skip).
+FINISHED = ("completed", "stopped")
+
+
+class Verdict(enum.Enum):
+    """What a run does with its directory."""
+
+    start = "start"            # nothing of an earlier run there
+    skip = "skip"              # a finished job of a resumed sweep, same configuration
+    set_aside = "set_aside"    # an unfinished job of a resumed sweep: move its files aside
+    replace = "replace"        # output.overwrite=true: remove the earlier run's files
+
+
+# --------------------------------------------------------------------- configuration
+def _result_options(config: Mapping[str, Any]) -> dict[str, Any]:
+    """``config`` (plain) without :data:`RUN_CONTROL_OPTIONS`."""
+    plain = yaml_safe.to_plain(dict(config))
+    for dotted in RUN_CONTROL_OPTIONS:
+        *parents, leaf = dotted.split(".")
+        node = plain
+        for key in parents:
+            node = node.get(key) if isinstance(node, dict) else None
+        if isinstance(node, dict):
+            node.pop(leaf, None)
+    return plain
+
+
+def config_hash(config: Mapping[str, Any]) -> str:
+    """SHA-256 of the canonical JSON of a run's configuration, run-control options left out."""
+    text = json.dumps(_result_options(config), sort_keys=True, separators=(",", ":"),
+                      default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def first_difference(old: Mapping[str, Any], new: Mapping[str, Any]
+                     ) -> tuple[str, Any, Any] | None:
+    """(dotted option, old value, new value) of the first option that differs, or None."""
+    a, b = _flatten(_result_options(old)), _flatten(_result_options(new))
+    missing = object()
+    for key in list(b) + [k for k in a if k not in b]:
+        if a.get(key, missing) != b.get(key, missing):
+            return key, a.get(key), b.get(key)
+    return None
+
+
+def _flatten(value: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(value, dict) and value:
+        out: dict[str, Any] = {}
+        for key, item in value.items():
+            out.update(_flatten(item, f"{prefix}.{key}" if prefix else str(key)))
+        return out
+    if isinstance(value, list) and value and any(isinstance(v, (dict, list)) for v in value):
+        out = {}
+        for i, item in enumerate(value):
+            out.update(_flatten(item, f"{prefix}.{i}" if prefix else str(i)))
+        return out
+    return {prefix: value}
+
+
+# ------------------------------------------------------------------------- inspection
+@dataclass(frozen=True)
+class EarlierRun:
+    """What a run directory already holds."""
+
+    live_pid: str | None = None
+    """``pid@host`` of a run holding the directory's lock right now."""
+    marker: Mapping[str, Any] | None = None
+    """The earlier run's marker (None: no nlosfw run claimed anything here)."""
+    status: str | None = None
+    """The earlier run's ``metrics.json`` status (None: it wrote none)."""
+    in_the_way: tuple[str, ...] = ()
+    """Names a run writes that exist here but that no run claimed."""
+
+    @property
+    def files(self) -> tuple[str, ...]:
+        """The files the earlier run claimed (relative paths)."""
+        return tuple((self.marker or {}).get("files", ()))
+
+
+def inspect_run_dir(run_dir: Path, planned: Iterable[str], check_live: bool = True
+                    ) -> EarlierRun:
+    """What ``run_dir`` holds: a live run (unless not ``check_live``: the caller holds the
+    lock), an earlier run's marker and status, and which of the ``planned`` top-level names
+    are there without a run having claimed them."""
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        return EarlierRun()
+    live = _lock_holder(run_dir / LOCK_NAME) if check_live else None
+    marker = _read_marker(run_dir / MARKER_NAME)
+    claimed = {f.split("/", 1)[0] for f in (marker or {}).get("files", ())}
+    if marker is not None:  # Hydra's files beside an earlier run are that run's
+        claimed.update(HYDRA_FILES)
+    in_the_way = tuple(name for name in planned
+                       if name not in claimed and (run_dir / name).exists())
+    status = None
+    if marker is not None and "metrics.json" in claimed:
+        try:
+            status = json.loads((run_dir / "metrics.json").read_text()).get("status")
+        except (OSError, ValueError, AttributeError):
+            status = None
+    return EarlierRun(live_pid=live, marker=marker, status=status, in_the_way=in_the_way)
+
+
+def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, Any], *,
+            overwrite: bool, resume: bool) -> Verdict:
+    """What a run of ``config`` does with ``run_dir`` holding ``earlier``; a refusal is a
+    one-line :class:`ConfigError` (exit status 2) and leaves the directory as it was.
+
+    ``resume``: the run is a job of a multirun (a sweep may be resumed in its directory).
+    """
+    if earlier.live_pid is not None:
+        raise ConfigError("", f"{run_dir}: another nlosfw run (process {earlier.live_pid}) is "
+                              "writing there; wait for it to end or choose another directory")
+    if earlier.in_the_way:
+        raise ConfigError("", f"{run_dir}: holds {earlier.in_the_way[0]}, which no nlosfw run "
+                              "wrote there; choose another directory (nothing was changed)")
+    if earlier.marker is None:
+        return Verdict.start
+    if overwrite:
+        return Verdict.replace
+    state = earlier.status if earlier.status in FINISHED else "unfinished"
+    if not resume:
+        article = "an" if state == "unfinished" else "a"
+        raise ConfigError("output.overwrite", f"{run_dir} already holds {article} {state} run; "
+                          "choose another directory, or set output.overwrite=true to replace "
+                          "its files")
+    if earlier.marker.get("config_hash") != config_hash(config):
+        raise _differs(run_dir, config)
+    return Verdict.skip if state in FINISHED else Verdict.set_aside
+
+
+def _differs(run_dir: Path, config: Mapping[str, Any]) -> ConfigError:
+    """The refusal of a resumed sweep job whose configuration is not the earlier one's."""
+    hint = ("this sweep directory was run with another configuration; use a new "
+            "hydra.sweep.dir, or output.overwrite=true to replace its runs")
+    try:
+        old = yaml_safe.load((run_dir / "config.yaml").read_text(encoding="utf-8"))
+    except (OSError, ValueError, yaml_safe.LimitExceeded):
+        old = None
+    found = first_difference(old, config) if isinstance(old, dict) else None
+    if found is None:
+        return ConfigError("", f"{run_dir}: {hint}")
+    key, before, now = found
+    return ConfigError(key, f"is {now!r} but {before!r} in the run in {run_dir}; {hint}")
+
+
+# --------------------------------------------------------------------------- holding
+class RunHold:
+    """The running process's hold on its run directory: the lock and the marker.
+
+    Create it with :meth:`acquire`; :meth:`claim` a file before writing it; :meth:`release`
+    when the run ends (the marker stays, the lock goes).
+    """
+
+    def __init__(self, run_dir: Path, lock: TextIO, marker: dict[str, Any]) -> None:
+        self.run_dir = run_dir
+        self._lock = lock
+        self._marker = marker
+
+    @classmethod
+    def acquire(cls, run_dir: Path, config: Mapping[str, Any], planned: Iterable[str], *,
+                overwrite: bool, resume: bool) -> RunHold | None:
+        """Lock ``run_dir``, judge what it holds and act on it: None when the run is to be
+        skipped (a finished job of a resumed sweep), else the hold. Raises the refusals of
+        :func:`verdict` (the directory unchanged)."""
+        run_dir = Path(run_dir)
+        lock_path = run_dir / LOCK_NAME
+        try:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            existed = lock_path.exists()
+            lock = _try_lock(lock_path)
+        except OSError as err:
+            raise (storage_error(lock_path, err) or err) from None
+        if lock is None:
+            holder = _lock_holder(lock_path) or "unknown"
+            raise ConfigError("", f"{run_dir}: another nlosfw run (process {holder}) is "
+                                  "writing there; wait for it to end or choose another directory")
+        try:
+            earlier = inspect_run_dir(run_dir, planned, check_live=False)
+            decision = verdict(run_dir, earlier, config, overwrite=overwrite, resume=resume)
+            if decision is Verdict.skip:
+                _unlock(lock, lock_path, remove=not existed)
+                return None
+            if decision is Verdict.set_aside:
+                _set_aside(run_dir, earlier)
+            elif decision is Verdict.replace:
+                _remove(run_dir, earlier)
+        except BaseException:
+            _unlock(lock, lock_path, remove=not existed)
+            raise
+        lock.seek(0)
+        lock.truncate()
+        lock.write(f"{os.getpid()}@{socket.gethostname()}\n")
+        lock.flush()
+        marker = {"format": MARKER_FORMAT, "version": 1, "pid": os.getpid(),
+                  "host": socket.gethostname(), "config_hash": config_hash(config),
+                  "files": []}
+        return cls(run_dir, lock, marker)
+
+    def claim(self, name: str) -> None:
+        """Record ``name`` (relative to the run directory) as this run's, before writing it."""
+        if name in self._marker["files"]:
+            return
+        self._marker = {**self._marker, "files": [*self._marker["files"], name]}
+        write_text(self.run_dir / MARKER_NAME, json.dumps(self._marker, indent=1) + "\n",
+                   overwrite=True)
+
+    def release(self) -> None:
+        """Drop the lock (and its file); the marker stays for later runs to read."""
+        _unlock(self._lock, self.run_dir / LOCK_NAME, remove=True)
+
+
+def _try_lock(path: Path) -> TextIO | None:
+    """``path`` opened and exclusively locked, or None when another process holds it."""
+    import fcntl
+
+    while True:
+        handle = open(path, "a+")  # noqa: SIM115 - held open for the whole run
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.close()
+            return None
+        try:  # the holder before us may have removed the file: lock the current one
+            if os.fstat(handle.fileno()).st_ino == os.stat(path).st_ino:
+                return handle
+        except FileNotFoundError:
+            pass
+        handle.close()
+
+
+def _unlock(handle: TextIO, path: Path, remove: bool) -> None:
+    if remove:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+    handle.close()  # closing drops the flock
+
+
+def _lock_holder(path: Path) -> str | None:
+    """``pid@host`` of the process holding ``path``'s lock, or None when nobody does."""
+    import fcntl
+
+    try:
+        handle = open(path)  # noqa: SIM115 - closed below
+    except OSError:
+        return None
+    with handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return handle.read().strip() or "unknown"
+        except OSError:
+            return None
+        fcntl.flock(handle, fcntl.LOCK_UN)
+    return None
+
+
+def _read_marker(path: Path) -> dict[str, Any] | None:
+    if not path.is_file():
+        return None
+    try:
+        marker = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        raise DataError(f"{path}: unreadable run marker; move the directory's files away "
+                        "by hand") from None
+    if not (isinstance(marker, dict) and marker.get("format") == MARKER_FORMAT
+            and isinstance(marker.get("files"), list)):
+        raise DataError(f"{path}: not an nlosfw run marker")
+    return marker
+
+
+# ------------------------------------------------------------------- acting on files
+def _claimed_paths(run_dir: Path, earlier: EarlierRun) -> list[Path]:
+    """The earlier run's files that exist, its temporaries, then its marker, never anything
+    outside ``run_dir``."""
+    root = run_dir.resolve()
+    out = []
+    for name in earlier.files:
+        path = run_dir / name
+        if root in path.resolve().parents and (path.is_file() or path.is_symlink()):
+            out.append(path)
+    pid = str((earlier.marker or {}).get("pid", ""))
+    dirs = {run_dir, *((run_dir / name).parent for name in earlier.files)}
+    for folder in dirs:
+        if not folder.is_dir() or root not in [folder.resolve(), *folder.resolve().parents]:
+            continue
+        for entry in folder.iterdir():
+            match = TEMPORARY_NAME.match(entry.name)
+            if match and match.group("pid") == pid and entry.is_file():
+                out.append(entry)
+    out.append(run_dir / MARKER_NAME)
+    return out
+
+
+def _set_aside(run_dir: Path, earlier: EarlierRun) -> None:
+    """Move the earlier (unfinished) run's files into ``interrupted-<time>/``."""
+    aside = run_dir / f"interrupted-{time.strftime('%Y%m%d-%H%M%S')}"
+    n = 2
+    while aside.exists():
+        aside = run_dir / f"interrupted-{time.strftime('%Y%m%d-%H%M%S')}-{n}"
+        n += 1
+    moved = 0
+    for path in _claimed_paths(run_dir, earlier):
+        target = aside / path.relative_to(run_dir)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.move(str(path), target)
+        moved += 1
+    _remove_empty_parents(run_dir, earlier.files)
+    log.warning("moved %d files of an unfinished earlier run to %s", moved, aside)
+
+
+def _remove(run_dir: Path, earlier: EarlierRun) -> None:
+    """Delete the earlier run's files (output.overwrite=true)."""
+    paths = _claimed_paths(run_dir, earlier)
+    for path in paths:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+    _remove_empty_parents(run_dir, earlier.files)
+    log.warning("output.overwrite: removed %d files of the earlier run in %s", len(paths),
+                run_dir)
+
+
+def _remove_empty_parents(run_dir: Path, names: Iterable[str]) -> None:
+    """Remove the folders the earlier run's files were in, when they are now empty."""
+    folders = sorted({(run_dir / n).parent for n in names} - {run_dir},
+                     key=lambda p: len(p.parts), reverse=True)
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only ever succeeds on an empty folder
+
+
+@contextlib.contextmanager
+def held(run_dir: Path, config: Mapping[str, Any], planned: Iterable[str], *,
+         overwrite: bool, resume: bool) -> Iterator[RunHold | None]:
+    """:meth:`RunHold.acquire` for a block, released when it ends (None: skip the run)."""
+    hold = RunHold.acquire(run_dir, config, planned, overwrite=overwrite, resume=resume)
+    try:
+        yield hold
+    finally:
+        if hold is not None:
+            hold.release()

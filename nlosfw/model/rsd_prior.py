@@ -1,0 +1,448 @@
+"""The ``rsd_prior`` field model: the wall field of a non-negative hidden albedo.
+
+Instead of a generic function of (x, y, f), the field is explained by a hidden scene: a
+non-negative albedo a on voxel planes parallel to the wall, the same at every frequency,
+propagated to the wall by the physics of :mod:`nlosfw.model.scene_operator` (laser spot
+-> voxel -> wall, or the doubled path of confocal scans). Fitting solves
+
+    min_{a >= 0}  1/2 sum_f ||A_f a - P_f||^2 + l1 sum_v n_v a_v + tv TV(n a)
+
+over the sparse wall samples P_f (``fit_frequencies`` of the field's frequencies, evenly
+spread), n_v = ||A e_v|| being the column norms: FISTA (monotone, :mod:`nlosfw.model.fista`)
+runs on x = n a, so every column has unit norm (much faster convergence) and a weak,
+distant voxel pays the same L1 price as a bright near one for the same contribution to
+the data. The step is 1/L from a power iteration. The weights are relative:
+l1 = ``l1_weight`` * max Re(A_n^H P), the smallest weight at which the solution is zero
+(A_n the normalised operator); TV is a smoothed total variation of x within each plane
+(off by default).
+The fitted albedo then predicts the field anywhere on the wall and at any frequency: on
+a regular grid whose spacing and the voxels' are whole multiples of one another by FFT
+convolution, elsewhere by a direct sum over the non-zero voxels.
+
+Voxels: planes ``depth_step`` apart (default a fifth of the shortest wavelength; the
+feasibility study found about 1.3 cm necessary, 3.9 cm stalls) over ``depth_range``, or
+chosen from the data (below), on a lateral lattice of spacing ``lateral_step`` (default
+half the shortest wavelength, a quarter for confocal scans, rounded down so that the
+training spacing is a whole multiple of it) covering the training grid and half a
+training spacing beyond. Enough frequencies are fitted that paths over twice the depth
+span do not alias in time.
+
+Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a
+coarse lattice (the training spacing laterally, planes a quarter of the shortest
+wavelength of the lower half of the band apart, from the wall to half the capture's
+time span) finds the depths where a plane's largest contribution ||A e_v|| a_v reaches
+``depth_threshold`` of the largest; the fine planes are those within ``depth_margin``
+(plus half a coarse step) of them. Separate objects thus cost separate clusters of
+planes, not the whole depth range between them.
+
+The field's device legs (when its time axis has them) are taken out before the fit and
+put back in predictions. The model is the simulators' own physics (an inverse crime on
+simulated captures): judge it on noisy, occluded and mis-calibrated captures.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.config import require
+from nlosfw.common.errors import ConfigError, DataError, FitError
+from nlosfw.image.fft import Precision
+from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout, to_canonical
+from nlosfw.image.rsd_kernel import check_geometry, path_multiplier, wall_field
+from nlosfw.model.fista import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
+from nlosfw.model.interface import (
+    FieldModel,
+    FieldModelConfig,
+    FitReport,
+    TrainingStep,
+    check_query,
+    check_training_field,
+)
+from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.scene_operator import (
+    Amplitude,
+    OperatorOptions,
+    SceneOperator,
+    VoxelLattice,
+    direct_fields,
+)
+from nlosfw.transform.field import PhasorField
+from nlosfw.transform.temporal_dft import unit_phasor
+
+log = logging.getLogger(__name__)
+
+#: Model name written in saved files.
+MODEL_NAME = "rsd_prior"
+#: Frequencies propagated at once when predicting (bounds memory).
+_PREDICT_CHUNK = 16
+#: Smoothing of the total variation, relative to the albedo's typical value.
+_TV_EPS = 0.1
+
+
+@dataclass(frozen=True)
+class RSDPriorConfig(FieldModelConfig):
+    """Options of the ``rsd_prior`` field model (``seed``: the power iteration's start;
+    ``device`` is ignored: numpy on the CPU)."""
+
+    iterations: int = 150
+    """FISTA iterations."""
+    l1_weight: float = 0.02
+    """L1 weight relative to max Re(A^H P) (at 1 the fitted albedo is zero)."""
+    tv_weight: float = 0.0
+    """Smoothed total-variation weight, relative like ``l1_weight`` (0: none)."""
+    amplitude: Amplitude = Amplitude.lambertian
+    """Amplitude of each leg: lambertian (surfaces facing the wall, the simulators'),
+    point (point scatterers) or inverse_square (no cosines)."""
+    fit_frequencies: int = 32
+    """Frequencies used in the fit, evenly spread over the field's (0: all)."""
+    depth_range: tuple[float, ...] = ()
+    """[m] Near and far depth of the voxel planes; empty: estimated from the data."""
+    depth_step: float | None = None
+    """[m] Distance between voxel planes; default a fifth of the shortest wavelength."""
+    lateral_step: float | None = None
+    """[m] Largest lateral voxel spacing; default half the shortest wavelength (a quarter
+    for confocal scans). The training spacing is a whole multiple of the spacing used."""
+    depth_threshold: float = 0.1
+    """Automatic depth range: keep the planes where the coarse fit's largest contribution
+    reaches this fraction of the overall largest."""
+    depth_iterations: int = 40
+    """Automatic depth range: FISTA iterations of the coarse fit."""
+    depth_margin: float = 0.05
+    """Automatic depth range: metres added before and after the kept planes."""
+    power_iterations: int = 20
+    """Power iterations estimating the Lipschitz constant L."""
+    step: float = 0.9
+    """FISTA step as a fraction of 1/L (the power iteration estimates L from below)."""
+    tolerance: float = 0.0
+    """Stop when the objective falls by less than this fraction over 10 iterations (0: never)."""
+    precision: Precision = Precision.single
+    """FFT precision: complex64 (fast) or complex128."""
+    workers: int = -1
+    """Threads of scipy.fft (-1: all cores)."""
+    cache_mb: float = 1024.0
+    """[MiB] Memory for the kernels' spectra during the fit (recomputed when larger)."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require(self.iterations >= 1, "iterations", f"must be >= 1, got {self.iterations}")
+        require(0 <= self.l1_weight < 1, "l1_weight",
+                f"must be in [0, 1) (1 zeroes the albedo), got {self.l1_weight}")
+        require(self.tv_weight >= 0, "tv_weight", f"must be >= 0, got {self.tv_weight}")
+        require(self.fit_frequencies >= 0, "fit_frequencies",
+                f"must be >= 0 (0: all), got {self.fit_frequencies}")
+        require(len(self.depth_range) in (0, 2), "depth_range",
+                f"must be empty (automatic) or [near, far], got {list(self.depth_range)}")
+        if self.depth_range:
+            near, far = self.depth_range
+            require(0 < near <= far, "depth_range",
+                    f"must satisfy 0 < near <= far (m), got {list(self.depth_range)}")
+        for name in ("depth_step", "lateral_step"):
+            value = getattr(self, name)
+            require(value is None or value > 0, name, f"must be > 0 m or null, got {value}")
+        require(0 < self.depth_threshold <= 1, "depth_threshold",
+                f"must be in (0, 1], got {self.depth_threshold}")
+        require(self.depth_iterations >= 1, "depth_iterations",
+                f"must be >= 1, got {self.depth_iterations}")
+        require(self.depth_margin >= 0, "depth_margin", f"must be >= 0 m, got {self.depth_margin}")
+        require(self.power_iterations >= 1, "power_iterations",
+                f"must be >= 1, got {self.power_iterations}")
+        require(0 < self.step <= 1, "step", f"must be in (0, 1], got {self.step}")
+        require(0 <= self.tolerance < 1, "tolerance", f"must be in [0, 1), got {self.tolerance}")
+        require(self.workers == -1 or self.workers >= 1, "workers",
+                f"must be -1 (all cores) or >= 1, got {self.workers}")
+        require(self.cache_mb >= 0, "cache_mb", f"must be >= 0 MiB, got {self.cache_mb}")
+
+
+@dataclass(frozen=True, eq=False)
+class _Fitted:
+    """What a fit leaves: the lattice, the albedo on it, and how to put the field back."""
+
+    lattice: VoxelLattice
+    albedo: np.ndarray
+    geometry: CaptureGeometry
+    scale: float
+
+
+class RSDPriorFieldModel(FieldModel):
+    """The wall field of a fitted non-negative voxel albedo (see the module docstring)."""
+
+    config_class = RSDPriorConfig
+    family = MODEL_NAME
+
+    def __init__(self, config: Any = None) -> None:
+        super().__init__(config)
+        self._fitted: _Fitted | None = None
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, field: PhasorField, validation: PhasorField | None = None,
+            on_step: Callable[[TrainingStep], None] | None = None) -> FitReport:
+        """Fit the albedo to ``field`` (``validation`` is unused)."""
+        start = time.perf_counter()
+        cfg = self.config
+        check_training_field(field, MODEL_NAME)
+        check_geometry(field.geometry)
+        wall = _training_grid(field)
+        values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
+        scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))
+        values = values / scale
+        shortest = 1.0 / float(field.frequencies.max())
+        depth_step = cfg.depth_step or shortest / 5
+        if cfg.depth_range:
+            near, far = (float(v) for v in cfg.depth_range)
+            depths = np.arange(near, far + depth_step / 2, depth_step)
+        else:
+            depths = self._depth_planes(values, wall, field, depth_step)
+        span = float(depths.max() - depths.min())
+        chosen = fit_frequency_indices(field.frequencies,
+                                       _enough_frequencies(field.frequencies, cfg.fit_frequencies,
+                                                           span))
+        freqs = field.frequencies[chosen]
+        lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
+        lattice = voxel_lattice(wall, lateral, depths)
+        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options())
+        log.info("rsd_prior: %d planes in %.3f-%.3f m, %d x %d voxels, %d frequencies",
+                 depths.size, depths.min(), depths.max(), *lattice.shape, freqs.size)
+        history: list[dict[str, float]] = []
+
+        def report(k: int, objective: float, residual: float) -> None:
+            if k == 1 or k % 10 == 0 or k == cfg.iterations:
+                history.append({"step": k, "objective": objective,
+                                "relative_residual": residual})
+            if on_step is not None:
+                on_step(TrainingStep(step=k, total_steps=cfg.iterations, loss=residual,
+                                     seconds=time.perf_counter() - start))
+
+        albedo, result = self._solve(op, values[chosen], cfg.iterations, report)
+        self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale)
+        return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
+                         final_loss=result.residual,
+                         stopped_early=result.iterations < cfg.iterations, history=history)
+
+    def _solve(self, op: SceneOperator, data: np.ndarray, iterations: int,
+               report: Callable[[int, float, float], None] | None = None
+               ) -> tuple[np.ndarray, FistaResult]:
+        """The albedo fitted to ``data`` by FISTA on the column-normalised operator."""
+        cfg = self.config
+        norms = op.column_norms()
+
+        def forward(x: np.ndarray) -> np.ndarray:
+            return op.forward(x / norms)
+
+        def adjoint(p: np.ndarray) -> np.ndarray:
+            return op.adjoint(p) / norms
+
+        shape = op.lattice.volume_shape
+        lip = lipschitz(forward, adjoint, shape, cfg.power_iterations, cfg.seed)
+        peak = float(adjoint(data).real.max())
+        if not peak > 0 or not lip > 0:
+            raise FitError(f"{MODEL_NAME}: no non-negative albedo correlates with the field "
+                           "(max Re(A^H P) <= 0); check the capture geometry and the field's sign")
+        tv = cfg.tv_weight * peak
+        eps = _TV_EPS * peak / lip
+        smooth_l = lip + (tv * tv_lipschitz(2, eps) if tv > 0 else 0.0)
+        problem = FistaProblem(forward, adjoint, data, shape, l1=cfg.l1_weight * peak, tv=tv,
+                               tv_eps=eps, tv_axes=(1, 2))
+        result = solve(problem, cfg.step / smooth_l, iterations, report, cfg.tolerance)
+        return result.x / norms, result
+
+    def _depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
+                      step: float) -> np.ndarray:
+        """Planes ``step`` apart within ``depth_margin`` of the planes where a quick fit on a
+        coarse lattice finds the scene (see the module docstring)."""
+        cfg = self.config
+        deepest = _deepest(field)
+        f = field.frequencies
+        lower = np.flatnonzero(f <= f.min() + (f.max() - f.min()) / 2)
+        chosen = lower[fit_frequency_indices(f[lower], _enough_frequencies(
+            f[lower], cfg.fit_frequencies, deepest))]
+        freqs = f[chosen]
+        coarse = 1.0 / (4.0 * float(freqs.max()))
+        depths = np.arange(coarse, deepest + coarse / 2, coarse)
+        lattice = voxel_lattice(wall, max(wall.spacing), depths)
+        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options())
+        albedo, _ = self._solve(op, values[chosen], cfg.depth_iterations)
+        contribution = albedo * op.column_norms()
+        profile = contribution.reshape(depths.size, -1).max(axis=1)
+        if not profile.max() > 0:
+            raise FitError(f"{MODEL_NAME}: the coarse fit found no scene; give "
+                           "model.depth_range")
+        found = depths[profile >= cfg.depth_threshold * profile.max()]
+        reach = cfg.depth_margin + coarse / 2
+        grid = np.arange(max(step, found.min() - reach), found.max() + reach + step / 2, step)
+        near = np.abs(grid[:, None] - found[None, :]).min(axis=1) <= reach
+        log.info("rsd_prior: a coarse fit of %d planes and %d frequencies finds the scene at "
+                 "%s m", depths.size, freqs.size, np.round(found, 3).tolist())
+        return grid[near]
+
+    def _options(self, cache: bool = True) -> OperatorOptions:
+        cfg = self.config
+        dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
+        return OperatorOptions(amplitude=cfg.amplitude, dtype=dtype, workers=cfg.workers,
+                               cache_mb=cfg.cache_mb if cache else 0.0)
+
+    # ------------------------------------------------------------------ predict
+    def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
+        """The fitted scene's field at wall points (..., 2) and frequencies (F,) -> (F, ...)."""
+        xy, f = check_query(wall_xy, frequencies, MODEL_NAME)
+        fitted = self._stored()
+        kept = np.flatnonzero(np.any(fitted.albedo != 0, axis=(1, 2)))
+        lattice = replace(fitted.lattice, depths=fitted.lattice.depths[kept])
+        albedo = fitted.albedo[kept]
+        options = self._options(cache=False)
+        layout = grid_layout(xy) if xy.ndim == 3 else None
+        out: np.ndarray | None = None
+        if layout is not None and kept.size:
+            try:
+                out = self._predict_grid(lattice, albedo, layout, f, options)
+            except DataError:            # spacings not commensurate: sum directly
+                out = None
+        if out is None:
+            points = xy.reshape(-1, 2)
+            out = direct_fields(lattice, albedo, points, fitted.geometry, f, options)
+        out = out.reshape((f.size,) + xy.shape[:-1]).astype(np.complex128) * fitted.scale
+        if fitted.geometry.t_accounts_first_and_last_bounces:
+            points3 = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], axis=-1)
+            legs = fitted.geometry.device_path(points3)
+            out *= unit_phasor(-f.reshape((-1,) + (1,) * legs.ndim) * legs[None])
+        return out
+
+    def _predict_grid(self, lattice: VoxelLattice, albedo: np.ndarray, layout: GridLayout,
+                      f: np.ndarray, options: OperatorOptions) -> np.ndarray:
+        fitted = self._stored()
+        parts = []
+        for start in range(0, f.size, _PREDICT_CHUNK):
+            op = SceneOperator(lattice, layout, fitted.geometry, f[start:start + _PREDICT_CHUNK],
+                               options)
+            parts.append(op.forward(albedo))
+        canon = np.concatenate(parts, axis=0)
+        return from_canonical(canon, layout.order, axes=(1, 2))
+
+    def _stored(self) -> _Fitted:
+        if self._fitted is None:
+            raise FitError(f"{MODEL_NAME}: call fit() or load() before predict() or save()")
+        return self._fitted
+
+    @property
+    def albedo(self) -> np.ndarray:
+        """The fitted albedo (Z, Y, X) (relative units) on :attr:`lattice`."""
+        return self._stored().albedo
+
+    @property
+    def lattice(self) -> VoxelLattice:
+        """The voxel lattice of the fitted albedo."""
+        return self._stored().lattice
+
+    @property
+    def n_parameters(self) -> int:
+        """Voxels of the albedo."""
+        if self._fitted is None:
+            raise FitError(f"{MODEL_NAME}: the number of voxels is known after fit or load")
+        return self._fitted.lattice.size
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | Path) -> None:
+        fitted = self._stored()
+        lat = fitted.lattice
+        write_model_file(path, MODEL_NAME, self.config,
+                         {"albedo": fitted.albedo, "depths": lat.depths},
+                         {"origin": list(lat.origin), "step": list(lat.step),
+                          "shape": list(lat.shape), "geometry": fitted.geometry.to_dict(),
+                          "scale": fitted.scale})
+
+    @classmethod
+    def load(cls, path: str | Path) -> RSDPriorFieldModel:
+        from nlosfw.common.config import config_from_mapping
+
+        header, arrays = read_model_file(path, MODEL_NAME)
+        try:
+            model = cls(config_from_mapping(RSDPriorConfig, header["config"], "model"))
+            depths = np.asarray(arrays["depths"], dtype=float)
+            lattice = VoxelLattice(depths, _pair(header["origin"]), _pair(header["step"]),
+                                   (int(header["shape"][0]), int(header["shape"][1])))
+            albedo = np.asarray(arrays["albedo"], dtype=np.float32)
+            geometry = CaptureGeometry.from_dict(header["geometry"])
+            scale = float(header["scale"])
+        except (KeyError, TypeError, ValueError, IndexError, ConfigError, DataError) as err:
+            raise DataError(f"model file {path}: invalid {MODEL_NAME} file "
+                            f"({type(err).__name__})") from None
+        if albedo.shape != lattice.volume_shape or not np.all(np.isfinite(albedo)):
+            raise DataError(f"model file {path}: albedo of shape {albedo.shape} does not match "
+                            f"the lattice {lattice.volume_shape}")
+        model._fitted = _Fitted(lattice, albedo, geometry, scale)
+        return model
+
+
+def _pair(values: Any) -> tuple[float, float]:
+    return float(values[0]), float(values[1])
+
+
+def _training_grid(field: PhasorField) -> GridLayout:
+    layout = grid_layout(field.wall_xyz)
+    if layout is None or min(layout.shape) < 2:
+        raise DataError(f"{MODEL_NAME}: the training samples must form a regular axis-aligned "
+                        f"grid of at least 2 x 2 points in the wall plane z = 0, got wall_xyz "
+                        f"of shape {field.wall_xyz.shape}")
+    return layout
+
+
+def fit_frequency_indices(frequencies: np.ndarray, count: int) -> np.ndarray:
+    """Indices of ``count`` frequencies evenly spread over the sorted ``frequencies`` (the
+    first and the last included; all of them for count 0 or count >= F)."""
+    order = np.argsort(frequencies, kind="stable")
+    n = order.size
+    if count == 0 or count >= n:
+        return order
+    picks = np.unique(np.round(np.linspace(0, n - 1, count)).astype(int))
+    return order[picks]
+
+
+def voxel_lattice(wall: GridLayout, lateral_step: float, depths: np.ndarray) -> VoxelLattice:
+    """Voxel planes at ``depths`` whose spacing divides the training spacing (at most
+    ``lateral_step``) and covering the training grid plus half a training spacing."""
+    origin, step, shape = [], [], []
+    for axis in (0, 1):
+        spacing, n = wall.spacing[axis], wall.shape[axis]
+        k = max(1, math.ceil(spacing / lateral_step - 1e-6))
+        pad = k // 2
+        step.append(spacing / k)
+        origin.append(wall.origin[axis] - pad * spacing / k)
+        shape.append(k * (n - 1) + 1 + 2 * pad)
+    return VoxelLattice(np.asarray(depths, dtype=float), (origin[0], origin[1]),
+                        (step[0], step[1]), (shape[0], shape[1]))
+
+
+def _enough_frequencies(frequencies: np.ndarray, count: int, depth_span: float) -> int:
+    """At least ``count`` (0: all), and enough evenly spread frequencies that paths over
+    twice ``depth_span`` (m) do not alias in time (spacing <= 1 / (2.2 depth_span))."""
+    if count == 0:
+        return 0
+    f = np.asarray(frequencies, dtype=float)
+    band = float(f.max() - f.min())
+    needed = int(math.ceil(band * 2.2 * depth_span)) + 1
+    return max(count, needed)
+
+
+def _deepest(field: PhasorField) -> float:
+    """Half the longest path the field can hold: the capture's time span (from the
+    transform's metadata) or the unambiguous range 1/df of the frequency spacing."""
+    meta = field.metadata
+    try:
+        end = float(meta["t_start"]) + int(meta["n_bins"]) * float(meta["delta_t"])
+        if end > 0:
+            return end / 2
+    except (KeyError, TypeError, ValueError):
+        pass
+    f = np.sort(np.unique(field.frequencies))
+    if f.size < 2:
+        raise ConfigError("model.depth_range", "give [near, far] (m): one frequency and no "
+                          "capture time span in the field's metadata cannot place the scene")
+    return 1.0 / (2.0 * float(np.min(np.diff(f))))
