@@ -84,7 +84,8 @@ def read_capture_file(path: Path, forced: str | None, host: PluginHost
 def load_file_capture(source: CaptureSource, host: PluginHost) -> FileCapture:
     """Read ``source.path`` (format forced or detected) and preprocess it: the run's options
     over the format's defaults."""
-    assert source.path is not None
+    if source.path is None:
+        raise ConfigError("capture.path", "no capture file given")
     path = Path(source.path).expanduser()
     name, fmt, capture = read_capture_file(path, source.format, host)
     options, from_format = options_of(source).merged_over(fmt.defaults(path))
