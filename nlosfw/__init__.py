@@ -12,13 +12,15 @@ its public API:
 * :mod:`nlosfw.app`: the command line (Hydra), pipeline, cache, figures and reports.
 
 For notebooks and scripts, :mod:`nlosfw.api` gives one function per stage and one for a
-whole run, all importable from here: :func:`read_capture`, :func:`simulate_scene`,
+whole run, all importable from here: :func:`load_capture` (any capture format),
+:func:`read_capture` (HDF5), :func:`simulate_scene`,
 :func:`transform_capture`, :func:`split_field`, :func:`fit_model`, :func:`predict_field`,
 :func:`reconstruct` and :func:`run` (``nlosfw.run(["model=interp"])`` is
 ``python -m nlosfw model=interp``, returning the results instead of printing them).
 
-Importing this package loads only numpy, scipy and the core data types; plugins and
-their heavy backends (torch, JAX, mitsuba, embreex), Hydra and matplotlib load on demand.
+Importing this package loads the core (numpy, scipy, h5py, pluggy, PyYAML and the data
+types); plugins and their heavy backends (torch, JAX, mitsuba, embreex), Hydra, rich and
+matplotlib load on demand.
 """
 
 from nlosfw.api import (

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import json
 import logging
 import os
 import tempfile
@@ -29,10 +28,11 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, TypeVar
+from typing import Any, TypeVar
 
 from nlosfw.common.errors import DataError
-from nlosfw.common.files import TEMPORARY_NAME, atomic_path, write_text
+from nlosfw.common.files import TEMPORARY_NAME, atomic_path, open_locked, write_text
+from nlosfw.common.hashing import canonical_digest
 from nlosfw.common.version import __version__
 
 log = logging.getLogger(__name__)
@@ -49,9 +49,7 @@ def default_cache_dir() -> Path:
 
 def cache_key(material: Any) -> str:
     """SHA-256 of the canonical JSON of ``material`` plus the nlosfw version."""
-    text = json.dumps({"nlosfw": __version__, "material": material}, sort_keys=True,
-                      separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+    return canonical_digest({"nlosfw": __version__, "material": material})
 
 
 def file_digest(path: Path) -> str:
@@ -62,32 +60,10 @@ def file_digest(path: Path) -> str:
     return digest.hexdigest()
 
 
-def _open_locked(path: Path, blocking: bool) -> IO[str] | None:
-    """``path`` (created if needed) opened with an exclusive ``flock`` held, or None when
-    not ``blocking`` and another process holds it. The lock is on the file the path
-    names when it is taken (an evicted lock file is not locked by mistake)."""
-    import fcntl
-
-    flags = fcntl.LOCK_EX | (0 if blocking else fcntl.LOCK_NB)
-    while True:
-        handle = open(path, "a")  # noqa: SIM115 - returned open, closed by the caller
-        try:
-            fcntl.flock(handle, flags)
-        except BlockingIOError:
-            handle.close()
-            return None
-        try:
-            if os.fstat(handle.fileno()).st_ino == os.stat(path).st_ino:
-                return handle
-        except FileNotFoundError:
-            pass
-        handle.close()
-
-
 @contextlib.contextmanager
 def _locked(path: Path) -> Iterator[None]:
     """An exclusive advisory lock on ``path`` (created if needed) for the block."""
-    handle = _open_locked(path, blocking=True)
+    handle = open_locked(path, blocking=True)
     assert handle is not None  # a blocking lock is always taken
     try:
         yield
@@ -134,7 +110,7 @@ def cache_entries(root: Path) -> list[CacheEntry]:
 
 def evict(entry: CacheEntry) -> bool:
     """Remove ``entry`` unless a running process holds its lock; True when removed."""
-    handle = _open_locked(entry.lock, blocking=False)
+    handle = open_locked(entry.lock, blocking=False)
     if handle is None:
         return False
     try:

@@ -20,6 +20,7 @@ from typing import Any
 from nlosfw.app.metrics import RunMetrics
 from nlosfw.app.quality import QualityTable, parse_overrides
 from nlosfw.app.records import RunRecord
+from nlosfw.app.tables import format_cell
 from nlosfw.common import yaml_safe
 
 _STYLE = """
@@ -49,7 +50,8 @@ def page(title: str, sections: Sequence[str]) -> str:
 def table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     """An HTML table; cells are escaped, None is empty, floats have 4 significant digits."""
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(_cell(c))}</td>" for c in row) + "</tr>"
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(format_cell(c))}</td>" for c in row)
+                   + "</tr>"
                    for row in rows)
     return (f"<div class=\"scroll\"><table>\n<thead><tr>{head}</tr></thead>\n<tbody>{body}"
             "</tbody>\n</table></div>")
@@ -68,14 +70,6 @@ def preformatted(text: str, summary: str | None = None) -> str:
     block = f"<pre>{html.escape(text)}</pre>"
     return block if summary is None else (
         f"<details><summary>{html.escape(summary)}</summary>{block}</details>")
-
-
-def _cell(value: Any) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)
 
 
 def _section(title: str, *parts: str) -> str:

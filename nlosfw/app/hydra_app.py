@@ -242,20 +242,12 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         if not node:
             raise ConfigError(group, "no plugin selected")
         spec = host.registry.get(group, str(node.get("name")))
-        command = spec.install_command()
-        if command:
-            raise PluginError(f"{group} plugin '{spec.name}' needs packages that are not "
-                              f"installed; run: {command}")
-        _check_imports(spec)
+        _check_plugin(spec, f"{group} plugin")
         spec.make_config(_plugin_options(node, spec.config_class()))
     for label, options in settings.compare.items():
         node = dict(options)
         spec = host.registry.get("model", str(node.pop("name")))
-        command = spec.install_command()
-        if command:
-            raise PluginError(f"compare.{label}: model plugin '{spec.name}' needs packages that "
-                              f"are not installed; run: {command}")
-        _check_imports(spec)
+        _check_plugin(spec, f"compare.{label}: model plugin")
         try:
             spec.make_config(node)
         except ConfigError as err:
@@ -318,6 +310,17 @@ def _task(cfg: Any) -> float | None:
         report_user_error(NlosfwError(f"out of memory ({one_line(err)}); make the run "
                                       "smaller (the sizes, or fewer sweep jobs at once)"))
         raise SystemExit(1) from None
+
+
+def _check_plugin(spec: PluginSpec, what: str) -> None:
+    """A one-line PluginError, before the run starts, when the plugin ``what`` names needs
+    packages that are not installed (with the command that installs them) or its code
+    cannot be imported."""
+    command = spec.install_command()
+    if command:
+        raise PluginError(f"{what} '{spec.name}' needs packages that are not installed; "
+                          f"run: {command}")
+    _check_imports(spec)
 
 
 def _check_imports(spec: PluginSpec) -> None:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import contextlib
 import enum
-import hashlib
 import json
 import logging
 import os
@@ -35,11 +34,12 @@ import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TextIO
+from typing import IO, Any
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.common.files import TEMPORARY_NAME, storage_error, write_text
+from nlosfw.common.files import TEMPORARY_NAME, open_locked, storage_error, write_text
+from nlosfw.common.hashing import canonical_digest
 
 log = logging.getLogger(__name__)
 
@@ -79,9 +79,7 @@ def _result_options(config: Mapping[str, Any]) -> dict[str, Any]:
 
 def config_hash(config: Mapping[str, Any]) -> str:
     """SHA-256 of the canonical JSON of a run's configuration, run-control options left out."""
-    text = json.dumps(_result_options(config), sort_keys=True, separators=(",", ":"),
-                      default=str)
-    return hashlib.sha256(text.encode()).hexdigest()
+    return canonical_digest(_result_options(config))
 
 
 def first_difference(old: Mapping[str, Any], new: Mapping[str, Any]
@@ -204,7 +202,7 @@ class RunHold:
     when the run ends (the marker stays, the lock goes).
     """
 
-    def __init__(self, run_dir: Path, lock: TextIO, marker: dict[str, Any]) -> None:
+    def __init__(self, run_dir: Path, lock: IO[str], marker: dict[str, Any]) -> None:
         self.run_dir = run_dir
         self._lock = lock
         self._marker = marker
@@ -220,7 +218,7 @@ class RunHold:
         try:
             run_dir.mkdir(parents=True, exist_ok=True)
             existed = lock_path.exists()
-            lock = _try_lock(lock_path)
+            lock = open_locked(lock_path, blocking=False, mode="a+")
         except OSError as err:
             raise (storage_error(lock_path, err) or err) from None
         if lock is None:
@@ -262,26 +260,7 @@ class RunHold:
         _unlock(self._lock, self.run_dir / LOCK_NAME, remove=True)
 
 
-def _try_lock(path: Path) -> TextIO | None:
-    """``path`` opened and exclusively locked, or None when another process holds it."""
-    import fcntl
-
-    while True:
-        handle = open(path, "a+")  # noqa: SIM115 - held open for the whole run
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            handle.close()
-            return None
-        try:  # the holder before us may have removed the file: lock the current one
-            if os.fstat(handle.fileno()).st_ino == os.stat(path).st_ino:
-                return handle
-        except FileNotFoundError:
-            pass
-        handle.close()
-
-
-def _unlock(handle: TextIO, path: Path, remove: bool) -> None:
+def _unlock(handle: IO[str], path: Path, remove: bool) -> None:
     if remove:
         with contextlib.suppress(FileNotFoundError):
             path.unlink()

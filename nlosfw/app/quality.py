@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -239,12 +239,7 @@ def quality_figure(points: Sequence[QualityPoint], layout: SweepLayout,
             if facet:
                 ax.set_title(facet, fontsize=9)
             _x_axis(ax, xs, positions, numeric)
-    handles, labels = [], []
-    for ax in axes.ravel():
-        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
-            if label not in labels:
-                handles.append(handle)
-                labels.append(label)
+    handles, labels = unique_legend(axes)
     if handles:
         fig.legend(handles, labels, loc="outside right upper", title="field")
     repeat = f"; mean and range over {', '.join(layout.repeats)}" if layout.repeats else ""
@@ -313,3 +308,16 @@ def _cell(point: QualityPoint | None) -> str:
     if min(point.values) == max(point.values):
         return f"{point.mean:.4g}"
     return f"{point.mean:.4g} ({min(point.values):.4g} to {max(point.values):.4g})"
+
+
+def unique_legend(axes: Any) -> tuple[list[Any], list[str]]:
+    """The legend entries of every panel in ``axes`` (an array of matplotlib axes), each
+    label once, in the order first seen: one figure legend for panels sharing lines."""
+    handles: list[Any] = []
+    labels: list[str] = []
+    for ax in axes.ravel():
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            if label not in labels:
+                handles.append(handle)
+                labels.append(label)
+    return handles, labels

@@ -45,7 +45,7 @@ from nlosfw.app.quality import (
 )
 from nlosfw.app.records import RunRecord, find_runs, read_run
 from nlosfw.app.study import SCORES, study_csv_rows, study_figure, study_rows, study_table
-from nlosfw.app.tables import markdown_table
+from nlosfw.app.tables import format_cell, markdown_table
 from nlosfw.app.thesis import thesis_comparison
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.common.files import atomic_path, write_text
@@ -139,17 +139,9 @@ COLUMNS: tuple[tuple[str, Column], ...] = (
 )
 
 
-def _fmt(value: Any) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)
-
-
 def report_rows(records: Sequence[RunRecord]) -> list[dict[str, str]]:
     """One row of formatted cells per run, by column name."""
-    return [{name: _fmt(value(r)) for name, value in COLUMNS} for r in records]
+    return [{name: format_cell(value(r)) for name, value in COLUMNS} for r in records]
 
 
 def to_csv(rows: list[dict[str, str]]) -> str:

@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from nlosfw.app.metrics import ImageScores, RunMetrics
+from nlosfw.app.quality import unique_legend
 from nlosfw.app.records import RunRecord
 
 #: The scores aggregated, in order (attributes of :class:`~nlosfw.app.metrics.ImageScores`).
@@ -266,12 +267,7 @@ def study_figure(rows: Sequence[StudyRow], path: Path, dpi: int = 110) -> None:
                 ax.set_xlabel("wall samples of the full capture per sample kept")
             if j == 0:
                 ax.set_title(condition, loc="left", fontsize=10)
-    handles, labels = [], []
-    for ax in axes.ravel():
-        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
-            if lab not in labels:
-                handles.append(h)
-                labels.append(lab)
+    handles, labels = unique_legend(axes)
     fig.legend(handles, labels, loc="upper center", ncol=min(6, max(1, len(labels))),
                fontsize=9, frameon=False)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.6 / fig.get_figheight()))

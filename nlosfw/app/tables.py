@@ -1,8 +1,18 @@
-"""Markdown tables for reports (runs, sweeps, thesis comparisons)."""
+"""Tables for reports (runs, sweeps, thesis comparisons): markdown, and their cells."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
+
+
+def format_cell(value: Any) -> str:
+    """A table cell: empty for None, 4 significant digits for a float, else ``str``."""
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:

@@ -15,6 +15,7 @@ import shutil
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
 from nlosfw.common.errors import DataError, StorageError
 
@@ -142,3 +143,26 @@ def write_bytes(path: str | Path, data: bytes | memoryview, overwrite: bool = Fa
         for start in range(0, len(view), 1 << 24):
             fh.write(view[start:start + (1 << 24)])
     return Path(path)
+
+
+def open_locked(path: Path, blocking: bool, mode: str = "a") -> IO[str] | None:
+    """``path`` (created if needed) opened in ``mode`` with an exclusive ``flock`` held, or
+    None when not ``blocking`` and another process holds it. The lock is on the file the
+    path names when it is taken: a lock file its holder removed meanwhile is not locked by
+    mistake. Closing the handle drops the lock."""
+    import fcntl
+
+    flags = fcntl.LOCK_EX | (0 if blocking else fcntl.LOCK_NB)
+    while True:
+        handle = open(path, mode)  # noqa: SIM115 - returned open, closed by the caller
+        try:
+            fcntl.flock(handle, flags)
+        except BlockingIOError:
+            handle.close()
+            return None
+        try:
+            if os.fstat(handle.fileno()).st_ino == os.stat(path).st_ino:
+                return handle
+        except FileNotFoundError:
+            pass
+        handle.close()
