@@ -19,7 +19,10 @@ voxels); the ``rsd_prior`` field model propagates voxel planes to the wall and b
 (input: voxels, output: wall). Grids may come in any orientation (x along either array
 axis, increasing or decreasing): :func:`grid_layout` finds the canonical order (x along
 axis 1, y along axis 0, both increasing) and :func:`to_canonical` /
-:func:`from_canonical` move arrays in and out of it.
+:func:`from_canonical` move arrays in and out of it. :func:`wall_layout` and
+:func:`plane_layout` are the imagers' checked versions (the ``fft`` imager and the
+classical ``lct``/``fk``/``fbp`` imagers of :mod:`nlosfw.image.transient`): a one-line
+DataError for a wall or voxel plane that is not such a grid.
 """
 
 from __future__ import annotations
@@ -30,10 +33,13 @@ from typing import NamedTuple
 import numpy as np
 import scipy.fft
 
-from nlosfw.transform.field import regular_grid_spacing
+from nlosfw.common.errors import DataError
+from nlosfw.transform.field import PhasorField, regular_grid_spacing
 
 #: Relative tolerance on "one spacing is a whole multiple of the other".
 RATIO_RTOL = 1e-3
+#: Relative tolerance on the flatness of a voxel plane (constant z).
+FLATNESS_RTOL = 1e-6
 
 
 class GridOrder(NamedTuple):
@@ -112,6 +118,33 @@ def grid_layout(points: np.ndarray) -> GridLayout | None:
         return None
     return GridLayout(order, (float(canon[0, 0, 1]), float(canon[0, 0, 0])), spacing,
                       (int(canon.shape[0]), int(canon.shape[1])))
+
+
+def wall_layout(field: PhasorField) -> GridLayout:
+    """The canonical layout of the field's wall; DataError unless it is a regular grid."""
+    layout = grid_layout(field.wall_xyz)
+    if layout is None:
+        raise DataError("field.wall_xyz: the imager needs the field on a regular, "
+                        "axis-aligned wall grid in the plane z = 0; use the rsd imager for "
+                        "other walls")
+    return layout
+
+
+def plane_layout(plane: np.ndarray, index: int) -> tuple[GridLayout, float]:
+    """(canonical layout, depth z) of voxel plane ``index`` (Y, X, 3); DataError unless it
+    is a regular x-y grid parallel to the wall."""
+    z = plane[..., 2]
+    scale = max(1.0, float(np.abs(z).max()), float(np.ptp(plane[..., :2])))
+    if np.ptp(z) > FLATNESS_RTOL * scale:
+        raise DataError(f"voxels: plane {index} is not parallel to the wall (z from "
+                        f"{z.min():.6g} to {z.max():.6g} m); the imager needs planes of "
+                        "constant z on a regular x-y grid; use the rsd imager for other voxels")
+    layout = grid_layout(plane[..., :2])
+    if layout is None:
+        raise DataError(f"voxels: plane {index} is not a regular axis-aligned x-y grid; the "
+                        "imager needs regularly spaced planes parallel to the wall; use the "
+                        "rsd imager for other voxels")
+    return layout, float(z.mean())
 
 
 @dataclass(frozen=True)

@@ -44,8 +44,8 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
-from nlosfw.image.grids import apply_ops, plane_grid, wall_grid
 from nlosfw.image.interface import Imager, ImagerConfig
+from nlosfw.image.plane_convolution import plane_layout, to_canonical, wall_layout
 from nlosfw.image.propagation import check_field, check_voxels
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.rsd_kernel import wall_field
@@ -181,9 +181,9 @@ class TransientImager(Imager):
 
 def canonical_wall(field: PhasorField) -> WallGrid:
     """The field's wall as a :class:`WallGrid` (DataError unless it is a regular grid)."""
-    ops, origin, spacing = wall_grid(field)
-    values = np.ascontiguousarray(apply_ops(wall_field(field), ops, axes=(1, 2)))
-    return WallGrid(values=values, origin=origin, spacing=spacing)
+    wall = wall_layout(field)
+    values = np.ascontiguousarray(to_canonical(wall_field(field), wall.order, axes=(1, 2)))
+    return WallGrid(values=values, origin=wall.origin, spacing=wall.spacing)
 
 
 def voxel_planes(voxels: np.ndarray, grid: WallGrid, name: str) -> VoxelPlanes:
@@ -193,7 +193,7 @@ def voxel_planes(voxels: np.ndarray, grid: WallGrid, name: str) -> VoxelPlanes:
     if planes is None:
         raise DataError(f"voxels: the {name} imager needs planes parallel to the wall, (Y, X, 3) "
                         f"or (Z, Y, X, 3); got a point list {voxels.shape} (use the rsd imager)")
-    depths = np.array([plane_grid(p, i)[3] for i, p in enumerate(planes)])
+    depths = np.array([plane_layout(p, i)[1] for i, p in enumerate(planes)])
     (y0, x0), (dy, dx) = grid.origin, grid.spacing
     ny, nx = grid.shape
     rows_f = (planes[..., 1] - y0) / dy if ny > 1 else np.zeros(planes.shape[:-1])

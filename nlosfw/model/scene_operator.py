@@ -17,8 +17,8 @@ one leg (:class:`Amplitude`; constants such as 1/pi^3 are absorbed in the albedo
 
 Per plane the sum over voxels is a convolution (the sensor leg depends on x_s - x_v
 only) times a per-voxel laser leg L_f(x_v) = g(r_l) e^{-2 pi i f r_l}, evaluated by the
-FFT layout of :mod:`nlosfw.image.plane_convolution` (the ``fft`` imager's layout, also
-for voxels coarser than the wall) with the kernels of
+FFT layout of :mod:`nlosfw.image.plane_convolution` (one layout shared with the ``fft``
+imager; also for voxels coarser than the wall) with the kernels of
 :func:`nlosfw.image.rsd_kernel.phasor_series`. The adjoint is the correlation with the
 conjugate kernels, i.e. an RSD back-propagation: the ``fft`` imager's sum with this
 model's amplitudes.
