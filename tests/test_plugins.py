@@ -393,3 +393,12 @@ def test_a_broken_entry_point_shows_as_broken(monkeypatch):
     assert _command(host, "--check")[0] == 1
     status, out = _command(host, "broken")
     assert status == 1 and "entry point failed to load" in out
+
+
+def test_a_capture_format_says_it_is_detected_and_forced_with_capture_format():
+    status, out = _command(load_plugins(env={}), "capture_format:lct")
+    assert status == 0, out
+    assert ("kind          capture_format (detected from a file's content; force it with "
+            "capture.format=lct)") in out
+    assert "python -m nlosfw capture.path=FILE capture.format=lct" in out
+    assert "capture_format=lct" not in out.replace("capture.format=lct", "")

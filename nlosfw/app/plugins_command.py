@@ -21,6 +21,7 @@ from rich.table import Table
 from nlosfw.common.config_docs import OptionDoc, option_docs
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins import CAPABILITIES, PluginHost, PluginSpec
+from nlosfw.plugins.kinds import RUN_KINDS
 
 #: Exit status of ``plugins --check`` and ``plugins NAME`` when a plugin is broken.
 BROKEN_EXIT_STATUS = 1
@@ -98,7 +99,7 @@ def plugin_details(spec: PluginSpec) -> list[Any]:
     status = plugin_status(spec, full=True)
     out: list[Any] = [
         f"[bold]{spec.qualified_name}[/]  {escape(spec.description)}",
-        f"  kind          {spec.kind.value} (select it with {spec.kind.value}={spec.name})",
+        f"  kind          {spec.kind.value} ({_how_selected(spec)})",
         f"  distribution  {spec.distribution} {_version(spec.distribution)}",
         f"  entry point   {spec.entry_point or '-'}",
         f"  factory       {escape(_describe(spec.factory))}",
@@ -119,8 +120,18 @@ def plugin_details(spec: PluginSpec) -> list[Any]:
     return out
 
 
+def _how_selected(spec: PluginSpec) -> str:
+    """How a run picks the plugin: its config group, or (capture formats) the file."""
+    if spec.kind in RUN_KINDS:
+        return f"select it with {spec.kind.value}={spec.name}"
+    return f"detected from a file's content; force it with capture.format={spec.name}"
+
+
 def example_command(spec: PluginSpec, options: Sequence[OptionDoc]) -> str:
-    """A command that selects the plugin and sets one of its numeric options."""
+    """A command that selects the plugin and sets one of its numeric options (a capture
+    format: reads a file with it)."""
+    if spec.kind not in RUN_KINDS:
+        return f"python -m nlosfw capture.path=FILE capture.format={spec.name}"
     command = f"python -m nlosfw {spec.kind.value}={spec.name}"
     numeric = next((o for o in options if o.name not in ("seed", "device")
                     and o.type in ("int", "float") and o.default is not None), None)
