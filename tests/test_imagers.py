@@ -8,6 +8,7 @@ voxel sets, chunking, time-resolved images and bad input.
 
 from __future__ import annotations
 
+import threading
 import tracemalloc
 
 import numpy as np
@@ -19,7 +20,7 @@ from nlosfw.common.errors import DataError
 from nlosfw.image.fft import FFTImager
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
 from nlosfw.image.rsd import RSDImager
-from nlosfw.image.rsd_kernel import phasor_series, phasor_steps
+from nlosfw.image.rsd_kernel import kernel_blocks, phasor_blocks, phasor_series, phasor_steps
 from nlosfw.testing import fixtures, reference
 from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
@@ -283,6 +284,84 @@ def test_chunking_changes_nothing_and_bounds_memory():
     # voxels (0.2 MiB) + output + a few blocks of 1 MiB per worker (2 workers, whatever the
     # machine's cores), not voxels x samples x 16 B (32 MiB)
     assert peak < 6 * 2**20, f"peak {peak / 2**20:.1f} MiB"
+
+
+@pytest.mark.parametrize("dtype, rtol", [(np.complex128, 1e-12), (np.complex64, 2e-6)])
+@pytest.mark.parametrize("order", ["ascending", "descending", "irregular"])
+@pytest.mark.parametrize("size", [2, 7])
+def test_kernel_blocks_are_the_closed_form_kernels(size, order, dtype, rtol):
+    """Every block of the 600 frequencies holds exp(2 pi i f m r) / r (blocks of 2 pass the
+    exact refresh at block 256, blocks of 7 end with a partial block), written into a
+    strided view and nowhere else."""
+    rng = np.random.default_rng(5)
+    r = rng.uniform(0.2, 3.0, (7, 5))
+    freqs = 2.0 + 0.05 * np.arange(600)
+    if order == "descending":
+        freqs = freqs[::-1]
+    elif order == "irregular":
+        freqs = freqs * (1 + 0.01 * np.sin(np.arange(600)))
+    expected = np.exp(2j * np.pi * freqs[:, None, None] * 2 * r) / r
+    buffer = np.zeros((size, 9, 8), dtype=dtype)
+    seen: list[int] = []
+    for sel in kernel_blocks(freqs, r, 2, buffer[:, 1:8, 2:7]):
+        block = buffer[:sel.stop - sel.start, 1:8, 2:7]
+        np.testing.assert_allclose(block, expected[sel], rtol=rtol, atol=0)
+        seen.extend(range(sel.start, sel.stop))
+    assert seen == list(range(600))
+    assert not buffer[:, 0].any() and not buffer[:, 8].any() and not buffer[..., :2].any()
+    assert not buffer[..., 7].any()
+    unscaled = np.empty((size,) + r.shape, dtype=dtype)                    # no 1 / r
+    for sel in phasor_blocks(freqs, r, unscaled):
+        np.testing.assert_allclose(unscaled[:sel.stop - sel.start],
+                                   np.exp(2j * np.pi * freqs[sel, None, None] * r), rtol=rtol,
+                                   atol=0)
+
+
+@pytest.mark.parametrize("kind", ["confocal", "confocal_two_times", "single_spot",
+                                  "incoherent"])
+def test_fft_blocks_threads_and_uncached_spectra_equal_rsd(kind):
+    """40 frequencies make blocks of 16, 16 and 8; 1, 2 or 3 threads over the planes, and a
+    spectrum computed per block of one frequency instead of cached, all give the direct
+    sum (and the thread count changes no bit)."""
+    field = random_field(shape=(6, 8), n_f=40, confocal=kind.startswith("confocal"),
+                         legs=True)
+    voxels = _with_spacing(volume_voxels([0.3, 0.45, 0.6], (0, 1), (0, 1), (7, 9)), SPACING,
+                           SPACING)
+    options = {"combine": "incoherent"} if kind == "incoherent" else {}
+
+    def image(imager):
+        if kind == "confocal_two_times":
+            return imager.reconstruct_time_resolved(field, voxels, [0.0, 0.1])
+        return imager.reconstruct(field, voxels).intensity
+
+    expected = image(RSDImager(options))
+    by_threads = []
+    for extra in ({"workers": 1}, {"workers": 2}, {"workers": 3},
+                  {"workers": 2, "chunk_mb": 0.01}):
+        got = image(FFTImager({**options, **extra, "precision": "double"}))
+        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-11 * expected.max())
+        by_threads.append(got)
+    assert np.array_equal(by_threads[0], by_threads[1])
+    assert np.array_equal(by_threads[0], by_threads[2])
+
+
+def test_fft_starts_no_more_planes_after_an_error():
+    """An error in one thread (here the progress callback) stops the imaging: the planes not
+    yet started are cancelled, not computed before the error is raised."""
+    field = random_field(shape=(6, 8))
+    voxels = fixtures.aligned_voxels(field.wall_xyz, np.linspace(0.3, 0.9, 40))
+    calls: list[int] = []
+    first = threading.Lock()
+
+    def on_progress(done: int, total: int) -> None:
+        calls.append(done)
+        if first.acquire(blocking=False):
+            raise RuntimeError("stop here")
+        threading.Event().wait(0.05)             # later planes are slow to finish
+
+    with pytest.raises(RuntimeError, match="stop here"):
+        FFTImager({"workers": 2}).reconstruct(field, voxels, on_progress=on_progress)
+    assert 1 <= len(calls) <= 5
 
 
 def test_metadata_names_the_imager_and_frequencies():

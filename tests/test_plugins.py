@@ -253,13 +253,16 @@ def test_plugins_name_shows_kind_distribution_options_capabilities_plan_and_exam
     assert "status        ok" in out
     # the options: type, default, unit and the first sentence of the field's docstring
     assert " ".join(_row(out, "chunk_mb")) == (
-        "chunk_mb float 512.0 MiB Memory of one batch of frequency planes; the field's "
-        "spectrum is cached when it fits in half of this.")
+        "chunk_mb float 512.0 MiB Memory budget: the field's spectrum is cached when it "
+        "fits in half of this; each thread works on blocks of at most a few MiB of "
+        "frequency planes.")
     assert " ".join(_row(out, "time")) == (
         "time float 0.0 m Virtual time (a path length) of the coherent image; 0 images the "
         "pulse as it focuses.")
     assert " ".join(_row(out, "precision"))[:33] == "precision single | double single "
-    assert " ".join(_row(out, "workers")) == "workers int -1 Threads of scipy.fft (-1: all cores)."
+    assert " ".join(_row(out, "workers")) == (
+        "workers int -1 Threads (-1: all cores): depth planes are imaged in parallel, and the "
+        "threads left over when there are fewer planes split each plane's FFTs.")
     # the declared capabilities, and the conformance kit's plan from them
     assert " ".join(_row(out, "progress")).startswith("progress reconstruct(..., on_progress=")
     assert "run   check_imager_reports_progress[single_spot]" in out

@@ -4,9 +4,9 @@ For a plane of voxels parallel to the wall, the shared kernel of
 :mod:`nlosfw.image.rsd_kernel` depends on x_v - x_s only, so the sum over the
 wall is a 2-D linear convolution of the wall field with the kernel sampled at
 every voxel-sample offset. Both are zero-padded to the linear convolution's
-length per axis (then to a fast FFT length), multiplied in the Fourier domain for
-all frequencies at once, and transformed back: O(N^2 log N) per plane and
-frequency instead of O(N^4). A volume is a stack of planes.
+length per axis (then to a fast FFT length), multiplied in the Fourier domain and
+transformed back: O(N^2 log N) per plane and frequency instead of O(N^4). A volume is
+a stack of planes.
 
 Voxel spacing may equal the wall spacing Δ, be a finer Δ/k or a coarser kΔ (k an
 integer, per axis): the convolution then runs on the finer of the two lattices, the
@@ -16,11 +16,19 @@ goes and the voxels are read) is :mod:`nlosfw.image.plane_convolution`, shared w
 the ``rsd_prior`` field model. Voxel planes need not be aligned with or as large as
 the wall grid. The single-spot laser leg is a per-voxel phase applied after the
 convolution; confocal fields use the doubled path (and, for coherent images,
-sum the frequencies before a single inverse FFT).
+sum the frequencies before a single inverse FFT per plane).
+
+Speed: planes are imaged in parallel threads (``workers``), and each plane runs over
+blocks of a few frequencies whose padded arrays stay in the core's cache from the
+kernel (:func:`~nlosfw.image.rsd_kernel.kernel_blocks`: one complex product per
+value) through its FFT, the product with the field's cached spectrum and the sum
+over frequencies.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,9 +37,12 @@ import scipy.fft
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice, require
+from nlosfw.common.cores import available_cores
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image.plane_convolution import (
+    GridLayout,
+    GridOrder,
     LatticeAxis,
     PlaneConvolution,
     from_canonical,
@@ -41,7 +52,13 @@ from nlosfw.image.plane_convolution import (
     wall_layout,
 )
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
-from nlosfw.image.rsd_kernel import kernel, laser_phase, path_multiplier, wall_field
+from nlosfw.image.rsd_kernel import (
+    kernel_blocks,
+    laser_distances,
+    path_multiplier,
+    phasor_blocks,
+    wall_field,
+)
 from nlosfw.transform.field import PhasorField
 
 
@@ -59,10 +76,11 @@ class FFTImagerConfig(PropagationConfig):
     precision: Precision = Precision.single
     """FFT precision: complex64 (fast, ~1e-6 relative) or complex128."""
     workers: int = -1
-    """Threads of scipy.fft (-1: all cores)."""
+    """Threads (-1: all cores): depth planes are imaged in parallel, and the threads left
+    over when there are fewer planes split each plane's FFTs."""
     chunk_mb: float = 512.0
-    """[MiB] Memory of one batch of frequency planes; the field's spectrum is cached when it
-    fits in half of this."""
+    """[MiB] Memory budget: the field's spectrum is cached when it fits in half of this;
+    each thread works on blocks of at most a few MiB of frequency planes."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -72,21 +90,30 @@ class FFTImagerConfig(PropagationConfig):
 
 
 @dataclass(frozen=True, eq=False)
-class _PlaneJob:
-    """One voxel plane to image: the wall field (F, Y, X) in canonical order, its
-    frequencies, the plane's voxels (canonical order) and depth, its convolution layout,
-    the path multiplier, the field's geometry, the coefficient rows, the shared spectrum
-    cache and the FFT dtype."""
+class _Plane:
+    """One voxel plane to image: its voxels in canonical order, that order, its depth and
+    its convolution layout."""
+
+    voxels: np.ndarray
+    order: GridOrder
+    z: float
+    conv: PlaneConvolution
+
+
+@dataclass(frozen=True, eq=False)
+class _Volume:
+    """What every plane of one reconstruction shares: the wall field (F, Y, X) in
+    canonical order, its frequencies, the path multiplier, the geometry, the coefficient
+    rows, the cached spectra per input layout (None: computed per block), whether the
+    coefficients are already in them, and the FFT dtype."""
 
     values: np.ndarray
     freqs: np.ndarray
-    plane: np.ndarray
-    z: float
-    conv: PlaneConvolution
     m: int
     geometry: CaptureGeometry
     coeffs: np.ndarray
-    cache: dict[tuple[int, ...], np.ndarray]
+    spectra: dict[tuple[int, ...], np.ndarray | None]
+    weighted: bool
     cdtype: type
 
 
@@ -114,70 +141,138 @@ class FFTImager(PropagationImager):
         cdtype = np.complex64 if cfg.precision == "single" else np.complex128
         wall = wall_layout(field)
         values = to_canonical(wall_field(field, cdtype), wall.order, axes=(1, 2))
-        geometry = field.geometry
-        m = path_multiplier(geometry)
         planes = voxels.reshape((-1,) + voxels.shape[-3:])
+        cores = available_cores() if cfg.workers == -1 else cfg.workers
+        threads = min(cores, len(planes))                   # planes imaged in parallel
+        fft_workers = max(1, cores // threads)              # the rest split each FFT
+        layouts = [_plane(wall, plane, i, fft_workers) for i, plane in enumerate(planes)]
+        # confocal coherent images of one virtual time: the coefficients go into the
+        # spectrum once, and each block's sum over frequencies is a plain sum
+        weighted = self._folds(field.geometry) and coeffs.shape[0] == 1
+        volume = _Volume(values, field.frequencies, path_multiplier(field.geometry),
+                         field.geometry, coeffs,
+                         self._spectra(values, layouts, coeffs[0] if weighted else None),
+                         weighted, cdtype)
         out = np.empty((coeffs.shape[0],) + planes.shape[:-1], dtype=np.float64)
-        cache: dict[tuple[int, ...], np.ndarray] = {}
-        progress = ProgressCounter(len(planes), on_progress)
-        for i, plane in enumerate(planes):
-            grid, z = plane_layout(plane, i)
-            canon = to_canonical(plane, grid.order, axes=(0, 1))
-            conv = PlaneConvolution(
-                _axis(wall.shape[0], wall.spacing[0], grid.shape[0], grid.spacing[0],
-                      grid.origin[0] - wall.origin[0], "y"),
-                _axis(wall.shape[1], wall.spacing[1], grid.shape[1], grid.spacing[1],
-                      grid.origin[1] - wall.origin[1], "x"),
-                cfg.workers)
-            image = self._plane(_PlaneJob(values, field.frequencies, canon, z, conv, m,
-                                          geometry, coeffs, cache, cdtype))
-            out[:, i] = from_canonical(image, grid.order, axes=(1, 2))
+        progress = ProgressCounter(len(planes), on_progress)   # advanced from every thread
+
+        def image(i: int) -> None:                  # planes write disjoint output slices
+            layout = layouts[i]
+            out[:, i] = from_canonical(self._image_plane(volume, layout), layout.order,
+                                       axes=(1, 2))
             progress.advance()
+
+        _run_threads(image, range(len(planes)), threads)
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
 
-    def _plane(self, job: _PlaneJob) -> np.ndarray:
-        cfg = self.config
-        values, freqs, plane, z = job.values, job.freqs, job.plane, job.z
-        conv, m, geometry = job.conv, job.m, job.geometry
-        coeffs, cache, cdtype = job.coeffs, job.cache, job.cdtype
-        n_f = freqs.size
-        shape = conv.shape
-        itemsize = np.dtype(cdtype).itemsize
-        plane_bytes = shape[0] * shape[1] * itemsize
-        budget = cfg.chunk_mb * 2**20
-        key = conv.input_key
-        spectrum = cache.get(key)
-        if spectrum is None and n_f * plane_bytes <= budget / 2:
-            spectrum = cache[key] = conv.input_spectrum(values)
-        batch = int(max(1, budget // (4 * plane_bytes
-                                      + 12 * conv.ay.n_linear * conv.ax.n_linear)))
-        r = conv.distances(z)
-        coherent = cfg.combine == "coherent"
-        fold = coherent and geometry.kind is CaptureKind.CONFOCAL   # no voxel phase: sum first
-        acc = FrequencySum(coeffs, cfg.combine, (conv.ay.n_out, conv.ax.n_out))
-        folded = np.zeros((coeffs.shape[0],) + shape, dtype=np.complex128) if fold else None
-        for start in range(0, n_f, batch):
-            sel = slice(start, min(n_f, start + batch))
-            spec = spectrum[sel] if spectrum is not None else conv.input_spectrum(values[sel])
-            work = conv.padded(spec.shape[0], cdtype)
-            kernel(freqs[sel], r, m, cdtype, out=work[(slice(None),) + conv.kernel_region])
-            work = scipy.fft.fft2(work, overwrite_x=True, workers=cfg.workers)
-            work *= spec
-            if folded is not None:
-                # the sum over frequencies as one matrix product (BLAS), in the work
-                # array's precision: an einsum here was a third of the plane's time
-                rows = coeffs[:, sel].astype(work.dtype)
-                folded += (rows @ work.reshape(work.shape[0], -1)).reshape(
-                    (rows.shape[0],) + shape)
+    def _folds(self, geometry: CaptureGeometry) -> bool:
+        """Whether frequencies are summed before a single inverse FFT per plane (coherent
+        confocal images: no per-voxel phase)."""
+        return self.config.combine == "coherent" and geometry.kind is CaptureKind.CONFOCAL
+
+    def _spectra(self, values: np.ndarray, layouts: list[_Plane],
+                 weights: np.ndarray | None) -> dict[tuple[int, ...], np.ndarray | None]:
+        """The wall field's spectrum per distinct input layout (times ``weights`` per
+        frequency when given), or None for a layout whose spectrum does not fit in half
+        of ``chunk_mb``."""
+        budget = self.config.chunk_mb * 2**20 / 2
+        spectra: dict[tuple[int, ...], np.ndarray | None] = {}
+        for layout in layouts:
+            conv = layout.conv
+            if conv.input_key in spectra:
                 continue
-            fields = conv.read_outputs(work)
-            phase = laser_phase(freqs[sel], plane, geometry, cdtype)
-            if phase is not None:
-                fields *= phase
-            acc.add(fields, sel)
+            nbytes = values.shape[0] * conv.shape[0] * conv.shape[1] * values.itemsize
+            spectrum = None
+            if nbytes <= budget:
+                spectrum = conv.input_spectrum(values)
+                if weights is not None:
+                    spectrum *= weights.astype(values.dtype)[:, None, None]
+            spectra[conv.input_key] = spectrum
+        return spectra
+
+    def _block_size(self, conv: PlaneConvolution, cdtype: type) -> int:
+        """Frequencies per block: about 512 KiB of padded planes (they stay in the core's
+        cache through the kernel, FFT, product and sum), within ``chunk_mb``."""
+        plane_bytes = conv.shape[0] * conv.shape[1] * np.dtype(cdtype).itemsize
+        cached = int(np.clip(_BLOCK_BYTES // plane_bytes, 2, 16))
+        return max(1, min(cached, int(self.config.chunk_mb * 2**20 // (8 * plane_bytes))))
+
+    def _image_plane(self, volume: _Volume, layout: _Plane) -> np.ndarray:
+        """Intensities (n_t, Y, X) of one plane, in canonical order."""
+        conv, freqs, coeffs = layout.conv, volume.freqs, volume.coeffs
+        work = conv.padded(self._block_size(conv, volume.cdtype), volume.cdtype)
+        kernels = work[(slice(None),) + conv.kernel_region]
+        spectrum = volume.spectra[conv.input_key]
+        fold = self._folds(volume.geometry)
+        folded = np.zeros((coeffs.shape[0],) + conv.shape, dtype=volume.cdtype) if fold else None
+        acc = FrequencySum(coeffs, self.config.combine, (conv.ay.n_out, conv.ax.n_out))
+        blocks = kernel_blocks(freqs, conv.distances(layout.z), volume.m, kernels)
+        r_l = laser_distances(layout.voxels, volume.geometry)
+        laser: np.ndarray | None = None
+        if r_l is not None:                         # the laser leg's phasors, block by block
+            laser = np.empty((work.shape[0],) + r_l.shape, dtype=volume.cdtype)
+            blocks = _same_blocks(blocks, phasor_blocks(freqs, r_l, laser))
+        for sel in blocks:
+            k = sel.stop - sel.start
+            block = scipy.fft.fft2(work[:k], overwrite_x=True, workers=conv.workers)
+            if spectrum is not None:
+                block *= spectrum[sel]
+            else:
+                block *= conv.input_spectrum(volume.values[sel])
+                if volume.weighted:
+                    block *= coeffs[0, sel].astype(volume.cdtype)[:, None, None]
+            if folded is not None:
+                if volume.weighted:
+                    folded[0] += block.sum(axis=0)
+                else:
+                    folded += np.einsum("tf,fyx->tyx", coeffs[:, sel].astype(volume.cdtype),
+                                        block)
+            else:
+                fields = conv.read_outputs(block)
+                if laser is not None:
+                    fields *= laser[:k]
+                acc.add(fields, sel)
+            conv.clear_padding(work)
         if folded is not None:
             acc.add_amplitude(conv.read_outputs(folded))
         return acc.intensity()
+
+
+def _plane(wall: GridLayout, plane: np.ndarray, index: int, workers: int) -> _Plane:
+    """The layout of voxel plane ``index`` against the wall (DataError for a spacing the
+    FFT convolution cannot take)."""
+    grid, z = plane_layout(plane, index)
+    conv = PlaneConvolution(
+        _axis(wall.shape[0], wall.spacing[0], grid.shape[0], grid.spacing[0],
+              grid.origin[0] - wall.origin[0], "y"),
+        _axis(wall.shape[1], wall.spacing[1], grid.shape[1], grid.spacing[1],
+              grid.origin[1] - wall.origin[1], "x"),
+        workers)
+    return _Plane(to_canonical(plane, grid.order, axes=(0, 1)), grid.order, z, conv)
+
+
+def _same_blocks(first: Iterator[slice], second: Iterator[slice]) -> Iterator[slice]:
+    """Advance two block generators over the same frequencies together."""
+    for a, b in zip(first, second, strict=True):
+        if a != b:
+            raise RuntimeError(f"block generators out of step: {a} and {b}")
+        yield a
+
+
+def _run_threads(task: Callable[[int], None], items: range, threads: int) -> None:
+    """``task(i)`` for every item, on ``threads`` threads, one item per task: on an error or
+    an interrupt, ``Executor.map`` cancels the items not yet started."""
+    if threads <= 1:
+        for i in items:
+            task(i)
+        return
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        for _ in pool.map(task, items):
+            pass
+
+
+#: Target bytes of one block of padded frequency planes (per thread).
+_BLOCK_BYTES = 2**19
 
 
 def _axis(n_wall: int, wall_step: float, n_vox: int, vox_step: float, offset: float,

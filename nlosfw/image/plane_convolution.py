@@ -252,6 +252,13 @@ class PlaneConvolution:
         """A zeroed padded array (batch, *shape)."""
         return np.zeros((batch,) + self.shape, dtype=dtype)
 
+    def clear_padding(self, work: np.ndarray) -> None:
+        """Zero a padded array (batch, *shape) outside the kernel region, in place (an
+        in-place FFT of the previous kernels wrote there)."""
+        ly, lx = self.ay.n_linear, self.ax.n_linear
+        work[:, ly:, :] = 0
+        work[:, :ly, lx:] = 0
+
     def kernel_spectrum(self, kernels: np.ndarray, dtype: type) -> np.ndarray:
         """FFT of kernels (batch, n_linear_y, n_linear_x) zero-padded to ``shape``."""
         work = self.padded(kernels.shape[0], dtype)

@@ -66,11 +66,16 @@ def wall_field(field: PhasorField, dtype: type = np.complex128) -> np.ndarray:
 def laser_phase(frequencies: np.ndarray, voxels: np.ndarray, geometry: CaptureGeometry,
                 dtype: type = np.complex128) -> np.ndarray | None:
     """L_f(x_v) = exp(+2 pi i f |x_v - x_l|), shape (F, *voxels.shape[:-1]); None if confocal."""
+    r_l = laser_distances(voxels, geometry)
+    return None if r_l is None else phasor_series(frequencies, r_l, dtype)
+
+
+def laser_distances(voxels: np.ndarray, geometry: CaptureGeometry) -> np.ndarray | None:
+    """|x_v - x_l| for every voxel, shape voxels.shape[:-1]; None if confocal."""
     if geometry.kind is CaptureKind.CONFOCAL:
         return None
-    r_l = np.linalg.norm(np.asarray(voxels, float) - np.asarray(geometry.laser_point, float),
-                         axis=-1)
-    return phasor_series(frequencies, r_l, dtype)
+    return np.linalg.norm(np.asarray(voxels, float) - np.asarray(geometry.laser_point, float),
+                          axis=-1)
 
 
 def kernel(frequencies: np.ndarray, r: np.ndarray, multiplier: int,
@@ -78,6 +83,53 @@ def kernel(frequencies: np.ndarray, r: np.ndarray, multiplier: int,
     """exp(+2 pi i f m r) / r for every frequency, shape (F, *r.shape) (into ``out`` if given)."""
     r = np.asarray(r, dtype=float)
     return phasor_series(frequencies, multiplier * r, dtype, out, scale=1.0 / r)
+
+
+def kernel_blocks(frequencies: np.ndarray, r: np.ndarray, multiplier: int,
+                  out: np.ndarray) -> Iterator[slice]:
+    """Kernels exp(+2 pi i f m r) / r for consecutive blocks of ``out.shape[0]`` frequencies
+    (see :func:`phasor_blocks`)."""
+    r = np.asarray(r, dtype=float)
+    return phasor_blocks(frequencies, multiplier * r, out, scale=1.0 / r)
+
+
+def phasor_blocks(frequencies: np.ndarray, path: np.ndarray, out: np.ndarray,
+                  scale: np.ndarray | None = None) -> Iterator[slice]:
+    """scale * exp(+2 pi i f path) for consecutive blocks of ``out.shape[0]`` frequencies.
+
+    Fills ``out[:k]`` (a block of k frequencies, ``out`` of shape (block, *path.shape),
+    any complex dtype, possibly a strided view) and yields the block's slice of
+    ``frequencies``; the next block overwrites it. For uniformly spaced frequencies (in
+    the given order) a block's phasors are its first phasor (a complex128 recurrence
+    over blocks, recomputed exactly every 256 blocks) times the fixed phasors
+    exp(2 pi i j df path), j < block: one complex product per value instead of a cosine
+    and a sine. Otherwise every phasor is evaluated exactly.
+    """
+    f = np.asarray(frequencies, dtype=float)
+    path = np.asarray(path, dtype=float)
+    size = out.shape[0]
+    step = uniform_step(f) if f.size > 2 else None
+    starts = range(0, f.size, size)
+    if step is None:
+        for start in starts:
+            sel = slice(start, min(f.size, start + size))
+            phasor_series(f[sel], path, out.dtype.type, out=out[:sel.stop - start], scale=scale)
+            yield sel
+        return
+    within = unit_phasor(np.multiply.outer(step * np.arange(size), path), out.dtype.type)
+    advance = unit_phasor(size * step * path)
+    first = np.empty(path.shape, dtype=np.complex128)
+    for b, start in enumerate(starts):
+        sel = slice(start, min(f.size, start + size))
+        if b % _REFRESH == 0:
+            first[...] = unit_phasor(f[start] * path)
+            if scale is not None:
+                first *= scale
+        else:
+            first *= advance
+        np.multiply(within[:sel.stop - start], first, out=out[:sel.stop - start],
+                    casting="same_kind")
+        yield sel
 
 
 def phasor_series(frequencies: np.ndarray, path: np.ndarray, dtype: type = np.complex128,
