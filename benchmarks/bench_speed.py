@@ -13,6 +13,10 @@ Every ratio is against a baseline measured in the same process, on the same fiel
   of path, a letter 0.9 m away), automatic band and depths: the transform plus ``fft``
   imaging, and the ``lct``, ``fk`` and ``fbp`` imagers on the same field and voxels.
 
+The imager images depth planes on parallel threads (all cores); the plain minimum's
+FFTs use every core too, its numpy products and sums one. The imager restricted to one
+thread (``workers=1``) is timed beside it, with its ratio.
+
 The machine's cores are shared, so each time is the minimum of ``--repeat`` runs.
 Results go to ``benchmarks/results/bench_speed.json``.
 
@@ -99,13 +103,15 @@ def imager_case(n: int, planes: int, confocal: bool, repeat: int) -> dict[str, A
     spacing = 2.0 / n
     depths = np.linspace(0.6, 1.6, planes)
     voxels = volume_voxels(depths, (-1.0, 1.0), (-1.0, 1.0), (n, n))
-    imager = FFTImager()
+    imager, one_thread = FFTImager(), FFTImager({"workers": 1})
     t_imager, _ = best(lambda: imager.reconstruct(field, voxels), repeat)
+    t_one, _ = best(lambda: one_thread.reconstruct(field, voxels), repeat)
     t_plain, _ = best(lambda: plain_minimum(field, depths, confocal), repeat)
     return {"wall": [n, n], "spacing_m": spacing, "frequencies": 151, "planes": planes,
             "padded": [scipy.fft.next_fast_len(2 * n - 1)] * 2,
-            "imager_seconds": t_imager, "plain_minimum_seconds": t_plain,
-            "ratio": t_imager / t_plain}
+            "imager_seconds": t_imager, "imager_one_thread_seconds": t_one,
+            "plain_minimum_seconds": t_plain, "ratio": t_imager / t_plain,
+            "ratio_one_thread": t_one / t_plain}
 
 
 def real_size_case(repeat: int, quick: bool) -> dict[str, Any]:
@@ -165,11 +171,13 @@ def report(results: dict[str, Any]) -> None:
 
     table = Table(title=f"fft imager vs the plain minimum (min of {results['repeat']} runs, "
                         f"{results['machine']['cpus']} cores)")
-    for col in ("case", "imager s", "plain minimum s", "ratio", "target"):
+    for col in ("case", "imager s", "plain minimum s", "ratio", "target", "1 thread s",
+                "ratio"):
         table.add_column(col, justify="left" if col == "case" else "right")
     for name, row in results["imagers"].items():
         table.add_row(name, f"{row['imager_seconds']:.3f}", f"{row['plain_minimum_seconds']:.3f}",
-                      f"{row['ratio']:.2f}", "<= 2")
+                      f"{row['ratio']:.2f}", "<= 2", f"{row['imager_one_thread_seconds']:.3f}",
+                      f"{row['ratio_one_thread']:.2f}")
     real = results["real_size"]
     table.add_row(f"real size {real['capture']}: transform", f"{real['transform_seconds']:.3f}",
                   "", "", "")

@@ -22,7 +22,10 @@ Speed: planes are imaged in parallel threads (``workers``), and each plane runs 
 blocks of a few frequencies whose padded arrays stay in the core's cache from the
 kernel (:func:`~nlosfw.image.rsd_kernel.kernel_blocks`: one complex product per
 value) through its FFT, the product with the field's cached spectrum and the sum
-over frequencies.
+over frequencies. Coherent confocal images of the wall's own grid (the usual volume:
+same extent, no offset) have an even kernel: its spectrum is a type-I DCT of a
+quarter of it and the frequency sum runs on a quarter grid
+(:mod:`nlosfw.image.even_kernel`), the same sum to rounding.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from nlosfw.common.config import Choice, require
 from nlosfw.common.cores import available_cores
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
+from nlosfw.image import even_kernel
 from nlosfw.image.plane_convolution import (
     GridLayout,
     GridOrder,
@@ -98,14 +102,21 @@ class _Plane:
     order: GridOrder
     z: float
     conv: PlaneConvolution
+    even: bool
+    """Whether its frequencies are folded on an even kernel (:mod:`nlosfw.image.even_kernel`)."""
+
+    @property
+    def spectrum_key(self) -> tuple[int, ...]:
+        """Equal for planes that use the same cached spectrum."""
+        return self.conv.input_key + (int(self.even),)
 
 
 @dataclass(frozen=True, eq=False)
 class _Volume:
     """What every plane of one reconstruction shares: the wall field (F, Y, X) in
     canonical order, its frequencies, the path multiplier, the geometry, the coefficient
-    rows, the cached spectra per input layout (None: computed per block), whether the
-    coefficients are already in them, and the FFT dtype."""
+    rows, the cached spectra per :attr:`_Plane.spectrum_key` (None: computed per block),
+    whether the coefficients are already in them, and the FFT dtype."""
 
     values: np.ndarray
     freqs: np.ndarray
@@ -145,10 +156,11 @@ class FFTImager(PropagationImager):
         cores = available_cores() if cfg.workers == -1 else cfg.workers
         threads = min(cores, len(planes))                   # planes imaged in parallel
         fft_workers = max(1, cores // threads)              # the rest split each FFT
-        layouts = [_plane(wall, plane, i, fft_workers) for i, plane in enumerate(planes)]
+        fold = self._folds(field.geometry)
+        layouts = [_plane(wall, plane, i, fft_workers, fold) for i, plane in enumerate(planes)]
         # confocal coherent images of one virtual time: the coefficients go into the
         # spectrum once, and each block's sum over frequencies is a plain sum
-        weighted = self._folds(field.geometry) and coeffs.shape[0] == 1
+        weighted = fold and coeffs.shape[0] == 1
         volume = _Volume(values, field.frequencies, path_multiplier(field.geometry),
                          field.geometry, coeffs,
                          self._spectra(values, layouts, coeffs[0] if weighted else None),
@@ -172,22 +184,23 @@ class FFTImager(PropagationImager):
 
     def _spectra(self, values: np.ndarray, layouts: list[_Plane],
                  weights: np.ndarray | None) -> dict[tuple[int, ...], np.ndarray | None]:
-        """The wall field's spectrum per distinct input layout (times ``weights`` per
-        frequency when given), or None for a layout whose spectrum does not fit in half
-        of ``chunk_mb``."""
+        """The wall field's spectrum per :attr:`_Plane.spectrum_key` (times ``weights`` per
+        frequency when given; its four mirror images for an even kernel), None for those
+        that do not fit in what is left of half of ``chunk_mb``."""
         budget = self.config.chunk_mb * 2**20 / 2
         spectra: dict[tuple[int, ...], np.ndarray | None] = {}
         for layout in layouts:
-            conv = layout.conv
-            if conv.input_key in spectra:
+            if layout.spectrum_key in spectra:
                 continue
-            nbytes = values.shape[0] * conv.shape[0] * conv.shape[1] * values.itemsize
+            shape = layout.conv.shape
+            if layout.even:
+                shape = (4 * (shape[0] // 2 + 1), shape[1] // 2 + 1)
+            nbytes = values.shape[0] * shape[0] * shape[1] * values.itemsize
             spectrum = None
             if nbytes <= budget:
-                spectrum = conv.input_spectrum(values)
-                if weights is not None:
-                    spectrum *= weights.astype(values.dtype)[:, None, None]
-            spectra[conv.input_key] = spectrum
+                spectrum = _spectrum(values, layout, weights)
+                budget -= nbytes
+            spectra[layout.spectrum_key] = spectrum
         return spectra
 
     def _block_size(self, conv: PlaneConvolution, cdtype: type) -> int:
@@ -199,10 +212,12 @@ class FFTImager(PropagationImager):
 
     def _image_plane(self, volume: _Volume, layout: _Plane) -> np.ndarray:
         """Intensities (n_t, Y, X) of one plane, in canonical order."""
+        if layout.even:
+            return self._image_even_plane(volume, layout)
         conv, freqs, coeffs = layout.conv, volume.freqs, volume.coeffs
         work = conv.padded(self._block_size(conv, volume.cdtype), volume.cdtype)
         kernels = work[(slice(None),) + conv.kernel_region]
-        spectrum = volume.spectra[conv.input_key]
+        spectrum = volume.spectra[layout.spectrum_key]
         fold = self._folds(volume.geometry)
         folded = np.zeros((coeffs.shape[0],) + conv.shape, dtype=volume.cdtype) if fold else None
         acc = FrequencySum(coeffs, self.config.combine, (conv.ay.n_out, conv.ax.n_out))
@@ -215,12 +230,9 @@ class FFTImager(PropagationImager):
         for sel in blocks:
             k = sel.stop - sel.start
             block = scipy.fft.fft2(work[:k], overwrite_x=True, workers=conv.workers)
-            if spectrum is not None:
-                block *= spectrum[sel]
-            else:
-                block *= conv.input_spectrum(volume.values[sel])
-                if volume.weighted:
-                    block *= coeffs[0, sel].astype(volume.cdtype)[:, None, None]
+            block *= (spectrum[sel] if spectrum is not None
+                      else _spectrum(volume.values[sel], layout,
+                                     coeffs[0, sel] if volume.weighted else None))
             if folded is not None:
                 if volume.weighted:
                     folded[0] += block.sum(axis=0)
@@ -238,17 +250,58 @@ class FFTImager(PropagationImager):
         return acc.intensity()
 
 
-def _plane(wall: GridLayout, plane: np.ndarray, index: int, workers: int) -> _Plane:
+    def _image_even_plane(self, volume: _Volume, layout: _Plane) -> np.ndarray:
+        """Intensities (n_t, Y, X) of one plane whose frequencies fold on an even kernel:
+        the sum over frequencies on the quarter grid, once per mirror image of the
+        spectrum, then one full inverse FFT (:mod:`nlosfw.image.even_kernel`)."""
+        conv, freqs, coeffs, cdtype = layout.conv, volume.freqs, volume.coeffs, volume.cdtype
+        quarter = even_kernel.quarter_shape(conv)
+        work = np.zeros((self._block_size(conv, cdtype),) + quarter, dtype=cdtype)
+        kernels = work[(slice(None),) + even_kernel.kernel_region(conv)]
+        spectrum = volume.spectra[layout.spectrum_key]
+        sums = np.zeros((2, 2, coeffs.shape[0]) + quarter, dtype=cdtype)
+        rows: np.ndarray = coeffs.astype(cdtype)
+        for sel in kernel_blocks(freqs, even_kernel.distances(conv, layout.z), volume.m,
+                                 kernels):
+            k = sel.stop - sel.start
+            block = even_kernel.kernel_spectrum(work[:k], conv.workers)
+            images = (spectrum[:, :, sel] if spectrum is not None
+                      else _spectrum(volume.values[sel], layout,
+                                     coeffs[0, sel] if volume.weighted else None))
+            products = images * block                                  # (2, 2, k, hy, hx)
+            if volume.weighted:
+                sums[:, :, 0] += products.sum(axis=2)
+            else:
+                sums += np.einsum("tf,abfyx->abtyx", rows[:, sel], products)
+            even_kernel.clear_padding(conv, work)
+        acc = FrequencySum(coeffs, self.config.combine, (conv.ay.n_out, conv.ax.n_out))
+        acc.add_amplitude(even_kernel.read_outputs(conv, even_kernel.assemble(sums)))
+        return acc.intensity()
+
+
+def _spectrum(values: np.ndarray, layout: _Plane, weights: np.ndarray | None) -> np.ndarray:
+    """The spectrum of wall fields (F, Y, X) on the plane's layout, times ``weights`` (F,)
+    when given; its four mirror images (2, 2, F, hy, hx) for an even kernel."""
+    spectrum = layout.conv.input_spectrum(values)
+    if weights is not None:
+        spectrum *= weights.astype(values.dtype)[:, None, None]
+    return even_kernel.quarters(spectrum) if layout.even else spectrum
+
+
+def _plane(wall: GridLayout, plane: np.ndarray, index: int, workers: int,
+           fold: bool) -> _Plane:
     """The layout of voxel plane ``index`` against the wall (DataError for a spacing the
-    FFT convolution cannot take)."""
+    FFT convolution cannot take); ``fold``: frequencies are summed before the inverse
+    FFT."""
     grid, z = plane_layout(plane, index)
-    conv = PlaneConvolution(
-        _axis(wall.shape[0], wall.spacing[0], grid.shape[0], grid.spacing[0],
-              grid.origin[0] - wall.origin[0], "y"),
-        _axis(wall.shape[1], wall.spacing[1], grid.shape[1], grid.spacing[1],
-              grid.origin[1] - wall.origin[1], "x"),
-        workers)
-    return _Plane(to_canonical(plane, grid.order, axes=(0, 1)), grid.order, z, conv)
+    ay = _axis(wall.shape[0], wall.spacing[0], grid.shape[0], grid.spacing[0],
+               grid.origin[0] - wall.origin[0], "y")
+    ax = _axis(wall.shape[1], wall.spacing[1], grid.shape[1], grid.spacing[1],
+               grid.origin[1] - wall.origin[1], "x")
+    even = even_kernel.even_layout(ay, ax, workers) if fold else None
+    conv = even if even is not None else PlaneConvolution(ay, ax, workers)
+    return _Plane(to_canonical(plane, grid.order, axes=(0, 1)), grid.order, z, conv,
+                  even is not None)
 
 
 def _same_blocks(first: Iterator[slice], second: Iterator[slice]) -> Iterator[slice]:

@@ -220,10 +220,18 @@ class PlaneConvolution:
     (batch, n_out_y, n_out_x); kernels are sampled on (n_linear_y, n_linear_x).
     """
 
-    def __init__(self, ay: LatticeAxis, ax: LatticeAxis, workers: int = -1) -> None:
+    def __init__(self, ay: LatticeAxis, ax: LatticeAxis, workers: int = -1,
+                 shape: tuple[int, int] | None = None) -> None:
         self.ay, self.ax = ay, ax
         self.workers = workers
-        self.shape = (scipy.fft.next_fast_len(ay.n_linear), scipy.fft.next_fast_len(ax.n_linear))
+        if shape is None:
+            shape = (scipy.fft.next_fast_len(ay.n_linear), scipy.fft.next_fast_len(ax.n_linear))
+        if shape[0] < ay.n_linear or shape[1] < ax.n_linear:
+            raise ValueError(f"padded shape {shape} is shorter than the linear convolution "
+                             f"({ay.n_linear}, {ax.n_linear})")
+        self.shape = (int(shape[0]), int(shape[1]))
+        """Padded lengths (L_y, L_x): by default the next fast lengths of the linear
+        convolution."""
 
     @property
     def kernel_region(self) -> tuple[slice, slice]:
