@@ -260,6 +260,7 @@ class FFTImager(PropagationImager):
         kernels = work[(slice(None),) + even_kernel.kernel_region(conv)]
         spectrum = volume.spectra[layout.spectrum_key]
         sums = np.zeros((2, 2, coeffs.shape[0]) + quarter, dtype=cdtype)
+        products = np.empty((2, 2, work.shape[0]) + quarter, dtype=cdtype)
         rows: np.ndarray = coeffs.astype(cdtype)
         for sel in kernel_blocks(freqs, even_kernel.distances(conv, layout.z), volume.m,
                                  kernels):
@@ -268,11 +269,11 @@ class FFTImager(PropagationImager):
             images = (spectrum[:, :, sel] if spectrum is not None
                       else _spectrum(volume.values[sel], layout,
                                      coeffs[0, sel] if volume.weighted else None))
-            products = images * block                                  # (2, 2, k, hy, hx)
+            product = np.multiply(images, block, out=products[:, :, :k])  # (2, 2, k, hy, hx)
             if volume.weighted:
-                sums[:, :, 0] += products.sum(axis=2)
+                sums[:, :, 0] += product.sum(axis=2)
             else:
-                sums += np.einsum("tf,abfyx->abtyx", rows[:, sel], products)
+                sums += np.einsum("tf,abfyx->abtyx", rows[:, sel], product)
             even_kernel.clear_padding(conv, work)
         acc = FrequencySum(coeffs, self.config.combine, (conv.ay.n_out, conv.ax.n_out))
         acc.add_amplitude(even_kernel.read_outputs(conv, even_kernel.assemble(sums)))
