@@ -309,3 +309,22 @@ def test_gate_past_the_end_names_the_option_and_the_valid_range(tmp_path, host, 
         load_file_capture(source(path=str(short)), host)
     assert str(info.value).endswith("(the capture format's default; set capture.gate to "
                                     "override it)")
+
+
+@pytest.mark.parametrize("name", ["nlosfw", "ytal", "znlos", "lct", "fk", "wisconsin"])
+def test_every_builtin_format_sizes_its_file_from_the_header(tmp_path, host, name):
+    """transient_shape (the memory estimate's input) is known for every built-in layout and
+    is the shape the file reads as; nothing else in the file is needed for it."""
+    from nlosfw.testing.layouts import known_captures, write_sample
+
+    spec = host.registry.get("capture_format", name)
+    fmt = spec.create({})
+    known = known_captures(spec)[0]
+    path = write_sample(spec, fmt, known, tmp_path)
+    shape = fmt.transient_shape(path)
+    read = fmt.read(path)
+    assert shape is not None
+    bins, sensors, lasers = shape
+    assert (bins, sensors * lasers) == (read.n_bins, read.H.size // read.n_bins)
+    if name == "lct":                             # layouts.lct_scene: 8 x 8 scan, 1700 bins
+        assert shape == (1700, 64, 1)

@@ -23,13 +23,16 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.files import format_bytes
+
+#: Sizes a capture file from its header: (time bins, sensor points, laser points), or None.
+FileShape = Callable[[Path], "tuple[int, int, int] | None"]
 
 #: Bytes one entry of a neural model's training history takes (a small dict of floats).
 _HISTORY_ENTRY = 400
@@ -53,30 +56,21 @@ def _get(config: Any, dotted: str, default: Any = None) -> Any:
     return default if node is None else node
 
 
-def _capture_shape(config: Any) -> tuple[int, int, int, str] | None:
-    """(B, S, L, why) from ``capture.path`` (the file's header only) or the scene."""
+def _capture_shape(config: Any, file_shape: FileShape | None) -> tuple[int, int, int, str] | None:
+    """(B, S, L, why) from ``capture.path`` (its header, through ``file_shape``) or the
+    scene; None when the file's size is unknown."""
     path = _get(config, "capture.path")
     if path is not None:
-        return _file_shape(Path(str(path)).expanduser())
+        shape = None if file_shape is None else file_shape(Path(str(path)).expanduser())
+        if shape is None:
+            return None
+        bins, sensors, lasers = shape
+        return bins, sensors, lasers, (f"capture.path's transient of {bins} time bins × "
+                                       f"{sensors * lasers} samples")
     res = _get(config, "scene.wall.resolution", (64, 64))
     bins = int(_get(config, "scene.time.bins", 2048))
     sensors = math.prod(int(r) for r in res)
     return bins, sensors, 1, (f"scene.wall.resolution {list(res)} × scene.time.bins {bins}")
-
-
-def _file_shape(path: Path) -> tuple[int, int, int, str] | None:
-    """(B, S, L, why) of a capture file's transient, from its header (nothing read)."""
-    import h5py
-
-    try:
-        with h5py.File(path, "r") as f:
-            node = f.get("H") if "H" in f else f.get("data")
-            shape = tuple(int(n) for n in getattr(node, "shape", None) or ())
-    except (OSError, ValueError):
-        return None  # the capture reader explains what is wrong with the file
-    if not shape:
-        return None
-    return shape[0], math.prod(shape[1:]), 1, f"capture.path's transient of shape {list(shape)}"
 
 
 def _n_frequencies(config: Any, bins: int) -> int:
@@ -114,9 +108,11 @@ def _history(options: Any) -> float:
     return float(steps) / max(int(every), 1) * _HISTORY_ENTRY
 
 
-def estimate_memory(config: Any) -> list[MemoryPart]:
-    """The parts of the memory a run of ``config`` (composed, validated) needs, in bytes."""
-    shape = _capture_shape(config)
+def estimate_memory(config: Any, file_shape: FileShape | None = None) -> list[MemoryPart]:
+    """The parts of the memory a run of ``config`` (composed, validated) needs, in bytes;
+    ``file_shape``: how to size a ``capture.path`` from its header (none: unknown, no
+    estimate for such a run)."""
+    shape = _capture_shape(config, file_shape)
     if shape is None:
         return []
     bins, sensors, lasers, why = shape
@@ -177,13 +173,14 @@ def _cgroup_room() -> int | None:
     return None
 
 
-def check_memory(config: Any, available: int | None = None) -> None:
+def check_memory(config: Any, available: int | None = None,
+                 file_shape: FileShape | None = None) -> None:
     """Refuse (one-line :class:`ConfigError`) a run whose estimated memory exceeds what is
     available, unless ``limits.allow_large`` is true. ``available``: bytes (default: this
-    machine's)."""
+    machine's); ``file_shape``: see :func:`estimate_memory`."""
     if bool(_get(config, "limits.allow_large", False)):
         return
-    parts = estimate_memory(config)
+    parts = estimate_memory(config, file_shape)
     total = sum(p.nbytes for p in parts)
     room = available_memory() if available is None else available
     if room is None or total <= room:
@@ -195,9 +192,9 @@ def check_memory(config: Any, available: int | None = None) -> None:
                       "make it smaller, or set limits.allow_large=true to run anyway")
 
 
-def memory_summary(config: Mapping[str, Any]) -> str:
+def memory_summary(config: Mapping[str, Any], file_shape: FileShape | None = None) -> str:
     """The estimate as one line (for the log)."""
-    parts = estimate_memory(config)
+    parts = estimate_memory(config, file_shape)
     total = sum(p.nbytes for p in parts)
     return f"estimated memory {format_bytes(total)}: " + ", ".join(
         f"{p.what} {format_bytes(p.nbytes)}" for p in parts if p.nbytes)

@@ -72,6 +72,17 @@ def choose_format(path: Path, forced: str | None, host: PluginHost) -> tuple[str
     return name, host.registry.create(_KIND, name, {})
 
 
+def file_transient_shape(path: Path, forced: str | None, host: PluginHost
+                         ) -> tuple[int, int, int] | None:
+    """(time bins, sensor points, laser points) of a capture file from its format's reading
+    of the header (for the memory estimate); None when the file or its format cannot tell
+    (reading the file says why)."""
+    try:
+        return choose_format(path, forced, host)[1].transient_shape(path)
+    except (ConfigError, DataError):
+        return None
+
+
 def read_capture_file(path: Path, forced: str | None, host: PluginHost
                       ) -> tuple[str, CaptureFormat, Capture]:
     """The format of ``path`` and the capture it reads there (no preprocessing)."""

@@ -253,8 +253,16 @@ def validate_config(cfg: Any, host: PluginHost) -> None:
         except ConfigError as err:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
-    check_memory(cfg)  # before anything sized by the configuration is allocated
-    from nlosfw.app.capture_source import check_files, load_file_capture, options_of
+    from nlosfw.app.capture_source import (
+        check_files,
+        file_transient_shape,
+        load_file_capture,
+        options_of,
+    )
+
+    # before anything sized by the configuration is allocated
+    check_memory(cfg, file_shape=lambda path: file_transient_shape(
+        path, settings.capture.format, host))
 
     if settings.capture.path is None:
         from nlosfw.simulate.geometry import validate_scene

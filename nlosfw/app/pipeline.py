@@ -122,8 +122,13 @@ class Pipeline:
         early or skipped. Everything that can be checked is checked before the first byte
         is written; a failed or interrupted (SIGINT, SIGTERM) run leaves metrics.json
         saying where and why, and no temporary file."""
-        check_memory(self.config)
-        log.info(memory_summary(self.config))
+        from nlosfw.app.capture_source import file_transient_shape
+
+        def file_shape(path: Path) -> tuple[int, int, int] | None:
+            return file_transient_shape(path, self.settings.capture.format, self.host)
+
+        check_memory(self.config, file_shape=file_shape)
+        log.info(memory_summary(self.config, file_shape))
         with signals_raise(), lifecycle.held(
                 self.run_dir, self.config, PLANNED_NAMES, overwrite=self.settings.output.overwrite,
                 resume=self.resume) as hold:

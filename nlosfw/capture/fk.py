@@ -43,6 +43,7 @@ from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.matfile import (
     read_mat_array,
     require_variables,
+    scan_shape,
     variables_or_none,
 )
 from nlosfw.capture.preprocess import Preprocessing, TimeCrop
@@ -87,6 +88,9 @@ class FkFormat(CaptureFormat):
                             delta_t=BIN_SECONDS * SPEED_OF_LIGHT,
                             scene_info={"original_format": "MAT_FK", "bin_seconds": BIN_SECONDS})
         return confocal_capture(scan)
+
+    def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
+        return scan_shape(path, "meas")
 
     def defaults(self, path: Path) -> Preprocessing:
         tof = path.parent / TOF_FILE

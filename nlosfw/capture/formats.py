@@ -47,6 +47,12 @@ class CaptureFormat(Configurable, ABC):
         overwrites an existing file, and leaves nothing behind on failure."""
         raise PluginError(f"capture format {type(self).__name__} cannot write files")
 
+    def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
+        """(time bins, sensor points, laser points) of ``path``'s transient from the file's
+        header, no data read (for the memory estimate before a run); None when the format
+        cannot tell."""
+        return None
+
     def defaults(self, path: Path) -> Preprocessing:
         """The preprocessing this format applies to ``path`` unless the run's options say
         otherwise (none by default)."""

@@ -42,7 +42,13 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.formats import CaptureFormat
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
-from nlosfw.capture.matfile import read_mat_array, require_variables, scalar, variables_or_none
+from nlosfw.capture.matfile import (
+    read_mat_array,
+    require_variables,
+    scalar,
+    scan_shape,
+    variables_or_none,
+)
 from nlosfw.capture.preprocess import Gate, Preprocessing
 from nlosfw.capture.scan import ConfocalScan, ScanLayout, confocal_capture
 from nlosfw.common.errors import DataError
@@ -89,6 +95,9 @@ class LctFormat(CaptureFormat):
             return confocal_capture(scan)
         except DataError as err:
             raise DataError(f"{path}: variable 'rect_data': {err}") from None
+
+    def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
+        return scan_shape(path, "rect_data")
 
     def defaults(self, path: Path) -> Preprocessing:
         return Preprocessing(gate=Gate(bins=DIRECT_REFLECTION_BINS))

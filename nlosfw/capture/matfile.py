@@ -117,6 +117,34 @@ def hdf5_keys(path: Path, group: str = "") -> set[str] | None:
         return None
 
 
+def hdf5_shape(path: Path, name: str) -> tuple[int, ...] | None:
+    """The shape of dataset ``name`` in an HDF5 file, as h5py reports it (MATLAB 7.3 files:
+    MATLAB's axes reversed); None if it is not a readable HDF5 file with such a dataset.
+    Never raises; reads no data."""
+    if not is_hdf5(path):
+        return None
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            node = f.get(name)
+            if not isinstance(node, h5py.Dataset) or node.shape is None:
+                return None
+            return tuple(int(n) for n in node.shape)
+    except (OSError, KeyError, RuntimeError, ValueError):
+        return None
+
+
+def scan_shape(path: Path, name: str) -> tuple[int, int, int] | None:
+    """(T, N x M, 1): the transient shape of a confocal scan stored as MATLAB variable
+    ``name`` [N, M, T] (v5 or v7.3); None when the file has no such 3-D variable."""
+    found = (variables_or_none(path) or {}).get(name)
+    if found is None or len(found.shape) != 3:
+        return None
+    n, m, t = found.shape
+    return t, n * m, 1
+
+
 def require_variables(path: Path, names: Sequence[str], expected: str) -> dict[str, MatVariable]:
     """The variables of ``path``; DataError naming the first of ``names`` it lacks and
     ``expected`` (what the format holds) when one is missing."""

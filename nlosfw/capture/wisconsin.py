@@ -31,7 +31,14 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.capture.formats import CaptureFormat
-from nlosfw.capture.matfile import hdf5_keys, is_hdf5, read_mat_array, read_mat_struct, scalar
+from nlosfw.capture.matfile import (
+    hdf5_keys,
+    hdf5_shape,
+    is_hdf5,
+    read_mat_array,
+    read_mat_struct,
+    scalar,
+)
 from nlosfw.common.errors import DataError
 
 #: The struct's fields that must be present.
@@ -63,6 +70,13 @@ class WisconsinFormat(CaptureFormat):
     def detect(self, path: Path) -> bool:
         keys = hdf5_keys(path, "dataset")
         return keys is not None and {"data", "deltat"} <= keys
+
+    def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
+        shape = hdf5_shape(path, "dataset/data")          # MATLAB [nl, 1, nt], reversed
+        if shape is None or len(shape) != 3:
+            return None
+        n_t, _, n_l = shape
+        return n_t, n_l, 1                  # the laser points are the sensor points
 
     def read(self, path: Path) -> Capture:
         if not is_hdf5(path):

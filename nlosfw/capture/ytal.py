@@ -11,6 +11,7 @@ attributes. Either reads the other's files when forced.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from nlosfw.capture.data import Capture
@@ -21,7 +22,7 @@ from nlosfw.capture.hdf5 import (
     read_fields,
     write_capture,
 )
-from nlosfw.capture.matfile import hdf5_keys
+from nlosfw.capture.matfile import hdf5_keys, hdf5_shape
 from nlosfw.common.errors import DataError
 
 
@@ -46,6 +47,14 @@ class YtalFormat(CaptureFormat):
     def detect(self, path: Path) -> bool:
         found = _nlosfw_type(path)
         return found is not None and found != NLOSFW_CAPTURE_TYPE
+
+    def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
+        shape = hdf5_shape(path, "H")        # time first; (T, Lx, Ly, Sx, Sy) if exhaustive
+        if not shape:
+            return None
+        if len(shape) == 5:
+            return shape[0], shape[3] * shape[4], shape[1] * shape[2]
+        return shape[0], math.prod(shape[1:]), 1
 
     def read(self, path: Path) -> Capture:
         raw = read_fields(path)

@@ -17,8 +17,8 @@ from pathlib import Path
 from nlosfw.capture.data import Capture
 from nlosfw.capture.formats import CaptureFormat
 from nlosfw.capture.hdf5 import capture_from_fields, read_fields
-from nlosfw.capture.matfile import hdf5_keys
-from nlosfw.capture.znlos_layout import znlos_to_ytal
+from nlosfw.capture.matfile import hdf5_keys, hdf5_shape
+from nlosfw.capture.znlos_layout import data_transient_shape, znlos_to_ytal
 from nlosfw.common.errors import DataError
 
 #: The datasets that identify a ZNLOS file.
@@ -31,6 +31,10 @@ class ZnlosFormat(CaptureFormat):
     def detect(self, path: Path) -> bool:
         keys = hdf5_keys(path)
         return keys is not None and set(SIGNATURE) <= keys and "H" not in keys
+
+    def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
+        shape = hdf5_shape(path, "data")
+        return None if shape is None else data_transient_shape(shape)
 
     def read(self, path: Path) -> Capture:
         raw = read_fields(path)

@@ -18,6 +18,36 @@ def _xy3(arr: Any) -> np.ndarray:
     return np.transpose(arr) if arr.shape[0] == 3 else arr
 
 
+def data_order(shape: tuple[int, ...]) -> tuple[int, ...] | None:
+    """Where each axis of a ZNLOS ``data`` array goes (``np.moveaxis`` destinations) to
+    read (colors, bounces, t, *space); None for an order y-tal does not know."""
+    if len(shape) == 7:
+        if shape[4] == 6:  # (ly, lx, sy, sx, bounces, t, colors)
+            return (4, 3, 6, 5, 1, 2, 0)
+        if shape[2] == 6:  # (colors, t, bounces, sx, sy, lx, ly)
+            return (0, 2, 1, 6, 5, 4, 3)
+    elif len(shape) == 5:
+        if shape[0] == shape[1]:  # (sy, sx, bounces, t, colors)
+            return (3, 4, 1, 2, 0)
+        if shape[3] == shape[4]:  # (colors, t, bounces, sx, sy)
+            return (0, 2, 1, 4, 3)
+    return None
+
+
+def data_transient_shape(shape: tuple[int, ...]) -> tuple[int, int, int] | None:
+    """(time bins, sensor points, laser points) of a ZNLOS ``data`` array of ``shape``."""
+    order = data_order(shape)
+    if order is None:
+        return None
+    canonical = [0] * len(shape)
+    for axis, destination in enumerate(order):
+        canonical[destination] = int(shape[axis])
+    space = canonical[3:]                  # (sy, sx) or (lx, ly, sx, sy)
+    if len(space) == 2:
+        return canonical[2], space[0] * space[1], 1
+    return canonical[2], space[2] * space[3], space[0] * space[1]
+
+
 def znlos_to_ytal(raw: dict[str, Any], path: Path) -> dict[str, Any]:
     """Convert a Zaragoza NLOS dataset file's fields to y-tal's, as y-tal does."""
     needed = ("data", "deltaT", "t0", "cameraPosition", "cameraGridPositions",
@@ -26,23 +56,13 @@ def znlos_to_ytal(raw: dict[str, Any], path: Path) -> dict[str, Any]:
     if missing:
         raise DataError(f"{path}: Zaragoza (HDF5_ZNLOS) file lacks field '{missing[0]}'")
     H = np.asarray(raw["data"])
-    if H.ndim == 7:
-        if H.shape[4] == 6:  # (ly, lx, sy, sx, bounces, t, colors)
-            H = np.moveaxis(H, list(range(7)), (4, 3, 6, 5, 1, 2, 0))
-        elif H.shape[2] == 6:  # (colors, t, bounces, sx, sy, lx, ly)
-            H = np.moveaxis(H, list(range(7)), (0, 2, 1, 6, 5, 4, 3))
-        else:
-            raise DataError(f"{path}: field 'data' has 7 axes {H.shape} in no known ZNLOS order")
-    elif H.ndim == 5:
-        if H.shape[0] == H.shape[1]:  # (sy, sx, bounces, t, colors)
-            H = np.moveaxis(H, list(range(5)), (3, 4, 1, 2, 0))
-        elif H.shape[3] == H.shape[4]:  # (colors, t, bounces, sx, sy)
-            H = np.moveaxis(H, list(range(5)), (0, 2, 1, 4, 3))
-        else:
-            raise DataError(f"{path}: field 'data' has 5 axes {H.shape} in no known ZNLOS order")
-    else:
+    if H.ndim not in (5, 7):
         raise DataError(f"{path}: field 'data' must have 5 (confocal) or 7 axes, got {H.ndim}")
-    H = np.squeeze(H.sum(axis=(0, 1)))
+    order = data_order(H.shape)
+    if order is None:
+        raise DataError(f"{path}: field 'data' has {H.ndim} axes {H.shape} in no known ZNLOS "
+                        "order")
+    H = np.squeeze(np.moveaxis(H, list(range(H.ndim)), order).sum(axis=(0, 1)))
     if H.ndim not in (3, 5):
         raise DataError(f"{path}: field 'data' reduces to {H.ndim} axes; expected 3 or 5")
 

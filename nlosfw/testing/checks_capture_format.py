@@ -102,14 +102,23 @@ def _assert_peak_at_closed_form(spec: PluginSpec, got: Capture, target: Any) -> 
 def check_reads_its_layout(spec: PluginSpec) -> None:
     """A file written in the format's layout from a known analytic capture reads back as that
     capture: histograms, wall points, bin width (metres), time origin; the brightest bin at
-    the closed-form path length of the hidden patch."""
+    the closed-form path length of the hidden patch; the transient's shape from the header,
+    when the format gives one, is the one read."""
     from nlosfw.testing.fixtures import TINY_TARGET
 
     fmt = spec.create(dict(spec.test_config))
     for known in known_captures(spec):
         with tempfile.TemporaryDirectory() as tmp:
-            got = fmt.read(write_sample(spec, fmt, known, Path(tmp)))
+            path = write_sample(spec, fmt, known, Path(tmp))
+            got = fmt.read(path)
+            header = fmt.transient_shape(path)
         _assert_same_capture(spec, got, known)
+        if header is not None:
+            bins, sensors, lasers = header
+            read = (got.n_bins, got.H.size // got.n_bins)
+            assert (bins, sensors * lasers) == read, (
+                f"{spec.qualified_name}: transient_shape says {bins} bins x {sensors * lasers} "
+                f"samples, the file holds {read[0]} x {read[1]}")
         target = (known.scene_info.get("scene") or {}).get("geometry", [{}])[0].get(
             "position", TINY_TARGET)
         _assert_peak_at_closed_form(spec, got, target)
@@ -118,7 +127,8 @@ def check_reads_its_layout(spec: PluginSpec) -> None:
 @requires(C.READABLE)
 def check_detects_only_its_files(spec: PluginSpec) -> None:
     """Detection (from content, whatever the file's name) claims a file in the format's layout
-    and nothing else: no unrelated file, no file of another format, and never raises."""
+    and nothing else: no unrelated file, no file of another format, and never raises (nor
+    does the header's transient shape)."""
     fmt = spec.create(dict(spec.test_config))
     known = known_captures(spec)[0]
     with tempfile.TemporaryDirectory() as tmp:
@@ -128,9 +138,11 @@ def check_detects_only_its_files(spec: PluginSpec) -> None:
         for path in files:
             try:
                 claimed = fmt.detect(path)
+                fmt.transient_shape(path)
             except Exception as err:  # detection must never raise
-                raise AssertionError(f"{spec.qualified_name}: detect({path.name}) raised "
-                                     f"{type(err).__name__}: {err}") from err
+                raise AssertionError(f"{spec.qualified_name}: detect or transient_shape "
+                                     f"({path.name}) raised {type(err).__name__}: {err}"
+                                     ) from err
             where = path.relative_to(path.parents[1])
             assert claimed is False, f"{spec.qualified_name}: claims {where}"
 

@@ -15,7 +15,7 @@ from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.testing import fixtures
+from nlosfw.testing import fixtures, layouts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 
 
@@ -124,8 +124,26 @@ def test_a_capture_file_declaring_a_huge_transient_is_refused_before_it_is_read(
     assert path.stat().st_size < 1_000_000
     result = tools.run(f"capture.path={path}", "model=interp")
     assert result.returncode == 2
-    assert "most of it for the transient H (capture.path's transient of shape [1000000, " \
-           "1000, 1000]" in tools.one_error_line(result)
+    assert "most of it for the transient H (capture.path's transient of 1000000 time bins " \
+           "× 1000000 samples" in tools.one_error_line(result)
+
+
+def test_a_matlab_capture_declaring_a_huge_transient_is_refused_before_it_is_read(workdir,
+                                                                                 tools):
+    """The estimate sizes every format from its header: an f-k .mat (MATLAB 7.3) file whose
+    meas [N, N, T] declares 1000 x 1000 x 100000 bins."""
+    path = layouts.write_mat73(workdir / "huge.mat", {"meas": np.zeros((4, 4, 8), np.float32)})
+    with h5py.File(path, "a") as f:   # 400 GB declared, nothing stored
+        attrs = dict(f["meas"].attrs)
+        del f["meas"]
+        f.create_dataset("meas", shape=(100_000, 1000, 1000), dtype="f4", chunks=(1, 10, 10))
+        f["meas"].attrs.update(attrs)
+    assert path.stat().st_size < 1_000_000
+    result = tools.run(f"capture.path={path}", "model=interp")
+    assert result.returncode == 2
+    assert "most of it for the transient H (capture.path's transient of 100000 time bins × " \
+           "1000000 samples" in tools.one_error_line(result)
+    assert no_output(workdir)
 
 
 def test_the_estimate_bounds_a_real_run_and_allow_large_overrides_it():
