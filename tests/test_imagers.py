@@ -345,9 +345,11 @@ def test_fft_blocks_threads_and_uncached_spectra_equal_rsd(kind):
     assert np.array_equal(by_threads[0], by_threads[2])
 
 
-def test_fft_starts_no_more_planes_after_an_error():
-    """An error in one thread (here the progress callback) stops the imaging: the planes not
-    yet started are cancelled, not computed before the error is raised."""
+@pytest.mark.parametrize("imager", [FFTImager({"workers": 2}),
+                                    RSDImager({"workers": 2, "chunk_mb": 0.01})])
+def test_imagers_start_no_more_blocks_after_an_error(imager):
+    """An error in one thread (here the progress callback) stops the imaging: the planes
+    (voxel blocks) not yet started are cancelled, not computed before the error is raised."""
     field = random_field(shape=(6, 8))
     voxels = fixtures.aligned_voxels(field.wall_xyz, np.linspace(0.3, 0.9, 40))
     calls: list[int] = []
@@ -360,8 +362,8 @@ def test_fft_starts_no_more_planes_after_an_error():
         threading.Event().wait(0.05)             # later planes are slow to finish
 
     with pytest.raises(RuntimeError, match="stop here"):
-        FFTImager({"workers": 2}).reconstruct(field, voxels, on_progress=on_progress)
-    assert 1 <= len(calls) <= 5
+        imager.reconstruct(field, voxels, on_progress=on_progress)
+    assert 1 <= len(calls) <= 5 and calls[0] == 1
 
 
 def test_metadata_names_the_imager_and_frequencies():

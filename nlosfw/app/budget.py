@@ -32,7 +32,7 @@ from nlosfw.common.errors import ConfigError
 from nlosfw.common.files import format_bytes
 
 #: Sizes a capture file from its header: (time bins, sensor points, laser points), or None.
-FileShape = Callable[[Path], "tuple[int, int, int] | None"]
+FileShape = Callable[[Path], tuple[int, int, int] | None]
 
 #: Bytes one entry of a neural model's training history takes (a small dict of floats).
 _HISTORY_ENTRY = 400

@@ -30,8 +30,7 @@ quarter of it and the frequency sum runs on a quarter grid
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +39,7 @@ import scipy.fft
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice, require
-from nlosfw.common.cores import available_cores
+from nlosfw.common.cores import run_tasks, worker_count
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image import even_kernel
@@ -153,7 +152,7 @@ class FFTImager(PropagationImager):
         wall = wall_layout(field)
         values = to_canonical(wall_field(field, cdtype), wall.order, axes=(1, 2))
         planes = voxels.reshape((-1,) + voxels.shape[-3:])
-        cores = available_cores() if cfg.workers == -1 else cfg.workers
+        cores = worker_count(cfg.workers)
         threads = min(cores, len(planes))                   # planes imaged in parallel
         fft_workers = max(1, cores // threads)              # the rest split each FFT
         fold = self._folds(field.geometry)
@@ -174,7 +173,7 @@ class FFTImager(PropagationImager):
                                        axes=(1, 2))
             progress.advance()
 
-        _run_threads(image, range(len(planes)), threads)
+        run_tasks(image, range(len(planes)), threads)
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
 
     def _folds(self, geometry: CaptureGeometry) -> bool:
@@ -249,7 +248,6 @@ class FFTImager(PropagationImager):
             acc.add_amplitude(conv.read_outputs(folded))
         return acc.intensity()
 
-
     def _image_even_plane(self, volume: _Volume, layout: _Plane) -> np.ndarray:
         """Intensities (n_t, Y, X) of one plane whose frequencies fold on an even kernel:
         the sum over frequencies on the quarter grid, once per mirror image of the
@@ -311,18 +309,6 @@ def _same_blocks(first: Iterator[slice], second: Iterator[slice]) -> Iterator[sl
         if a != b:
             raise RuntimeError(f"block generators out of step: {a} and {b}")
         yield a
-
-
-def _run_threads(task: Callable[[int], None], items: range, threads: int) -> None:
-    """``task(i)`` for every item, on ``threads`` threads, one item per task: on an error or
-    an interrupt, ``Executor.map`` cancels the items not yet started."""
-    if threads <= 1:
-        for i in items:
-            task(i)
-        return
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        for _ in pool.map(task, items):
-            pass
 
 
 #: Target bytes of one block of padded frequency planes (per thread).

@@ -15,13 +15,12 @@ product, whose speed collapses when the cores are shared.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from nlosfw.common.config import require
-from nlosfw.common.cores import available_cores
+from nlosfw.common.cores import run_tasks, worker_count
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
 from nlosfw.image.rsd_kernel import laser_phase, path_multiplier, phasor_steps, wall_field
@@ -62,20 +61,12 @@ class RSDImager(PropagationImager):
         out = np.empty((coeffs.shape[0], points.shape[0]), dtype=np.float64)
         progress = ProgressCounter(len(starts), on_progress)   # advanced from every worker
 
-        def run(share: range) -> None:
-            for start in share:                     # blocks write disjoint output columns
-                vox = points[start:start + block]
-                out[:, start:start + vox.shape[0]] = self._block(field, values, wall, vox,
-                                                                 coeffs)
-                progress.advance()
+        def run(start: int) -> None:                # blocks write disjoint output columns
+            vox = points[start:start + block]
+            out[:, start:start + vox.shape[0]] = self._block(field, values, wall, vox, coeffs)
+            progress.advance()
 
-        workers = available_cores() if self.config.workers == -1 else self.config.workers
-        workers = min(workers, len(starts))
-        if workers > 1:
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                list(pool.map(run, [starts[w::workers] for w in range(workers)]))
-        else:
-            run(starts)
+        run_tasks(run, starts, min(worker_count(self.config.workers), len(starts)))
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
 
     def _block(self, field: PhasorField, values: np.ndarray, wall: np.ndarray, vox: np.ndarray,
