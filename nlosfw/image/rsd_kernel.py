@@ -87,7 +87,7 @@ def kernel(frequencies: np.ndarray, r: np.ndarray, multiplier: int,
 
 def kernel_blocks(frequencies: np.ndarray, r: np.ndarray, multiplier: int,
                   out: np.ndarray) -> Iterator[slice]:
-    """Kernels exp(+2 pi i f m r) / r for consecutive blocks of ``out.shape[0]`` frequencies
+    """Kernels exp(+2 pi i f m r) / r for blocks of ``out.shape[0]`` consecutive frequencies
     (see :func:`phasor_blocks`)."""
     r = np.asarray(r, dtype=float)
     return phasor_blocks(frequencies, multiplier * r, out, scale=1.0 / r)
@@ -95,15 +95,16 @@ def kernel_blocks(frequencies: np.ndarray, r: np.ndarray, multiplier: int,
 
 def phasor_blocks(frequencies: np.ndarray, path: np.ndarray, out: np.ndarray,
                   scale: np.ndarray | None = None) -> Iterator[slice]:
-    """scale * exp(+2 pi i f path) for consecutive blocks of ``out.shape[0]`` frequencies.
+    """scale * exp(+2 pi i f path) for blocks of ``out.shape[0]`` consecutive frequencies.
 
     Fills ``out[:k]`` (a block of k frequencies, ``out`` of shape (block, *path.shape),
     any complex dtype, possibly a strided view) and yields the block's slice of
     ``frequencies``; the next block overwrites it. For uniformly spaced frequencies (in
-    the given order) a block's phasors are its first phasor (a complex128 recurrence
-    over blocks, recomputed exactly every 256 blocks) times the fixed phasors
-    exp(2 pi i j df path), j < block: one complex product per value instead of a cosine
-    and a sine. Otherwise every phasor is evaluated exactly.
+    the given order) a block's phasors are its first phasor (from :func:`phasor_steps`
+    over the blocks' first frequencies, which sets the order of the blocks) times the
+    fixed phasors exp(2 pi i j df path), j < block: one complex product per value instead
+    of a cosine and a sine. Otherwise every phasor is evaluated exactly, block by block
+    in order.
     """
     f = np.asarray(frequencies, dtype=float)
     path = np.asarray(path, dtype=float)
@@ -117,19 +118,11 @@ def phasor_blocks(frequencies: np.ndarray, path: np.ndarray, out: np.ndarray,
             yield sel
         return
     within = unit_phasor(np.multiply.outer(step * np.arange(size), path), out.dtype.type)
-    advance = unit_phasor(size * step * path)
-    first = np.empty(path.shape, dtype=np.complex128)
-    for b, start in enumerate(starts):
-        sel = slice(start, min(f.size, start + size))
-        if b % _REFRESH == 0:
-            first[...] = unit_phasor(f[start] * path)
-            if scale is not None:
-                first *= scale
-        else:
-            first *= advance
-        np.multiply(within[:sel.stop - start], first, out=out[:sel.stop - start],
-                    casting="same_kind")
-        yield sel
+    for b, first in phasor_steps(f[::size], path, scale=scale):    # each block's first
+        start = b * size
+        k = min(size, f.size - start)
+        np.multiply(within[:k], first, out=out[:k], casting="same_kind")
+        yield slice(start, start + k)
 
 
 def phasor_series(frequencies: np.ndarray, path: np.ndarray, dtype: type = np.complex128,
