@@ -23,28 +23,17 @@ import argparse
 import json
 import os
 import platform
-import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from timing import best_of
 
 from nlosfw.simulate.builtin_scenes import builtin_scene
 from nlosfw.simulate.geometry import blocked_fraction, ground_truth_maps, validate_scene
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_geometry.json"
 SCENES = ("thesis_two_planes", "thesis_occluded", "thesis_planes", "thesis_concave")
-
-
-def best_of(repeat: int, call: Callable[[], Any]) -> tuple[float, Any]:
-    """(best wall-clock seconds over ``repeat`` calls, the last result)."""
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        result = call()
-        times.append(time.perf_counter() - start)
-    return min(times), result
 
 
 def backend(force_numpy: bool) -> str:
@@ -74,10 +63,9 @@ def main(argv: list[str] | None = None) -> int:
         geometry = validate_scene(scene)
         grid = scene.wall.grid_xyz()
         mesh = geometry.mesh
-        gt_s, (depth, _) = best_of(args.repeat,
-                                   lambda m=mesh, g=grid: ground_truth_maps(m, g))
-        bf_s, blocked = best_of(args.repeat,
-                                lambda s=scene, m=mesh: blocked_fraction(s, m))
+        gt_s, (depth, _) = best_of(lambda m=mesh, g=grid: ground_truth_maps(m, g),
+                                   args.repeat)
+        bf_s, blocked = best_of(lambda s=scene, m=mesh: blocked_fraction(s, m), args.repeat)
         row = {"scene": name, "wall": list(grid.shape[:2]), "faces": mesh.n_faces,
                "ground_truth_s": gt_s, "blocked_fraction_s": bf_s,
                "blocked_fraction": blocked, "hit_pixels": int(np.count_nonzero(depth > 0))}

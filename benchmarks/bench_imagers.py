@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from timing import best_of
 
 from nlosfw.image.fft import FFTImager
 from nlosfw.image.reconstruction import volume_voxels
@@ -86,16 +87,6 @@ def scene_config(n: int, bins: int, bin_width: float) -> dict[str, Any]:
             {"type": "point", "position": [0.5, 0.4, 1.5], "albedo": 0.01},
         ],
     }
-
-
-def timed(fn: Callable[[], Any], repeat: int = 1) -> tuple[float, Any]:
-    """(best wall-clock seconds of ``repeat`` runs, last result)."""
-    best, out = float("inf"), None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def peak_mb(fn: Callable[[], Any]) -> float:
@@ -157,7 +148,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     capture = AnalyticSimulator({"patch_size": 0.02}).simulate(scene)
     t_sim = time.perf_counter() - t0
     transform = WaveletTransform()
-    t_transform, field = timed(lambda: transform.transform(capture), args.repeat)
+    t_transform, field = best_of(lambda: transform.transform(capture), args.repeat)
     wavelet = field.metadata["wavelet"]
     extent = (-1.0, 1.0)
     volume = volume_voxels(depths, extent, extent, (n, n))
@@ -165,23 +156,23 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     fft, rsd = FFTImager(), RSDImager()
 
     rows: dict[str, Any] = {}
-    t, fft_plane = timed(lambda: fft.reconstruct(field, plane), args.repeat)
+    t, fft_plane = best_of(lambda: fft.reconstruct(field, plane), args.repeat)
     rows["fft_plane"] = {"seconds": t, "peak_mb": peak_mb(lambda: fft.reconstruct(field, plane))}
-    t, _ = timed(lambda: fft.reconstruct(field, volume))
+    t, _ = best_of(lambda: fft.reconstruct(field, volume))
     rows["fft_volume"] = {"seconds": t, "planes": n_planes,
                           "peak_mb": peak_mb(lambda: fft.reconstruct(field, volume))}
-    t, rsd_plane = timed(lambda: rsd.reconstruct(field, plane))
+    t, rsd_plane = best_of(lambda: rsd.reconstruct(field, plane))
     rows["rsd_plane"] = {"seconds": t, "peak_mb": peak_mb(lambda: rsd.reconstruct(field, plane))}
     sub = volume[:rsd_planes]
     if args.full_rsd:                      # one traced run gives both time and peak memory
         tracemalloc.start()
-        t, _ = timed(lambda: rsd.reconstruct(field, volume))
+        t, _ = best_of(lambda: rsd.reconstruct(field, volume))
         peak = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
         rows["rsd_volume"] = {"seconds": t, "planes": n_planes, "extrapolated": False,
                               "peak_mb": peak, "note": "timed with tracemalloc running"}
     else:
-        t, _ = timed(lambda: rsd.reconstruct(field, sub))
+        t, _ = best_of(lambda: rsd.reconstruct(field, sub))
         rows["rsd_volume"] = {"seconds": t * n_planes / rsd_planes, "planes": n_planes,
                               "extrapolated": True, "measured_planes": rsd_planes,
                               "measured_seconds": t,

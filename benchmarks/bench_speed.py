@@ -36,12 +36,12 @@ import os
 import platform
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import scipy.fft
+from timing import best_of
 
 from nlosfw.image import FFTImager, RSDImager, automatic_depths, depth_span, volume_voxels
 from nlosfw.plugins import load_plugins
@@ -52,16 +52,6 @@ from nlosfw.transform import FFTTransform, PhasorField
 
 RESULTS = Path(__file__).parent / "results" / "bench_speed.json"
 TARGETS = {"confocal_ratio": 2.0, "single_spot_ratio": 2.0, "real_size_seconds": 1.5}
-
-
-def best(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
-    """(minimum wall-clock seconds over ``repeat`` runs, last result)."""
-    seconds, out = float("inf"), None
-    for _ in range(repeat):
-        start = time.perf_counter()
-        out = fn()
-        seconds = min(seconds, time.perf_counter() - start)
-    return seconds, out
 
 
 def point_field(n: int, confocal: bool) -> PhasorField:
@@ -113,9 +103,9 @@ def imager_case(n: int, planes: int, confocal: bool, repeat: int,
     voxels = volume_voxels(depths, (-1.0, 1.0), (-1.0, 1.0), (n, n))
     voxels[..., :2] += shift * spacing
     imager, one_thread = FFTImager(), FFTImager({"workers": 1})
-    t_imager, recon = best(lambda: imager.reconstruct(field, voxels), repeat)
-    t_one, _ = best(lambda: one_thread.reconstruct(field, voxels), repeat)
-    t_plain, _ = best(lambda: plain_minimum(field, depths, confocal), repeat)
+    t_imager, recon = best_of(lambda: imager.reconstruct(field, voxels), repeat)
+    t_one, _ = best_of(lambda: one_thread.reconstruct(field, voxels), repeat)
+    t_plain, _ = best_of(lambda: plain_minimum(field, depths, confocal), repeat)
     return {"wall": [n, n], "spacing_m": spacing, "frequencies": 151, "planes": planes,
             "voxel_shift_spacings": shift,
             "padded": [scipy.fft.next_fast_len(2 * n - 1)] * 2,
@@ -146,7 +136,7 @@ def real_size_case(repeat: int, quick: bool) -> dict[str, Any]:
     capture = AnalyticSimulator().simulate(scene)
     simulate = time.perf_counter() - start
     transform = FFTTransform()
-    t_transform, field = best(lambda: transform.transform(capture), repeat)
+    t_transform, field = best_of(lambda: transform.transform(capture), repeat)
     depths = automatic_depths(depth_span(capture), float(field.frequencies.max()),
                               field.geometry.kind)
     voxels = fixtures.aligned_voxels(field.wall_xyz, depths)
@@ -154,7 +144,7 @@ def real_size_case(repeat: int, quick: bool) -> dict[str, Any]:
     rows: dict[str, Any] = {}
     for name in ("fft", "lct", "fk", "fbp"):
         imager = host.registry.create("imager", name)
-        seconds, _ = best(lambda imager=imager: imager.reconstruct(field, voxels), repeat)
+        seconds, _ = best_of(lambda imager=imager: imager.reconstruct(field, voxels), repeat)
         rows[name] = seconds
     return {"capture": [2048, n, n], "simulate_seconds": simulate,
             "band": [float(field.frequencies[0]), float(field.frequencies[-1])],
