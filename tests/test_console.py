@@ -5,12 +5,13 @@ from __future__ import annotations
 import logging
 import threading
 
-from nlosfw.app.console import FILE_ONLY, ConsoleFilter
-from nlosfw.app.overview import changed_options, run_plan, single_frequency_count
-from nlosfw.app.run_dir import format_size
-from nlosfw.app.settings import RunSettings
+from nlosfw.cli.console import ConsoleFilter
+from nlosfw.cli.overview import changed_options, run_plan, single_frequency_count
 from nlosfw.common.config import config_from_mapping, config_to_dict
+from nlosfw.common.files import format_bytes
+from nlosfw.common.logs import FILE_ONLY
 from nlosfw.common.progress import ProgressCounter, accepts_progress
+from nlosfw.pipeline.settings import RunSettings
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate.builtin_scenes import builtin_scene
 
@@ -53,14 +54,14 @@ def _record(name: str, level: int, **extra) -> logging.LogRecord:
 
 def test_the_console_shows_nlosfw_records_and_any_error_only():
     keep = ConsoleFilter().filter
-    assert keep(_record("nlosfw.app.pipeline", logging.INFO))
+    assert keep(_record("nlosfw.pipeline.engine", logging.INFO))
     assert keep(_record("nlosfw_torch.engine", logging.WARNING))        # our plugins too
     assert not keep(_record("jax._src.xla_bridge", logging.INFO))        # "no TPU"
     assert not keep(_record("jax._src.xla_bridge", logging.WARNING))
     assert not keep(_record("matplotlib.font_manager", logging.INFO))
     assert not keep(_record("py.warnings", logging.WARNING))
     assert keep(_record("hydra", logging.ERROR))
-    assert not keep(_record("nlosfw.app.run_dir", logging.INFO, **FILE_ONLY))
+    assert not keep(_record("nlosfw.pipeline.files", logging.INFO, **FILE_ONLY))
 
 
 def _config(**settings):
@@ -111,6 +112,6 @@ def test_the_plan_counts_reconstructions_and_says_why():
         "read c.hdf5 → phasor field (fft) → fit siren_torch, interp (stop after fit)"]
 
 
-def test_format_size():
-    assert [format_size(n) for n in (0, 999, 1000, 7_212_345, 57_261_952, 3 * 10**9)] == [
+def test_format_bytes():
+    assert [format_bytes(n) for n in (0, 999, 1000, 7_212_345, 57_261_952, 3 * 10**9)] == [
         "0 B", "999 B", "1.0 kB", "7.2 MB", "57.3 MB", "3.0 GB"]

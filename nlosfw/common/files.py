@@ -31,12 +31,14 @@ TEMPORARY_NAME = re.compile(r"^\..+\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp(\.[^.]+)?$")
 
 
 def format_bytes(n: float) -> str:
-    """``n`` bytes in a short human form (``1.5 MB``; decimal units)."""
-    for unit in ("bytes", "kB", "MB", "GB", "TB"):
-        if abs(n) < 1000 or unit == "TB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+    """``n`` bytes in a short human form: ``512 B``, ``1.5 MB`` (decimal units, as ``ls -h
+    --si`` and file browsers show them)."""
+    units = ("B", "kB", "MB", "GB", "TB")
+    for unit in units[:-1]:
+        if abs(n) < 1000:
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1000
-    raise AssertionError("unreachable")
+    return f"{n:.1f} {units[-1]}"
 
 
 def free_space(path: str | Path) -> int:

@@ -1,7 +1,8 @@
 """Built-in scenes: the ``scene`` config group shipped in ``conf/scene/<name>.yaml``.
 
-``conf/`` is installed as the package ``nlosfw.conf``, so the same YAML files
-serve Hydra (``scene=thesis_two_planes``) and Python code::
+The same YAML files (found by :func:`nlosfw.common.resources.config_dir`: the installed
+``nlosfw.conf`` package, or ``conf/`` beside a checkout) serve Hydra
+(``scene=thesis_two_planes``) and Python code::
 
     from nlosfw.simulate.builtin_scenes import builtin_scene
     scene = builtin_scene("thesis_two_planes", wall={"resolution": [32, 32]})
@@ -15,21 +16,18 @@ then the file's own fields (``_self_``, last) override what they name.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from importlib.resources import files
 from typing import Any
 
 import yaml
 
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.resources import config_dir
 from nlosfw.simulate.scene import Scene, scene_from_config
-
-#: Package holding the ``scene`` config group.
-SCENE_PACKAGE = "nlosfw.conf"
 
 
 def builtin_scene_names() -> list[str]:
     """Names of the built-in scenes (the YAML files of the ``scene`` config group)."""
-    folder = files(SCENE_PACKAGE) / "scene"
+    folder = config_dir() / "scene"
     return sorted(p.name[: -len(".yaml")] for p in folder.iterdir()
                   if p.name.endswith(".yaml"))
 
@@ -82,7 +80,7 @@ def merge_config(base: Mapping[str, Any], overrides: Mapping[str, Any]) -> dict[
 
 def _read(relative: str) -> dict[str, Any]:
     """A mapping from ``conf/scene/<relative>``."""
-    path = files(SCENE_PACKAGE) / "scene" / relative
+    path = config_dir() / "scene" / relative
     if not path.is_file():
         raise ConfigError("scene", f"conf/scene/{relative} does not exist")
     config = yaml.safe_load(path.read_text(encoding="utf-8"))
