@@ -1,9 +1,9 @@
 """Benchmark of the hidden-geometry ray queries: ground-truth maps and the shadowing test.
 
 For each thesis scene with its 64 x 64 wall: the time of
-:func:`nlosfw.simulate.geometry.ground_truth_maps` (one +z ray per wall point, the
+:func:`nlosfw.simulate.visibility.ground_truth_maps` (one +z ray per wall point, the
 mesh built once, as ``simulate()`` does) and of
-:func:`nlosfw.simulate.geometry.blocked_fraction` (the analytic simulator's
+:func:`nlosfw.simulate.visibility.blocked_fraction` (the analytic simulator's
 sight-line test, ~17 wall points x every surface sample). Best of ``--repeat``
 wall-clock seconds; the first call (building the ray structure) is included in
 every repeat, since each simulation builds it anew.
@@ -30,7 +30,8 @@ import numpy as np
 from timing import best_of
 
 from nlosfw.simulate.builtin_scenes import builtin_scene
-from nlosfw.simulate.geometry import blocked_fraction, ground_truth_maps, validate_scene
+from nlosfw.simulate.geometry import validate_scene
+from nlosfw.simulate.visibility import blocked_fraction, ground_truth_maps
 
 RESULTS = Path(__file__).resolve().parent / "results" / "bench_geometry.json"
 SCENES = ("thesis_two_planes", "thesis_occluded", "thesis_planes", "thesis_concave")

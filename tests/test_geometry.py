@@ -11,7 +11,6 @@ from nlosfw.capture.geometry import device_legs
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.geometry import (
     TriangleMesh,
-    ground_truth_maps,
     item_mesh,
     path_length_range,
     rotation_matrix,
@@ -23,6 +22,7 @@ from nlosfw.simulate.geometry import (
 )
 from nlosfw.simulate.physics import three_bounce
 from nlosfw.simulate.scene import GeometryItem, scene_from_config
+from nlosfw.simulate.visibility import ground_truth_maps
 from nlosfw.testing.fixtures import tiny_scene_config
 
 
@@ -189,7 +189,7 @@ def test_ground_truth_sees_the_nearest_surface():
 
 def test_blocked_fraction_finds_shadowing_only_where_it_exists():
     from nlosfw.simulate.builtin_scenes import builtin_scene
-    from nlosfw.simulate.geometry import blocked_fraction
+    from nlosfw.simulate.visibility import blocked_fraction
 
     for name, shadowed in (("thesis_two_planes", False), ("thesis_planes", False),
                            ("thesis_occluded", True), ("thesis_concave", True)):
@@ -252,7 +252,7 @@ def test_ground_truth_through_the_vertices_of_a_curved_surface():
 
 def test_first_hits_find_the_nearest_of_stacked_surfaces(ray_code):
     """Listed back to front, overlapping, one tilted: each ray reports the nearest."""
-    from nlosfw.simulate.geometry import first_hits
+    from nlosfw.simulate.visibility import first_hits
 
     items = [{"type": "rectangle", "position": [0.0, 0.0, 0.9], "size": [0.8, 0.8],
               "albedo": 0.1},
@@ -293,7 +293,7 @@ def test_segments_ending_on_a_surface_are_not_blocked(ray_code, gap, expected):
     the back one: blocked when the front square lies more than the last micrometre
     of the segment (gap / cos > 1e-6 for every segment here) before its end.
     """
-    from nlosfw.simulate.geometry import blocked_fraction
+    from nlosfw.simulate.visibility import blocked_fraction
 
     items = [{"type": "rectangle", "position": [0.0, 0.0, 0.5], "size": [0.3, 0.3]},
              {"type": "rectangle", "position": [0.0, 0.0, 0.5 - gap], "size": [0.3, 0.3]}]
@@ -306,7 +306,7 @@ def test_blocked_fraction_is_the_same_with_either_ray_code(monkeypatch):
     if not trimesh.ray.has_embree:
         pytest.skip("embreex is not installed")
     from nlosfw.simulate.builtin_scenes import builtin_scene
-    from nlosfw.simulate.geometry import blocked_fraction
+    from nlosfw.simulate.visibility import blocked_fraction
 
     scenes = [builtin_scene(n) for n in ("thesis_occluded", "thesis_concave", "thesis_planes")]
     embree = [blocked_fraction(s, scene_mesh(s)) for s in scenes]
@@ -315,7 +315,7 @@ def test_blocked_fraction_is_the_same_with_either_ray_code(monkeypatch):
 
 
 def test_rays_that_meet_nothing(ray_code):
-    from nlosfw.simulate.geometry import first_hits
+    from nlosfw.simulate.visibility import first_hits
 
     mesh = scene_mesh(scene([{"type": "rectangle", "position": [0.0, 0.0, 0.5],
                               "size": [0.2, 0.2]}]))

@@ -14,8 +14,9 @@ import yaml
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
 from nlosfw.simulate.builtin_scenes import builtin_scene, builtin_scene_config, builtin_scene_names
-from nlosfw.simulate.geometry import ground_truth_maps, sample_surface, validate_scene
+from nlosfw.simulate.geometry import sample_surface, validate_scene
 from nlosfw.simulate.scene import Scene, scene_from_config
+from nlosfw.simulate.visibility import ground_truth_maps
 
 THESIS = ("thesis_planes", "thesis_concave", "thesis_two_planes", "thesis_occluded")
 QUICK = ("plane", "letter_t", "point")
@@ -50,7 +51,8 @@ def compose_scene(*overrides):
     from hydra.core.global_hydra import GlobalHydra
     from omegaconf import OmegaConf
 
-    from nlosfw.app.hydra_app import config_dir, ensure_resolvers, register_configs
+    from nlosfw.common.resources import config_dir
+    from nlosfw.compose import ensure_resolvers, register_configs
     from nlosfw.plugins import load_plugins
 
     register_configs(load_plugins())

@@ -15,8 +15,6 @@ from nlosfw.simulate.geometry import (
     PointScatterers,
     SceneGeometry,
     TriangleMesh,
-    blocked_fraction,
-    ground_truth_maps,
     item_mesh,
     path_length_range,
     resolve_mesh_paths,
@@ -42,6 +40,7 @@ from nlosfw.simulate.scene import (
     WallConfig,
     scene_from_config,
 )
+from nlosfw.simulate.visibility import blocked_fraction, ground_truth_maps
 
 __all__ = [
     "AnalyticConfig",

@@ -6,7 +6,7 @@ exact length. Rectangles and heightfields are integrated by deterministic
 midpoint quadrature on triangles subdivided below ``patch_size``. No ray is
 traced, so nothing shadows anything: boxes and mesh files are refused, and the
 result is exact only for scenes in which no surface hides another (a sampled
-sight-line test, :func:`nlosfw.simulate.geometry.blocked_fraction`, logs a warning when
+sight-line test, :func:`nlosfw.simulate.visibility.blocked_fraction`, logs a warning when
 one does, e.g. thesis_occluded and the spikes of thesis_concave).
 """
 
@@ -20,10 +20,11 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError
-from nlosfw.simulate.geometry import SceneGeometry, TriangleMesh, blocked_fraction
+from nlosfw.simulate.geometry import SceneGeometry, TriangleMesh
 from nlosfw.simulate.interface import Simulator, SimulatorConfig, scene_capture
 from nlosfw.simulate.physics import bin_index, three_bounce
 from nlosfw.simulate.scene import Scene
+from nlosfw.simulate.visibility import blocked_fraction
 
 log = logging.getLogger(__name__)
 

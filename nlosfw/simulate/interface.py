@@ -64,8 +64,9 @@ class Simulator(Configurable, ABC):
         directory). ``scene_info['scene']`` records the scene without its noise.
         """
 
-        from nlosfw.simulate.geometry import ground_truth_maps, validate_scene
+        from nlosfw.simulate.geometry import validate_scene
         from nlosfw.simulate.scene import NoiseConfig
+        from nlosfw.simulate.visibility import ground_truth_maps
 
         geometry = validate_scene(scene, base_dir)  # one-line ConfigError for a bad scene
         scene = geometry.scene
