@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from nlosfw.app.cache import cache_entries, file_digest
+from nlosfw.pipeline.cache import cache_entries, file_digest
 
 RESULTS = Path(__file__).parent / "results" / "bench_sweep.json"
 JOB = ("scene=tiny", "scene.noise.model=poisson", "scene.noise.photons=1e5", "imager=fft",

@@ -38,9 +38,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from nlosfw.app.records import RunRecord, find_runs, read_run
-from nlosfw.app.study import Stat, StudyRow, study_figure, study_rows
-from nlosfw.app.tables import markdown_table
+from nlosfw.report.records import RunRecord, find_runs, read_run
+from nlosfw.report.study import Stat, StudyRow, study_figure, study_rows
+from nlosfw.report.tables import markdown_table
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(__file__).parent / "results" / "sparsity_study.json"

@@ -24,8 +24,8 @@ MODULES = (
     "nlosfw.image",
     "nlosfw.plugins",
     "nlosfw.testing",
-    "nlosfw.app.results",
-    "nlosfw.app.metrics",
+    "nlosfw.pipeline.results",
+    "nlosfw.pipeline.metrics",
 )
 
 

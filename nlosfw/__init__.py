@@ -9,7 +9,9 @@ its public API:
 * :mod:`nlosfw.model`: field models fitted to sparse fields, and their protocol;
 * :mod:`nlosfw.image`: imagers and reconstructions;
 * :mod:`nlosfw.plugins`: plugin discovery and hooks; :mod:`nlosfw.testing`: the kit;
-* :mod:`nlosfw.app`: the command line (Hydra), pipeline, cache, figures and reports.
+* :mod:`nlosfw.pipeline`: the run engine (plans, stages, cache, run directory, metrics);
+* :mod:`nlosfw.compose`: a run's configuration composed with Hydra and checked;
+* :mod:`nlosfw.report`: figures and reports; :mod:`nlosfw.cli`: the command line.
 
 For notebooks and scripts, :mod:`nlosfw.api` gives one function per stage and one for a
 whole run, all importable from here: :func:`load_capture` (any capture format),

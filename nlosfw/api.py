@@ -19,7 +19,7 @@ as the command line checks them (an unknown option or a bad value is a one-line
     out.metrics.field["interp"].splits.heldout_pixels.nmse_db
 
 Importing this module loads no Hydra, matplotlib or backend: plugins load when a function
-needs one, and :func:`run` imports the command line's app when called.
+needs one, and :func:`run` imports Hydra (to compose the configuration) when called.
 """
 
 from __future__ import annotations
@@ -34,12 +34,12 @@ from nlosfw.capture import Capture
 from nlosfw.common import ConfigError
 from nlosfw.image import Reconstruction, wall_voxels
 from nlosfw.model import FieldModel
-from nlosfw.plugins import PluginHost, load_plugins
+from nlosfw.plugins import PluginHost, PluginKind, load_plugins
 from nlosfw.simulate import Scene, builtin_scene, scene_from_config
 from nlosfw.transform import PhasorField
 
 if TYPE_CHECKING:
-    from nlosfw.app.results import RunOutput
+    from nlosfw.pipeline import RunOutput
 
 
 def simulate_scene(scene: Scene | str | Mapping[str, Any], simulator: str = "analytic",
@@ -51,9 +51,8 @@ def simulate_scene(scene: Scene | str | Mapping[str, Any], simulator: str = "ana
     ``options`` are the simulator's (``samples=65536`` for ``embree``). Noise the scene
     asks for is added.
     """
-    plugin = _host().registry.create("simulator", simulator, options)
-    capture: Capture = plugin.simulate(_scene(scene))
-    return capture
+    plugin = _host().registry.create(PluginKind.SIMULATOR, simulator, options)
+    return plugin.simulate(_scene(scene))
 
 
 def load_capture(path: str | Path, format: str | None = None,
@@ -68,8 +67,7 @@ def load_capture(path: str | Path, format: str | None = None,
     """
     import dataclasses
 
-    from nlosfw.app.capture_source import load_file_capture
-    from nlosfw.app.settings import CaptureSource
+    from nlosfw.capture.source import CaptureSource, load_file_capture
 
     valid = {f.name for f in dataclasses.fields(CaptureSource)} - {"path", "format"}
     for key in preprocessing:
@@ -77,15 +75,14 @@ def load_capture(path: str | Path, format: str | None = None,
             raise ConfigError(f"capture.{key}", f"unknown preprocessing option; valid: "
                                                 f"{', '.join(sorted(valid))}")
     source = CaptureSource(path=str(path), format=format, **preprocessing)
-    return load_file_capture(source, _host()).prepared.capture
+    return load_file_capture(source, _host().capture_formats()).prepared.capture
 
 
 def transform_capture(capture: Capture, transform: str = "fft", **options: Any) -> PhasorField:
     """The phasor field of ``capture`` (values ``[frequency, y, x]``) by transform plugin
     ``transform`` (``fft``, ``wavelet``) with its ``options`` (``n_frequencies=51``)."""
-    field: PhasorField = _host().registry.create("transform", transform, options).transform(
-        capture)
-    return field
+    plugin = _host().registry.create(PluginKind.PHASOR_TRANSFORM, transform, options)
+    return plugin.transform(capture)
 
 
 def fit_model(field: PhasorField, model: str = "interp", **options: Any) -> FieldModel:
@@ -95,7 +92,7 @@ def fit_model(field: PhasorField, model: str = "interp", **options: Any) -> Fiel
     on the held-out samples afterwards (:func:`nlosfw.model.field_metrics`). For the fit's
     report (steps, seconds, losses), create the plugin and call its ``fit`` yourself.
     """
-    fitted: FieldModel = _host().registry.create("model", model, options)
+    fitted = _host().registry.create(PluginKind.FIELD_MODEL, model, options)
     fitted.fit(field)
     return fitted
 
@@ -121,9 +118,8 @@ def reconstruct(field: PhasorField, depths: Sequence[float] | np.ndarray,
     (``load_plugins().registry.create("imager", "rsd").reconstruct(field, voxels)``).
     """
     voxels = wall_voxels(field if grid is None else grid, depths)
-    image: Reconstruction = _host().registry.create("imager", imager, options).reconstruct(
-        field, voxels)
-    return image
+    plugin = _host().registry.create(PluginKind.IMAGER, imager, options)
+    return plugin.reconstruct(field, voxels)
 
 
 def run(overrides: Sequence[str] = (), *, output_dir: str | Path | None = None,
@@ -139,12 +135,12 @@ def run(overrides: Sequence[str] = (), *, output_dir: str | Path | None = None,
     names it, with ``report.html`` and the figures. ``config_name`` is the command
     line's ``-cn``.
 
-    Returns the run's :class:`~nlosfw.app.results.RunOutput`: ``.metrics`` (the
-    :class:`~nlosfw.app.metrics.RunMetrics` of metrics.json), ``.results`` (the typed
-    :class:`~nlosfw.app.results.RunResults`: capture, phasor field, fitted models,
+    Returns the run's :class:`~nlosfw.pipeline.results.RunOutput`: ``.metrics`` (the
+    :class:`~nlosfw.pipeline.metrics.RunMetrics` of metrics.json), ``.results`` (the typed
+    :class:`~nlosfw.pipeline.results.RunResults`: capture, phasor field, fitted models,
     predicted fields, reconstructions), ``.config`` and ``.dir``.
     """
-    from nlosfw.app.inprocess import run_in_process
+    from nlosfw.compose import run_in_process
 
     return run_in_process(overrides, output_dir, config_name)
 

@@ -31,7 +31,7 @@ def check_metrics_file(path: Path) -> None:
     :class:`RunMetrics` reads it back unchanged."""
     import jsonschema
 
-    from nlosfw.app.metrics import RunMetrics
+    from nlosfw.pipeline.metrics import RunMetrics
 
     schema_path = path.with_name("metrics.schema.json")
     assert schema_path.is_file(), f"{path}: no metrics.schema.json beside it"

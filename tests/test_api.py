@@ -10,9 +10,9 @@ import pytest
 import yaml
 
 import nlosfw
-from nlosfw.app.metrics import RunMetrics
 from nlosfw.cli import main
 from nlosfw.common import one_line
+from nlosfw.pipeline.metrics import RunMetrics
 
 TINY = ["scene=tiny", "model=interp", "transform.n_frequencies=21", "reconstruction.n_depths=4",
         "figures.enabled=false"]

@@ -22,10 +22,27 @@ LAYERS = {
     "nlosfw.image": 3,
     "nlosfw.plugins": 4,
     "nlosfw.testing": 5,
-    "nlosfw.app": 5,
-    "nlosfw": 6,
-    "nlosfw.cli": 6,
-    "nlosfw.__main__": 6,
+    "nlosfw.pipeline": 5,
+    "nlosfw.report": 6,
+    "nlosfw.compose": 6,
+    "nlosfw": 7,
+    "nlosfw.cli": 8,
+    "nlosfw.__main__": 8,
+}
+
+#: Imports a layer's rule allows but the architecture forbids: the library API and the
+#: engine never depend on the command line or the reports (the reports are a plugin of the
+#: run hooks, the console a subscriber the command line registers).
+FORBIDDEN = {
+    "nlosfw.api": ("nlosfw.cli", "nlosfw.report"),
+    "nlosfw": ("nlosfw.cli", "nlosfw.report"),
+    "nlosfw.pipeline": ("nlosfw.cli", "nlosfw.report", "nlosfw.compose"),
+    "nlosfw.compose": ("nlosfw.cli", "nlosfw.report"),
+}
+
+#: Packages that must not import these libraries at all (not even inside functions).
+FORBIDDEN_LIBRARIES = {
+    "nlosfw.pipeline": ("hydra", "rich", "matplotlib"),
 }
 
 
@@ -39,10 +56,21 @@ def _is_module(name: str) -> bool:
     return base.with_suffix(".py").is_file() or (base / "__init__.py").is_file()
 
 
+def _runtime_nodes(tree: ast.AST) -> list[ast.AST]:
+    """Every node of ``tree`` outside ``if TYPE_CHECKING:`` blocks (imports there are for
+    annotations only and create no dependency at run time)."""
+    skipped: set[int] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            skipped.update(id(n) for child in node.body for n in ast.walk(child))
+    return [n for n in ast.walk(tree) if id(n) not in skipped]
+
+
 def _imports(path: Path) -> set[str]:
-    """nlosfw modules imported anywhere in ``path`` (function-level imports included)."""
+    """nlosfw modules imported anywhere in ``path`` (function-level imports included, type
+    annotations' imports not)."""
     found = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in _runtime_nodes(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             if node.module.split(".")[0] != "nlosfw":
                 continue
@@ -67,6 +95,36 @@ def test_stages_import_only_earlier_stages():
     wrong = sorted((src, dst) for src, deps in _graph().items() for dst in deps
                    if _layer(dst) > _layer(src))
     assert not wrong, f"imports against the stage order (importer, imported): {wrong}"
+
+
+def _package_of(module: str, table: dict[str, tuple[str, ...]]) -> str | None:
+    matches = [k for k in table if module == k or module.startswith(k + ".")]
+    return max(matches, key=len) if matches else None
+
+
+def test_forbidden_imports():
+    wrong = []
+    for src, deps in _graph().items():
+        rule = _package_of(src, FORBIDDEN)
+        if rule is None or (rule == "nlosfw" and src != "nlosfw"):
+            continue
+        wrong += [(src, dst) for dst in deps
+                  if any(dst == f or dst.startswith(f + ".") for f in FORBIDDEN[rule])]
+    assert not wrong, f"imports the architecture forbids (importer, imported): {wrong}"
+
+
+def test_engine_imports_no_ui_library():
+    wrong = []
+    for path in CORE.rglob("*.py"):
+        rule = _package_of(_module_name(path), FORBIDDEN_LIBRARIES)
+        if rule is None:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                     [node.module] if isinstance(node, ast.ImportFrom) and node.module else [])
+            wrong += [f"{_module_name(path)}: {n}" for n in names
+                      if n.split(".")[0] in FORBIDDEN_LIBRARIES[rule]]
+    assert not wrong, f"the engine imports a UI library: {wrong}"
 
 
 def test_no_import_cycles():

@@ -14,7 +14,6 @@ import logging
 import numpy as np
 import pytest
 
-from nlosfw.app.pipeline import Pipeline
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.image.depths import automatic_depths, depth_step
 from nlosfw.image.fft import FFTImager
@@ -98,13 +97,13 @@ def test_depth_step_is_a_quarter_wavelength_in_the_volume():
 
 
 def run_tiny(tmp_path, overrides, name):
-    from tests.test_pipeline import compose
+    from tests.test_pipeline import compose, pipeline
 
     host = load_plugins()
     config = compose(["scene=tiny", "model=interp", "figures.enabled=false",
                       "transform.n_frequencies=21", "scene.capture.type=confocal",
                       "stop_after=reconstruct", *overrides], host)
-    Pipeline(tmp_path / name, config, host).run()
+    pipeline(tmp_path / name, config, host).run()
     return json.loads((tmp_path / name / "metrics.json").read_text())
 
 

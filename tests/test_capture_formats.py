@@ -14,11 +14,10 @@ import pytest
 import scipy.io
 
 from nlosfw import CaptureKind, DataError, GridFormat, HFormat
-from nlosfw.app.capture_source import capture_formats, load_file_capture
-from nlosfw.app.settings import CaptureSource
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.hdf5 import write_capture
 from nlosfw.capture.preprocess import as_scan_grid
+from nlosfw.capture.source import CaptureSource, load_file_capture
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins import load_plugins
@@ -48,7 +47,9 @@ def simulate(config, target=TARGET):
 
 
 def formats(host):
-    return capture_formats(host)
+    """Every installed capture format by name (those detection asks)."""
+    catalogue = host.capture_formats()
+    return {name: catalogue.create(name) for name in sorted(catalogue.installed)}
 
 
 def claimed_by(host, path):
@@ -105,13 +106,13 @@ def test_lct_file_reads_back_as_the_simulated_capture(tmp_path, host, lct_captur
 def test_lct_defaults_gate_the_direct_reflection_as_the_authors(tmp_path, host, lct_capture):
     path = layouts.write_lct(tmp_path / "scene.mat", counts(lct_capture), dtype=np.uint16)
     assert formats(host)["lct"].defaults(path).gate.bins == 600
-    loaded = load_file_capture(source(path=str(path)), host)
+    loaded = load_file_capture(source(path=str(path)), host.capture_formats())
     (step,) = loaded.prepared.steps
     assert (step.option, step.value, step.source) == ("gate", {"bins": 600}, "format")
     assert np.all(loaded.prepared.capture.H[:600] == 0)
     assert np.array_equal(loaded.prepared.capture.H[600:], counts(lct_capture).H[600:])
     # the user's option wins over the format's default
-    loaded = load_file_capture(source(path=str(path), gate={"bins": 0}), host)
+    loaded = load_file_capture(source(path=str(path), gate={"bins": 0}), host.capture_formats())
     assert loaded.prepared.steps[0].source == "option"
     np.testing.assert_array_equal(loaded.prepared.capture.H, counts(lct_capture).H)
 
@@ -132,7 +133,7 @@ def test_fk_file_with_tof_reads_back_as_the_simulated_capture(tmp_path, host, fk
         assert f["meas"].shape == (330, 8, 8)
     assert meas.read_bytes()[:19] == b"MATLAB 7.3 MAT-file"
     assert claimed_by(host, meas) == ["fk"] and claimed_by(host, tof) == []
-    loaded = load_file_capture(source(path=str(meas)), host)
+    loaded = load_file_capture(source(path=str(meas)), host.capture_formats())
     got = loaded.prepared.capture
     (step,) = loaded.prepared.steps                                   # 330 bins: no crop
     assert (step.option, step.value, step.source) == ("tofgrid", str(tof), "format")
@@ -151,7 +152,7 @@ def test_fk_without_tof_warns_and_crops_to_512_bins(tmp_path, host, caplog):
     capture = simulate(layouts.fk_scene(bins=600))
     meas, _ = layouts.write_fk(tmp_path, capture)
     with caplog.at_level(logging.WARNING):
-        loaded = load_file_capture(source(path=str(meas)), host)
+        loaded = load_file_capture(source(path=str(meas)), host.capture_formats())
     assert "no tof.mat beside it" in caplog.text
     (step,) = loaded.prepared.steps
     assert (step.option, step.value, step.source) == ("time_crop", {"bins": [0, 512]}, "format")
@@ -163,7 +164,7 @@ def test_tofgrid_whose_shape_differs_is_one_line_naming_file_and_variable(tmp_pa
     meas, _ = layouts.write_fk(tmp_path, fk_capture)
     layouts.write_mat5(tmp_path / "tof.mat", {"tofgrid": np.zeros((4, 4))})
     with pytest.raises(ConfigError) as info:
-        load_file_capture(source(path=str(meas)), host)
+        load_file_capture(source(path=str(meas)), host.capture_formats())
     assert str(info.value) == (f"capture.tofgrid: {tmp_path / 'tof.mat'}: variable 'tofgrid' "
                                f"has shape [4, 4]; expected [8, 8], the scan grid of {meas}")
 
@@ -250,14 +251,14 @@ def test_detection_uses_content_not_the_file_name(tmp_path, host, lct_capture):
     renamed = tmp_path / "scene.hdf5"
     path.rename(renamed)
     assert claimed_by(host, renamed) == ["lct"]
-    loaded = load_file_capture(source(path=str(renamed), gate={"bins": 0}), host)
+    loaded = load_file_capture(source(path=str(renamed), gate={"bins": 0}), host.capture_formats())
     assert loaded.format == "lct"
 
 
 def test_unknown_file_lists_the_supported_formats(tmp_path, host):
     path = layouts.write_mat5(tmp_path / "image.mat", {"image": np.zeros((3, 3))})
     with pytest.raises(DataError) as info:
-        load_file_capture(source(path=str(path)), host)
+        load_file_capture(source(path=str(path)), host.capture_formats())
     assert str(info.value) == (f"{path}: not a capture file of any supported format; "
                                "supported: fk, lct, nlosfw, wisconsin, ytal, znlos (force one "
                                "with capture.format=NAME)")
@@ -268,7 +269,7 @@ def test_mat_without_width_is_not_lct_and_forcing_names_the_variable(tmp_path, h
     path = layouts.write_mat5(tmp_path / "cut.mat", {"rect_data": np.zeros((4, 4, 8))})
     assert claimed_by(host, path) == []
     with pytest.raises(DataError) as info:
-        load_file_capture(source(path=str(path), format="lct"), host)
+        load_file_capture(source(path=str(path), format="lct"), host.capture_formats())
     assert str(info.value).startswith(f"{path}: no variable 'width' (expected rect_data, the "
                                       "histograms [N, N, T] (uint16, 4 ps bins), and width")
 
@@ -286,27 +287,27 @@ def test_lct_width_must_be_positive(tmp_path, host, width):
 def test_forcing_another_format_names_the_missing_variable(tmp_path, host, fk_capture):
     meas, _ = layouts.write_fk(tmp_path, fk_capture)
     with pytest.raises(DataError) as info:
-        load_file_capture(source(path=str(meas), format="lct"), host)
+        load_file_capture(source(path=str(meas), format="lct"), host.capture_formats())
     assert str(info.value).startswith(f"{meas}: no variable 'rect_data' (expected rect_data, ")
     assert str(info.value).endswith("the file holds: meas)")
     with pytest.raises(DataError, match=r"no struct 'dataset' \(expected a struct 'dataset'"):
-        load_file_capture(source(path=str(meas), format="wisconsin"), host)
+        load_file_capture(source(path=str(meas), format="wisconsin"), host.capture_formats())
     with pytest.raises(ConfigError, match=r"^capture.format: unknown capture format 'tal'; "
                                           r"valid: fk, lct, nlosfw, wisconsin, ytal, znlos$"):
-        load_file_capture(source(path=str(meas), format="tal"), host)
+        load_file_capture(source(path=str(meas), format="tal"), host.capture_formats())
 
 
 def test_gate_past_the_end_names_the_option_and_the_valid_range(tmp_path, host, lct_capture):
     path = layouts.write_lct(tmp_path / "s.mat", lct_capture)
     with pytest.raises(ConfigError) as info:
-        load_file_capture(source(path=str(path), gate={"metres": 2.5}), host)
+        load_file_capture(source(path=str(path), gate={"metres": 2.5}), host.capture_formats())
     assert str(info.value).startswith("capture.gate.metres: 2.5 m is past the end of the "
                                       "histogram (1700 bins, path 0 to 2.039 m); valid: fewer "
                                       "than 1700 bins (0: no gate)")
     short = layouts.write_lct(tmp_path / "short.mat", lct_capture.replace(
         H=lct_capture.H[:500]))
     with pytest.raises(ConfigError) as info:     # the format's own default does not fit
-        load_file_capture(source(path=str(short)), host)
+        load_file_capture(source(path=str(short)), host.capture_formats())
     assert str(info.value).endswith("(the capture format's default; set capture.gate to "
                                     "override it)")
 

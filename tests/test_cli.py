@@ -100,9 +100,8 @@ def set_nan(f):
         (["+compare.pe={name:pe_torch,steps:abc}"],
          "error: compare.pe.steps: must be an integer, got 'abc' (str)"),
         (["model.lr=nan"], "error: model.lr: must be a number, got NaN"),
-        (["--cfg", "bogus"], "error: command line: argument --cfg/-c: invalid choice: 'bogus'"),
-        (["-m", "--cfg", "job"], "error: command line: --multirun and --cfg cannot be given "
-                                 "together"),
+        (["-m", "--cfg", "job"], "error: command line: Only one of --run, --multirun, --cfg, "
+                                 "--info and --shell_completion can be specified"),
     ],
 )
 def test_user_errors_one_line_exit_2_nothing_written(workdir, capsys, args, message):
@@ -110,6 +109,17 @@ def test_user_errors_one_line_exit_2_nothing_written(workdir, capsys, args, mess
     assert status == 2
     assert err.startswith(message), err
     assert err.count("\n") == 1 and "Traceback" not in err
+    assert not (workdir / "outputs").exists() and not (workdir / "multirun").exists()
+
+
+def test_hydra_refuses_its_own_flags_with_exit_2_and_nothing_written(workdir, capsys):
+    """nlosfw reads none of Hydra's flags: a bad one is Hydra's argparse error (its usage
+    and one error line), exit status 2, before anything is written."""
+    status, out, err = run_cli(["--cfg", "bogus"], capsys)
+    assert status == 2
+    assert err.splitlines()[-1].endswith(
+        "error: argument --cfg/-c: invalid choice: 'bogus' (choose from 'job', 'hydra', 'all')")
+    assert "Traceback" not in err
     assert not (workdir / "outputs").exists() and not (workdir / "multirun").exists()
 
 
@@ -176,17 +186,18 @@ def test_documented_sweeps_pass_the_preflight(workdir, monkeypatch, config_name,
     """Every combination of the documented sweeps composes and validates before any run."""
     pytest.importorskip("embreex")
     pytest.importorskip("torch")
-    from nlosfw.app import hydra_app
+    from nlosfw import compose
+    from nlosfw.compose import checks
     from nlosfw.plugins import load_plugins
 
     host = load_plugins()
-    hydra_app.register_configs(host)
-    hydra_app.ensure_resolvers()
+    compose.register_configs(host)
+    compose.ensure_resolvers()
     checked = []
-    validate = hydra_app.validate_config
-    monkeypatch.setattr(hydra_app, "validate_config",
+    validate = checks.validate_config
+    monkeypatch.setattr(checks, "validate_config",
                         lambda cfg, h: (checked.append(cfg), validate(cfg, h)))
-    hydra_app.preflight(overrides, host, config_name, multirun=True)
+    compose.preflight(overrides, host, config_name, multirun=True)
     assert len(checked) == runs
     assert not (workdir / "outputs").exists() and not (workdir / "multirun").exists()
 
@@ -349,7 +360,7 @@ def test_non_editable_install_runs_from_any_directory(tmp_path):
     result = nlosfw(*QUICK, "stop_after=transform", cwd=elsewhere, env=env)
     assert (elsewhere / "outputs").is_dir()
     import_check = subprocess.run(
-        [sys.executable, "-c", "import nlosfw.app.hydra_app as h; print(h.config_dir())"],
+        [sys.executable, "-c", "import nlosfw.common.resources as r; print(r.config_dir())"],
         cwd=elsewhere, env={**os.environ, **env}, capture_output=True, text=True, check=True)
     assert str(target) in import_check.stdout
 

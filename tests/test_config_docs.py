@@ -11,8 +11,8 @@ from typing import get_type_hints
 
 import pytest
 
-from nlosfw.app.settings import RunSettings
 from nlosfw.common.config_docs import OptionDoc, option_docs, split_unit, type_text
+from nlosfw.pipeline.settings import RunSettings
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate.scene import Scene
 

@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 import nlosfw
-from nlosfw.app.figures import (
+from nlosfw.pipeline.results import CaptureResult
+from nlosfw.report.figures import (
     VIEWPOINT,
     field_figure,
     reconstruction_figure,
     run_title,
     source_labels,
 )
-from nlosfw.app.results import CaptureResult
 
 TINY = ["scene=tiny", "model=interp", "+compare.nn={name:nearest}",
         "transform.n_frequencies=21", "reconstruction.n_depths=4"]
@@ -89,7 +89,7 @@ def test_field_figure_columns_share_one_scale(tiny_run):
 
 
 def test_run_title_names_a_capture_file():
-    from nlosfw.app.metrics import RunInfo
+    from nlosfw.pipeline.metrics import RunInfo
 
     info = RunInfo(dir="d", nlosfw_version="0", started="now", config_hash="h", scene=None,
                    simulator=None, transform="fft", model="siren_torch", imager="rsd")

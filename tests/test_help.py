@@ -8,10 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from nlosfw.app import help as help_page
-from nlosfw.app import hydra_app
-from nlosfw.app.settings import RunSettings
+from nlosfw import compose
+from nlosfw.cli import help as help_page
 from nlosfw.cli import main
+from nlosfw.common.resources import config_dir
+from nlosfw.pipeline.settings import RunSettings
 from nlosfw.plugins import PluginKind, load_plugins
 
 
@@ -67,7 +68,7 @@ def test_every_config_group_has_one_entry_with_its_choices(page):
             assert any(item.startswith(name) for item in listed), (kind, name, entry)
     assert "siren_torch (default)" in groups and "thesis_two_planes (default)" in groups
     assert "analytic (default)" in groups and "fft (default)" in groups
-    conf = hydra_app.config_dir()
+    conf = config_dir()
     for scene in (p.stem for p in (conf / "scene").glob("*.yaml")):
         assert scene in groups
     for preset in (p.stem for p in (conf / "experiment").glob("*.yaml")):
@@ -97,17 +98,18 @@ def test_five_examples_and_each_one_is_a_valid_command(page, tmp_path, monkeypat
     assert examples == [command for command, _ in help_page.EXAMPLES]
     assert len(examples) == 5
     host = load_plugins()
-    hydra_app.register_configs(host)
-    hydra_app.ensure_resolvers()
+    compose.register_configs(host)
+    compose.ensure_resolvers()
     monkeypatch.chdir(tmp_path)
     for command in examples:
-        argv = shlex.split(command)[3:]
+        argv = compose.normalise_overrides(shlex.split(command)[3:])
         if any(name in argv for name in ("embree",)):
             pytest.importorskip("embreex")
-        args = hydra_app.parse_command_line(hydra_app.normalise_overrides(argv))
+        named = [argv[i + 1] for i, a in enumerate(argv[:-1]) if a in ("-cn", "--config-name")]
+        overrides = [a for a in argv if not a.startswith("-") and a not in named]
         # composes and validates as a run would, before any output
-        hydra_app.preflight(args.overrides, host, args.config_name or "config",
-                            bool(args.multirun))
+        compose.preflight(overrides, host, named[0] if named else "config",
+                          multirun="-m" in argv or "--multirun" in argv)
     assert not (tmp_path / "outputs").exists()
 
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 import nlosfw
-from nlosfw.app.metrics import RunMetrics
-from nlosfw.app.report import write_report
+from nlosfw.pipeline.metrics import RunMetrics
+from nlosfw.report.sweep import write_report
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMEDRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"

@@ -1,4 +1,4 @@
-"""metrics.json has one definition (nlosfw.app.metrics): the JSON Schema written beside it,
+"""metrics.json has one definition (nlosfw.pipeline.metrics): the JSON Schema written beside it,
 the readers (report, summary, thesis comparison) and the README's outline all come from it."""
 
 from __future__ import annotations
@@ -13,14 +13,14 @@ from pathlib import Path
 import jsonschema
 import pytest
 
-from nlosfw.app.metrics import (
+from nlosfw.cli import main
+from nlosfw.common.errors import DataError
+from nlosfw.pipeline.metrics import (
     SCHEMA_VERSION,
     RunMetrics,
     metrics_outline,
     metrics_schema,
 )
-from nlosfw.cli import main
-from nlosfw.common.errors import DataError
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = ["scene=tiny", "model=interp", "imager=fft", "figures.enabled=false",
@@ -28,7 +28,7 @@ QUICK = ["scene=tiny", "model=interp", "imager=fft", "figures.enabled=false",
 
 #: sha256 of the schema's structure (descriptions and title left out) for each version.
 #: A change to the layout of metrics.json changes the hash: bump SCHEMA_VERSION in
-#: nlosfw/app/metrics.py and add the new version's hash here (never edit an old one).
+#: nlosfw/pipeline/metrics.py and add the new version's hash here (never edit an old one).
 LAYOUTS = {1: "df68d9802d66f6c788ccb3f73598862a1b3e03e0195b95c4a5dababd971930e2",
            2: "ce78167a70994c606d7a3b3d98a98dfe2568b521dff6e36e6459c5f264f7c834",
            3: "d12b6fae65c59b8af0701ab5ee039d632e8e4ca443ef212f9a9c6a9f64066991",
@@ -184,7 +184,7 @@ def test_every_layout_change_bumps_the_schema_version():
     assert SCHEMA_VERSION in LAYOUTS, (
         f"add schema version {SCHEMA_VERSION} to LAYOUTS in this test: {digest}")
     assert digest == LAYOUTS[SCHEMA_VERSION], (
-        "the layout of metrics.json changed: bump SCHEMA_VERSION in nlosfw/app/metrics.py "
+        "the layout of metrics.json changed: bump SCHEMA_VERSION in nlosfw/pipeline/metrics.py "
         f"and add {{{SCHEMA_VERSION + 1}: '{digest}'}} to LAYOUTS here")
 
 
@@ -194,7 +194,7 @@ def test_readme_shows_the_schema_as_defined():
                       readme, re.S)
     assert block, "README.md: the metrics outline block is missing"
     assert block.group(1) == metrics_outline(), (
-        "README.md's metrics.json outline differs from nlosfw/app/metrics.py; replace it with "
-        "the output of: python -c 'from nlosfw.app.metrics import metrics_outline as o; "
+        "README.md's metrics.json outline differs from nlosfw/pipeline/metrics.py; replace it with "
+        "the output of: python -c 'from nlosfw.pipeline.metrics import metrics_outline as o; "
         "print(o(), end=\"\")'")
     assert f"`metrics.json` (schema version {SCHEMA_VERSION})" in readme

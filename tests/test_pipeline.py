@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nlosfw.app.cache import Cache
-from nlosfw.app.lifecycle import MARKER_NAME
-from nlosfw.app.pipeline import Pipeline
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
 from nlosfw.model.interp import InterpConfig, InterpFieldModel
+from nlosfw.pipeline import Pipeline, make_plan
+from nlosfw.pipeline.cache import Cache
+from nlosfw.pipeline.lifecycle import MARKER_NAME
 from nlosfw.plugins import hookimpl, load_plugins
 from nlosfw.simulate.analytic import AnalyticConfig, AnalyticSimulator
 from nlosfw.testing import fixtures
@@ -83,13 +83,19 @@ def plugins(**factories):
     return module
 
 
+def pipeline(run_dir, config, host):
+    """The engine running ``config``'s plan in ``run_dir``."""
+    return Pipeline(make_plan(config, host), run_dir, host)
+
+
 def compose(overrides, host):
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
     from omegaconf import OmegaConf
 
-    from nlosfw.app.hydra_app import config_dir, ensure_resolvers, register_configs
+    from nlosfw.common.resources import config_dir
+    from nlosfw.compose import ensure_resolvers, register_configs
 
     register_configs(host)
     ensure_resolvers()
@@ -110,7 +116,7 @@ def test_lifecycle_hooks_follow_a_run(tmp_path, cache_dir):
     tracker = Tracker()
     host = load_plugins(extra=[("tracking-plugin", "tracker", tracker)])
     run_dir = tmp_path / "run"
-    Pipeline(run_dir, compose(TINY, host), host).run()
+    pipeline(run_dir, compose(TINY, host), host).run()
     events = [c[0] for c in tracker.calls]
     assert events[0] == "run_start" and events[-1] == "run_end"
     assert tracker.names("run_start")[0] == {"run_dir": str(run_dir), "scene": "tiny"}
@@ -119,7 +125,7 @@ def test_lifecycle_hooks_follow_a_run(tmp_path, cache_dir):
     written = {Path(a["path"]).relative_to(run_dir).as_posix() for a in tracker.names("artefact")}
     on_disk = {p.relative_to(run_dir).as_posix() for p in run_dir.rglob("*") if p.is_file()}
     # every file of the run was announced, and nothing else (but the run's marker, which
-    # lists them: nlosfw.app.lifecycle)
+    # lists them: nlosfw.pipeline.lifecycle)
     assert written == on_disk - {MARKER_NAME}
     assert set(json.loads((run_dir / MARKER_NAME).read_text())["files"]) == written
     assert tracker.names("run_end") == [{"status": "completed", "metrics_status": "completed"}]
@@ -132,7 +138,7 @@ def test_a_crashing_plugin_leaves_a_failed_record(tmp_path, cache_dir):
                                ("broken-plugin", "broken", plugins(model=BrokenModel))])
     run_dir = tmp_path / "run"
     with pytest.raises(RuntimeError, match="a bug in a plugin"):
-        Pipeline(run_dir, compose([*TINY[:1], "model=broken", *TINY[2:]], host), host).run()
+        pipeline(run_dir, compose([*TINY[:1], "model=broken", *TINY[2:]], host), host).run()
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["status"] == "failed" and "capture" in metrics["timings"]
     assert tracker.names("run_end") == [{"status": "failed", "metrics_status": "failed"}]
@@ -144,34 +150,39 @@ def test_noisy_scene_renders_the_transport_once(tmp_path, cache_dir):
     config = compose([*TINY, "simulator=counting", "scene.noise.model=poisson",
                       "scene.noise.photons=1e5", "stop_after=predict"], host)
     CountingSimulator.renders = 0
-    Pipeline(tmp_path / "a", config, host).run()
+    pipeline(tmp_path / "a", config, host).run()
     assert CountingSimulator.renders == 1
     metrics = json.loads((tmp_path / "a" / "metrics.json").read_text())
     denoising = metrics["field"]["interp"]["denoising"]
     assert denoising["noisy_relative_l2"] > 0.01  # 1e5 photons: visibly noisy
     # a second run finds both captures (clean and noisy) in the cache
-    Pipeline(tmp_path / "b", config, host).run()
+    pipeline(tmp_path / "b", config, host).run()
     assert CountingSimulator.renders == 1
     assert json.loads((tmp_path / "b" / "metrics.json").read_text())["capture"]["cache_hit"]
 
 
 def test_mesh_file_contents_and_plugin_version_are_part_of_the_cache_key(tmp_path, cache_dir):
     trimesh = pytest.importorskip("trimesh")
+    from nlosfw.pipeline.capture_stage import simulation_key
+    from nlosfw.pipeline.plan import plugin_version
+    from nlosfw.plugins import PluginKind
     from nlosfw.simulate.scene import scene_from_config
 
     host = load_plugins()
-    pipeline = Pipeline(tmp_path / "run", compose(TINY, host), host)
     simulator = host.registry.create("simulator", "analytic")
+    version = plugin_version(host, PluginKind.SIMULATOR, "analytic")
     mesh_path = tmp_path / "shape.stl"
     trimesh.creation.box(extents=(0.2, 0.2, 0.2)).export(mesh_path)
     config = fixtures.tiny_scene_config()
     config["geometry"] = [{"type": "mesh", "path": str(mesh_path), "position": [0, 0, 0.6]}]
     scene = scene_from_config(config)
-    before = pipeline._capture_key("analytic", simulator, scene)
-    assert pipeline._capture_key("analytic", simulator, scene) == before
+    before = simulation_key("analytic", version, simulator, scene)
+    assert simulation_key("analytic", version, simulator, scene) == before
     trimesh.creation.box(extents=(0.3, 0.2, 0.2)).export(mesh_path)   # same path, new shape
-    assert pipeline._capture_key("analytic", simulator, scene) != before
-    assert pipeline._plugin_version("simulator", "analytic").startswith("nlosfw==")
+    assert simulation_key("analytic", version, simulator, scene) != before
+    assert version.startswith("nlosfw==")
+    assert simulation_key("analytic", "nlosfw==0", simulator, scene) != simulation_key(
+        "analytic", version, simulator, scene)
 
 
 def test_corrupt_cache_entries_are_recomputed(tmp_path):
@@ -205,7 +216,7 @@ def test_a_random_scan_end_to_end(tmp_path, cache_dir):
     host = load_plugins()
     overrides = [*TINY[:-1], "reconstruction.n_depths=8", "split.pattern=random",
                  "split.spatial_fraction=0.25", "split.seed=7", "output.keep=[fields]"]
-    Pipeline(tmp_path / "run", compose(overrides, host), host).run()
+    pipeline(tmp_path / "run", compose(overrides, host), host).run()
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["split"] == {"pattern": "random", "spatial_step": 2, "spatial_fraction": 0.25,
                                 "seed": 7, "wall_samples": 256, "train_samples": 64,
@@ -259,7 +270,7 @@ def imager_plugin(name, factory):
 def test_reconstruction_reports_progress_per_depth_plane(tmp_path, cache_dir):
     RecordingImager.calls = []
     host = load_plugins(extra=[("rec-plugin", "rec", imager_plugin("recording", RecordingImager))])
-    Pipeline(tmp_path / "run", compose([*TINY, "imager=recording"], host), host).run()
+    pipeline(tmp_path / "run", compose([*TINY, "imager=recording"], host), host).run()
     # true, raw and interp from every frequency (4 depth planes each, reported one by one),
     # then each of them from two single frequencies (not reported: they are quick)
     full = [c for c in RecordingImager.calls if c]
@@ -270,7 +281,7 @@ def test_reconstruction_reports_progress_per_depth_plane(tmp_path, cache_dir):
 def test_an_imager_without_on_progress_still_runs(tmp_path, cache_dir):
     host = load_plugins(extra=[("old-plugin", "old", imager_plugin("legacy", LegacyImager))])
     run_dir = tmp_path / "run"
-    Pipeline(run_dir, compose([*TINY, "imager=legacy"], host), host).run()
+    pipeline(run_dir, compose([*TINY, "imager=legacy"], host), host).run()
     metrics = json.loads((run_dir / "metrics.json").read_text())
     assert metrics["status"] == "completed"
     assert set(metrics["reconstruction"]["sources"]) == {"true", "raw", "interp"}
@@ -281,7 +292,7 @@ def test_output_keep_decides_which_large_files_are_written(tmp_path, cache_dir):
     runs = {}
     for i, keep in enumerate(("[]", "[fields,reconstructions]")):
         run_dir = runs[keep] = tmp_path / f"run{i}"
-        Pipeline(run_dir, compose([*TINY, f"output.keep={keep}"], host), host).run()
+        pipeline(run_dir, compose([*TINY, f"output.keep={keep}"], host), host).run()
     nothing = {p.relative_to(runs["[]"]).as_posix() for p in runs["[]"].rglob("*")
                if p.is_file()}
     # the small files always: the config, metrics, the page, the run's marker of its files

@@ -139,7 +139,7 @@ def test_import_and_listing_import_no_heavy_backend():
         "import io, json, sys\n"
         "import nlosfw\n"
         "from rich.console import Console\n"
-        "from nlosfw.app.plugins_command import plugins_command\n"
+        "from nlosfw.cli.plugins_command import plugins_command\n"
         "from nlosfw.plugins import load_plugins\n"
         "host = load_plugins()\n"
         "plugins_command(host, Console(file=io.StringIO()))\n"
@@ -174,9 +174,9 @@ def test_a_third_party_config_is_checked_by_hydra_as_it_composes():
     from hydra.core.global_hydra import GlobalHydra
     from hydra.errors import HydraException
 
-    from nlosfw.app.hydra_app import (
+    from nlosfw.common.resources import config_dir
+    from nlosfw.compose import (
         composition_error,
-        config_dir,
         ensure_resolvers,
         register_configs,
         validate_config,
@@ -226,7 +226,7 @@ def _command(host, *args, width=500):
 
     from rich.console import Console
 
-    from nlosfw.app.plugins_command import plugins_command
+    from nlosfw.cli.plugins_command import plugins_command
 
     buffer = io.StringIO()
     status = plugins_command(host, Console(file=buffer, width=width), args)

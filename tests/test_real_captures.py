@@ -99,7 +99,7 @@ def test_lct_file_reconstructs_from_its_path_alone_like_the_same_capture_as_hdf5
 
 def test_a_file_run_is_labelled_with_its_file_and_format(workdir, letter_counts, capsys,
                                                          monkeypatch):
-    from nlosfw.app import figures
+    from nlosfw.report import figures
 
     titles = []
     original = figures.reconstruction_figure

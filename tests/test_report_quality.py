@@ -6,7 +6,7 @@ import itertools
 import numpy as np
 import pytest
 
-from nlosfw.app.metrics import (
+from nlosfw.pipeline.metrics import (
     ErrorMetrics,
     FieldMetrics,
     FitMetrics,
@@ -16,13 +16,13 @@ from nlosfw.app.metrics import (
     RunMetrics,
     SplitErrors,
 )
-from nlosfw.app.quality import (
+from nlosfw.report.quality import (
     quality_figure,
     quality_points,
     quality_table,
     sweep_layout,
 )
-from nlosfw.app.records import RunRecord
+from nlosfw.report.records import RunRecord
 
 
 def _errors(nmse_db):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from hydra.core.override_parser.overrides_parser import OverridesParser
 
-from nlosfw.app.output_dirs import sweep_jobs
 from nlosfw.common.errors import ConfigError
+from nlosfw.compose.output_dirs import sweep_jobs
 
 
 @pytest.mark.parametrize("arguments", [

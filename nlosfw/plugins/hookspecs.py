@@ -10,9 +10,15 @@ Plugins may implement any subset of the hooks, and may omit arguments.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pluggy
+
+if TYPE_CHECKING:  # the run's types, for the run hooks' annotations only
+    from nlosfw.pipeline.files import RunFiles
+    from nlosfw.pipeline.metrics import RunMetrics
+    from nlosfw.pipeline.results import RunResults
+    from nlosfw.pipeline.settings import RunSettings
 
 PROJECT = "nlosfw"
 hookspec = pluggy.HookspecMarker(PROJECT)
@@ -57,6 +63,10 @@ def register_capture_formats(register: Any) -> None:
 
 
 # ------------------------------------------------------------------ run lifecycle
+# A run reports everything it does through these hooks; its metrics, the console's
+# progress and the report files are written by subscribers to them (nlosfw's own
+# metrics recorder, the command line's console reporter, the report plugin
+# ``nlosfw.report.hooks``), so a third-party plugin sees exactly what they see.
 @hookspec
 def on_run_start(run_dir: str, config: dict[str, Any]) -> None:
     """A run begins; ``config`` is the resolved configuration as plain data."""
@@ -71,8 +81,27 @@ def on_run_end(run_dir: str, metrics: dict[str, Any], status: str) -> None:
 
 
 @hookspec
+def on_stage_start(stage: str) -> None:
+    """A pipeline stage begins: capture, transform, fit, predict, reconstruct or report."""
+
+
+@hookspec
 def on_stage_end(stage: str, seconds: float) -> None:
     """A pipeline stage has finished: capture, transform, fit, predict, reconstruct or report."""
+
+
+@hookspec
+def on_stage_result(stage: str, result: object) -> None:
+    """What a stage produced, typed (:mod:`nlosfw.pipeline.results`): ``capture`` a
+    ``CaptureResult``, ``transform`` a ``TransformResult``, ``fit`` a ``FitResult``,
+    ``predict`` an ``ImagedFields``, ``reconstruct`` a ``Reconstructions``."""
+
+
+@hookspec
+def on_progress(task: str, done: int, total: int | None, info: str) -> None:
+    """Progress of one task of the current stage (``simulate letter_t (analytic)``,
+    ``image model``, ...): ``done`` of ``total`` steps (``None``: not counted), and a
+    short ``info`` text. A task is finished when ``done == total``."""
 
 
 @hookspec
@@ -88,3 +117,16 @@ def on_training_step(source: str, model: str, step: int, total_steps: int, loss:
 @hookspec
 def on_artefact_written(path: str, kind: str) -> None:
     """A file was written into the run directory; ``kind`` is e.g. ``capture`` or ``figure``."""
+
+
+# ------------------------------------------------------------------ reports
+@hookspec
+def write_run_report(files: RunFiles, results: RunResults, metrics: RunMetrics,
+                     settings: RunSettings) -> None:
+    """The report stage of a complete run: write figures and tables into the run directory
+    through ``files`` (which claims and writes each file atomically)."""
+
+
+@hookspec
+def write_run_page(files: RunFiles, metrics: RunMetrics, config: dict[str, Any]) -> None:
+    """After ``metrics.json``: write the run's page (``report.html``) through ``files``."""

@@ -6,12 +6,14 @@ import logging
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from importlib.metadata import entry_points
 from types import ModuleType
 from typing import Any
 
 import pluggy
 
+from nlosfw.capture.source import FormatCatalogue
 from nlosfw.plugins import hookspecs
 from nlosfw.plugins.kinds import PluginKind
 from nlosfw.plugins.networks import NetworkRegistrar
@@ -79,6 +81,14 @@ class PluginHost:
     def hook(self) -> Any:
         """Call lifecycle hooks: ``host.hook.on_run_start(run_dir=..., config=...)``."""
         return self.manager.hook
+
+    def capture_formats(self) -> FormatCatalogue:
+        """The registered capture formats (detection asks those whose requirements are
+        installed), as the capture stage takes them."""
+        specs = self.registry.specs(PluginKind.CAPTURE_FORMAT)
+        return FormatCatalogue(
+            factories={spec.name: partial(spec.create, {}) for spec in specs},
+            installed=frozenset(s.name for s in specs if not s.missing_requirements()))
 
 
 def load_plugins(env: Mapping[str, str] | None = None,

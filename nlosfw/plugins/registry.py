@@ -12,14 +12,22 @@ import importlib.util
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import MISSING, dataclass, field, fields
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar, overload
 
-from nlosfw.common.config import config_from_mapping
+from nlosfw.capture.formats import CaptureFormat
+from nlosfw.common.config import Configurable, config_from_mapping
 from nlosfw.common.errors import PluginError
+from nlosfw.image.interface import Imager
+from nlosfw.model.interface import FieldModel
 from nlosfw.plugins.capabilities import Capability, parse_capabilities
-from nlosfw.plugins.kinds import PluginKind
+from nlosfw.plugins.kinds import INTERFACES, PluginKind
+from nlosfw.simulate.interface import Simulator
+from nlosfw.transform.interface import PhasorTransform
 
 T = TypeVar("T")
+
+#: A plugin's options: a mapping of them, a config instance, or None (the defaults).
+PluginOptions = Mapping[str, object] | object | None
 
 
 def module_of(path: str) -> str:
@@ -259,8 +267,36 @@ class Registry:
         kind = PluginKind(kind)
         return [self._specs[(kind, n)] for n in self.names(kind)]
 
-    def create(self, kind: PluginKind | str, name: str, options: Any = None) -> Any:
-        return self.get(kind, name).create(options)
+    @overload
+    def create(self, kind: Literal[PluginKind.SIMULATOR], name: str,
+               options: PluginOptions = None) -> Simulator: ...
+    @overload
+    def create(self, kind: Literal[PluginKind.PHASOR_TRANSFORM], name: str,
+               options: PluginOptions = None) -> PhasorTransform: ...
+    @overload
+    def create(self, kind: Literal[PluginKind.FIELD_MODEL], name: str,
+               options: PluginOptions = None) -> FieldModel: ...
+    @overload
+    def create(self, kind: Literal[PluginKind.IMAGER], name: str,
+               options: PluginOptions = None) -> Imager: ...
+    @overload
+    def create(self, kind: Literal[PluginKind.CAPTURE_FORMAT], name: str,
+               options: PluginOptions = None) -> CaptureFormat: ...
+    @overload
+    def create(self, kind: PluginKind | str, name: str,
+               options: PluginOptions = None) -> Configurable: ...
+
+    def create(self, kind: PluginKind | str, name: str,
+               options: PluginOptions = None) -> Configurable:
+        """Plugin ``name`` of ``kind`` built with ``options`` (a mapping or a config
+        instance): an instance of the kind's interface (a one-line PluginError otherwise)."""
+        spec = self.get(kind, name)
+        plugin = spec.create(options)
+        interface = INTERFACES[spec.kind.value]
+        if not isinstance(plugin, interface):
+            raise PluginError(f"{spec.label} is not a {interface.__name__} (its factory made "
+                              f"a {type(plugin).__name__})")
+        return plugin
 
     def __len__(self) -> int:
         return len(self._specs)

@@ -165,7 +165,7 @@ def read_only_dir(tmp_path: Path) -> Iterator[Path]:
 @pytest.fixture()
 def read_only_cache(tmp_path: Path) -> Iterator[Path]:
     """A cache directory holding one entry, that cannot be written (as :func:`read_only_dir`)."""
-    from nlosfw.app.cache import Cache
+    from nlosfw.pipeline.cache import Cache
 
     path = tmp_path / "ro-cache"
 

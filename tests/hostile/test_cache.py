@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from nlosfw.app.cache import Cache, cache_entries
+from nlosfw.pipeline.cache import Cache, cache_entries
 
 ENTRY = 1000          # bytes of each test entry (its .sha256 adds 65)
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from nlosfw.app.lifecycle import LOCK_NAME, MARKER_NAME
+from nlosfw.pipeline.lifecycle import LOCK_NAME, MARKER_NAME
 
 #: A capture stage of about a minute (many small patches, little memory): time to act.
 SLOW = ("simulator.patch_size=0.0005", "stop_after=simulate")

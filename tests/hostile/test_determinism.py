@@ -1,5 +1,5 @@
 """The same configuration and seed on the CPU give byte-identical artefacts, except the
-timing fields of metrics.json that nlosfw.app.metrics.TIMING_FIELDS documents."""
+timing fields of metrics.json that nlosfw.pipeline.metrics.TIMING_FIELDS documents."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import re
 
 import h5py
 
-from nlosfw.app.lifecycle import MARKER_NAME
-from nlosfw.app.metrics import TIMING_FIELDS, without_timings
+from nlosfw.pipeline.lifecycle import MARKER_NAME
+from nlosfw.pipeline.metrics import TIMING_FIELDS, without_timings
 
 #: A noisy scene (seeded draws), a neural model (seeded initialisation, saved weights) and
 #: every figure: each kind of artefact a run writes.

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nlosfw.app.cache import Cache, cache_entries, file_digest
-from nlosfw.app.lifecycle import LOCK_NAME
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import files
 from nlosfw.common.errors import StorageError
+from nlosfw.pipeline.cache import Cache, cache_entries, file_digest
+from nlosfw.pipeline.lifecycle import LOCK_NAME
 from nlosfw.testing import fixtures
 
 #: A transient of 32 x 32 sensors and 1024 bins, stored uncompressed: 4.2 MB.

@@ -10,11 +10,11 @@ import h5py
 import numpy as np
 import pytest
 
-from nlosfw.app.budget import check_memory, estimate_memory
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.pipeline.budget import check_memory, estimate_memory
 from nlosfw.testing import fixtures, layouts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 

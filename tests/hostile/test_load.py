@@ -8,7 +8,7 @@ import json
 import pytest
 import yaml
 
-from nlosfw.app.cache import cache_entries, file_digest
+from nlosfw.pipeline.cache import cache_entries, file_digest
 
 JOBS = 12
 SWEEP = ("-m", "hydra/launcher=parallel", "scene=tiny", "scene.noise.model=poisson",

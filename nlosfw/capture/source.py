@@ -1,0 +1,193 @@
+"""The capture of a file: its format (forced or detected), reading, preprocessing.
+
+Used twice with the same code: by the configuration's checks, so that a bad file or
+option ends with one line before any output exists, and by the pipeline's capture stage.
+The options are ``capture.*`` (:class:`CaptureSource`); a format's defaults
+(:meth:`~nlosfw.capture.CaptureFormat.defaults`) fill the options the run leaves unset,
+and every step applied is recorded with its source. The installed formats come as a
+:class:`FormatCatalogue` (the plugin registry builds it), so this stage needs no plugin
+machinery.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from nlosfw.capture.data import Capture
+from nlosfw.capture.formats import CaptureFormat, detect_format, read_with
+from nlosfw.capture.preprocess import AppliedStep, Extras, Preprocessing, preprocess
+from nlosfw.capture.scan import on_scan_grid
+from nlosfw.common.config import require
+from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.common.hashing import cache_key, file_digest
+
+#: What a cache key of a preprocessed capture covers (JSON-like values).
+KeyMaterial = dict[str, object]
+
+
+@dataclass(frozen=True)
+class CaptureSource(Preprocessing):
+    """Where the capture comes from, and its preprocessing (the fields of
+    :class:`~nlosfw.capture.Preprocessing`: gate, time_crop, bin, stride, flip, transpose,
+    bin_width, tofgrid, background), applied to a file's capture and to a simulated one."""
+
+    path: str | None = None
+    """Read this capture file instead of simulating; its format is detected from its content."""
+    format: str | None = None
+    """Force a capture format (a ``capture_format`` plugin: nlosfw, ytal, znlos, lct, fk,
+    wisconsin, ...); null: the one that recognises the file."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        require(self.format is None or self.path is not None, "format",
+                "forces the format of capture.path: give capture.path too")
+
+    @property
+    def options(self) -> Preprocessing:
+        """The preprocessing options alone."""
+        return Preprocessing(**{f.name: getattr(self, f.name)
+                                for f in dataclasses.fields(Preprocessing)})
+
+
+@dataclass(frozen=True)
+class FormatCatalogue:
+    """The installed capture formats: a factory per registered name, and the names whose
+    requirements are installed (the ones detection asks)."""
+
+    factories: Mapping[str, Callable[[], CaptureFormat]]
+    installed: frozenset[str]
+
+    def names(self) -> list[str]:
+        return sorted(self.factories)
+
+    def create(self, name: str) -> CaptureFormat:
+        """The format ``name`` (a one-line ConfigError for ``capture.format`` when unknown)."""
+        if name not in self.factories:
+            raise ConfigError("capture.format", f"unknown capture format '{name}'; valid: "
+                                                f"{', '.join(self.names())}")
+        return self.factories[name]()
+
+    def choose(self, path: Path, forced: str | None) -> tuple[str, CaptureFormat]:
+        """``forced`` (``capture.format``) or the one installed format that claims ``path``."""
+        if forced is not None:
+            return forced, self.create(forced)
+        installed = {name: self.create(name) for name in sorted(self.installed)}
+        name = detect_format(path, installed)
+        return name, installed[name]
+
+
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """A preprocessed capture, the steps applied, and what the cache key must cover."""
+
+    capture: Capture
+    steps: tuple[AppliedStep, ...]
+    key_material: KeyMaterial
+
+
+@dataclass(frozen=True, eq=False)
+class FileCapture:
+    """A capture read from a file (``format`` read it) and preprocessed."""
+
+    path: Path
+    format: str
+    prepared: Prepared
+
+    def cache_key(self, reader_version: str) -> str:
+        """Key of the preprocessed capture: the file's bytes, its format and the reader's
+        version, every step's value, and the bytes of the files the steps read."""
+        return cache_key({"file": file_digest(self.path), "format": self.format,
+                          "reader": reader_version, **self.prepared.key_material})
+
+
+def file_transient_shape(path: Path, forced: str | None, formats: FormatCatalogue
+                         ) -> tuple[int, int, int] | None:
+    """(time bins, sensor points, laser points) of a capture file from its format's reading
+    of the header (for the memory estimate); None when the file or its format cannot tell
+    (reading the file says why)."""
+    try:
+        return formats.choose(path, forced)[1].transient_shape(path)
+    except (ConfigError, DataError):
+        return None
+
+
+def read_capture_file(path: Path, forced: str | None, formats: FormatCatalogue
+                      ) -> tuple[str, CaptureFormat, Capture]:
+    """The format of ``path`` and the capture it reads there (no preprocessing)."""
+    if not path.is_file():
+        raise ConfigError("capture.path", f"file not found: {path}")
+    name, fmt = formats.choose(path, forced)
+    return name, fmt, read_with(fmt, name, path)
+
+
+def load_file_capture(source: CaptureSource, formats: FormatCatalogue) -> FileCapture:
+    """Read ``source.path`` (format forced or detected) and preprocess it: the run's options
+    over the format's defaults."""
+    if source.path is None:
+        raise ConfigError("capture.path", "no capture file given")
+    path = Path(source.path).expanduser()
+    name, fmt, capture = read_capture_file(path, source.format, formats)
+    options, from_format = source.options.merged_over(fmt.defaults(path))
+    return FileCapture(path=path, format=name,
+                       prepared=prepare(capture, options, from_format, formats, path))
+
+
+def prepare(capture: Capture, options: Preprocessing, from_format: frozenset[str],
+            formats: FormatCatalogue, origin: Path | None = None) -> Prepared:
+    """Preprocess ``capture`` (read from ``origin``, if a file): load the per-pixel delays
+    and the background the options name, apply every step, and say what the cache key of
+    the result must cover."""
+    material: KeyMaterial = {}
+    delays = None
+    if options.tofgrid:
+        tof = _existing(options.tofgrid, "tofgrid")
+        delays = _delays(tof, capture, origin)
+        material["tofgrid"] = file_digest(tof)
+    background = None
+    if options.background:
+        bg_path = _existing(options.background, "background")
+        _, _, background = read_capture_file(bg_path, None, formats)
+        material["background"] = file_digest(bg_path)
+    result, steps = preprocess(capture, options, from_format, Extras(delays, background))
+    material["steps"] = [[s.option, s.value] for s in steps]
+    return Prepared(result, steps, material)
+
+
+def check_files(options: Preprocessing, formats: FormatCatalogue) -> None:
+    """The files the options name exist and are readable (a simulated run's preflight:
+    their shapes are checked against the capture once it is simulated)."""
+    if options.tofgrid:
+        from nlosfw.capture.fk import read_tofgrid
+
+        read_tofgrid(_existing(options.tofgrid, "tofgrid"))
+    if options.background:
+        read_capture_file(_existing(options.background, "background"), None, formats)
+
+
+def _existing(value: str, option: str) -> Path:
+    path = Path(value).expanduser()
+    if not path.is_file():
+        raise ConfigError(f"capture.{option}", f"file not found: {value}")
+    return path
+
+
+def _delays(tof: Path, capture: Capture, origin: Path | None) -> np.ndarray:
+    """The per-pixel delays (ps) of ``tof`` on the capture's scan grid (X, Y)."""
+    from nlosfw.capture.fk import TOF_VARIABLE, read_tofgrid
+
+    try:
+        raw = read_tofgrid(tof)
+    except DataError as err:
+        raise ConfigError("capture.tofgrid", str(err)) from None
+    delays = on_scan_grid(capture, raw)
+    if delays.shape != capture.grid_shape:
+        of = f" of {origin}" if origin is not None else ""
+        raise ConfigError("capture.tofgrid", f"{tof}: variable '{TOF_VARIABLE}' has shape "
+                                             f"{list(raw.shape)}; expected "
+                                             f"{list(capture.grid_shape)}, the scan grid{of}")
+    return delays

@@ -1,0 +1,167 @@
+"""The Hydra application behind ``python -m nlosfw``.
+
+Before Hydra takes over, the run's schema and every plugin's config go into Hydra's
+ConfigStore and ``+group=name`` is normalised (:mod:`nlosfw.compose.store`). Hydra parses
+its own command line; nlosfw reads none of its flags. The checks of everything a command
+will run (:func:`nlosfw.compose.preflight`: every swept composition, the plugins, the
+files, the memory, the output directories) run in :class:`PreflightCallback`, a Hydra
+callback called after Hydra has composed the configuration and before it writes
+anything (``on_run_start``, ``on_multirun_start``); ``--cfg``, ``--info`` and ``--help``
+run no job and no check. Hydra runs with ``HYDRA_FULL_ERROR`` so that its own errors
+(an unknown group option, a wrong type) reach :func:`main` as exceptions, which end as
+one line naming the option (exit status 2), as every other mistake does.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import traceback
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from hydra.experimental.callback import Callback
+
+from nlosfw.cli.errors import report_user_error
+from nlosfw.cli.reporter import ConsoleReporter
+from nlosfw.common.errors import ConfigError, NlosfwError, one_line
+from nlosfw.common.resources import config_dir
+from nlosfw.compose import (
+    composition_error,
+    ensure_resolvers,
+    normalise_overrides,
+    preflight,
+    register_configs,
+)
+from nlosfw.pipeline import Pipeline, make_plan
+
+if TYPE_CHECKING:
+    from omegaconf import DictConfig
+
+log = logging.getLogger(__name__)
+
+#: Hydra flags nlosfw refuses: ``--experimental-rerun`` unpickles a file (code would run).
+REFUSED_FLAGS = ("--experimental-rerun",)
+
+
+def main(argv: Sequence[str]) -> int:
+    """Run the Hydra app with ``argv`` (without the program name); return the exit status."""
+    import hydra
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
+    argv = normalise_overrides(argv)
+    for arg in argv:
+        if arg.split("=", 1)[0] in REFUSED_FLAGS:
+            raise ConfigError("", f"{arg.split('=', 1)[0]} is not supported: it unpickles a "
+                                  "file, which can run any code; run the configuration "
+                                  "again from its overrides instead")
+    from nlosfw.plugins import load_plugins
+
+    host = load_plugins()
+    register_configs(host)
+    ensure_resolvers()
+    decorated = hydra.main(config_path=str(config_dir()), config_name="config",
+                           version_base="1.3")(_task)
+    try:
+        with _hydra_argv(argv), _hydra_full_error():
+            decorated()
+    except (HydraException, OmegaConfBaseException) as err:
+        raise composition_error(err, host) from None
+    except ValueError as err:  # Hydra refusing its own command line (before any job)
+        if _raised_in_a_job(err):
+            raise
+        raise ConfigError("", f"command line: {one_line(err, whole=True)}") from None
+    return 0
+
+
+def _raised_in_a_job(err: BaseException) -> bool:
+    """Whether ``err`` came from a job (:func:`_task`), not from Hydra itself."""
+    return any(frame.f_code is _task.__code__
+               for frame, _ in traceback.walk_tb(err.__traceback__))
+
+
+class PreflightCallback(Callback):
+    """The Hydra callback (``hydra.callbacks.nlosfw_preflight`` in config.yaml) that checks
+    every configuration a command will run before Hydra writes anything.
+
+    A mistake is reported in one line and ends the command with ``SystemExit`` (exit
+    status 2): Hydra turns a callback's exceptions into warnings and goes on, but lets
+    ``SystemExit`` through.
+    """
+
+    def on_run_start(self, config: DictConfig, **kwargs: object) -> None:
+        _check(config, multirun=False)
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: object) -> None:
+        _check(config, multirun=True)
+
+
+def _check(config: DictConfig, multirun: bool) -> None:
+    from omegaconf import OmegaConf
+
+    from nlosfw.plugins import load_plugins
+
+    overrides = OmegaConf.to_container(config.hydra.overrides.task, resolve=False)
+    config_name = str(config.hydra.job.config_name or "config")
+    try:
+        preflight([str(o) for o in overrides or []], load_plugins(), config_name, multirun)
+    except NlosfwError as err:
+        report_user_error(err)
+        raise SystemExit(err.exit_status) from None
+
+
+def _task(cfg: DictConfig) -> float | None:
+    """One Hydra job: the whole pipeline in its run directory, drawn on the console."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from nlosfw.plugins import load_plugins
+
+    logging.captureWarnings(True)  # library warnings go to run.log, not the console
+    hydra = HydraConfig.get()
+    try:
+        plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+        if not isinstance(plain, dict):
+            raise ConfigError("", "the composed configuration is not a mapping")
+        host = load_plugins()
+        plan = make_plan({str(k): v for k, v in plain.items()}, host)
+        host.manager.register(ConsoleReporter(host, plan.settings))
+        return Pipeline(plan, Path(hydra.runtime.output_dir), host,
+                        resume=hydra.mode == RunMode.MULTIRUN).run()
+    except NlosfwError as err:
+        report_user_error(err)
+        raise SystemExit(err.exit_status) from None
+    except MemoryError as err:  # the estimate let it through: still one line
+        report_user_error(NlosfwError(f"out of memory ({one_line(err)}); make the run "
+                                      "smaller (the sizes, or fewer sweep jobs at once)"))
+        raise SystemExit(1) from None
+
+
+@contextmanager
+def _hydra_argv(argv: Sequence[str]) -> Iterator[None]:
+    """``sys.argv`` as Hydra reads it: the program name and ``argv``."""
+    saved = sys.argv
+    sys.argv = [saved[0] if saved else "nlosfw", *argv]
+    try:
+        yield
+    finally:
+        sys.argv = saved
+
+
+@contextmanager
+def _hydra_full_error() -> Iterator[None]:
+    """Hydra re-raises its errors instead of printing them and exiting with status 1."""
+    saved = os.environ.get("HYDRA_FULL_ERROR")
+    os.environ["HYDRA_FULL_ERROR"] = "1"
+    try:
+        yield
+    finally:
+        if saved is None:
+            os.environ.pop("HYDRA_FULL_ERROR", None)
+        else:
+            os.environ["HYDRA_FULL_ERROR"] = saved

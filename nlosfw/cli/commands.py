@@ -1,0 +1,66 @@
+"""Command line: ``python -m nlosfw [--help | plugins [NAME] | report DIR | cache info|clean |
+--debug | Hydra overrides...]``.
+
+Errors end with one line on stderr: exit status 2 for a mistake in the input or the
+configuration, 1 for a storage failure (a full disk); SIGINT and SIGTERM stop a run
+cleanly with 130 and 143.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Sequence
+
+from nlosfw.common.errors import NlosfwError
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit status (2 for errors the user can fix)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if "--debug" in args or os.environ.get("HYDRA_FULL_ERROR") == "1":
+        args = [a for a in args if a != "--debug"]
+        os.environ["NLOSFW_DEBUG"] = "1"
+    from nlosfw.cli.errors import report_interruption, report_user_error
+    from nlosfw.pipeline.interrupts import as_interruption, signals_raise
+
+    try:
+        with signals_raise():
+            return _dispatch(args)
+    except NlosfwError as err:
+        report_user_error(err)
+        return err.exit_status
+    except SystemExit as err:  # a Hydra job's exit status (its error already reported)
+        return err.code if isinstance(err.code, int) else (0 if err.code is None else 1)
+    except BaseException as err:  # SIGINT, SIGTERM: one line; anything else goes on
+        interruption = as_interruption(err)
+        if interruption is None:
+            raise
+        report_interruption(interruption)
+        return interruption.exit_status
+
+
+def _dispatch(args: list[str]) -> int:
+    if args[:1] not in (["plugins"], ["report"], ["cache"]) and ("--help" in args or "-h" in args):
+        from nlosfw.cli.help import help_text
+        from nlosfw.common.resources import config_dir
+        from nlosfw.plugins import load_plugins
+
+        sys.stdout.write(help_text(load_plugins(), config_dir()) + "\n")
+        return 0
+    if args[:1] == ["plugins"]:
+        from nlosfw.cli.plugins_command import plugins_command
+        from nlosfw.plugins import load_plugins
+
+        return plugins_command(load_plugins(), args=args[1:])
+    if args[:1] == ["report"]:
+        from nlosfw.cli.report_command import report_command
+
+        return report_command(args[1:])
+    if args[:1] == ["cache"]:
+        from nlosfw.cli.cache_command import cache_command
+
+        return cache_command(args[1:])
+    from nlosfw.cli.app import main as hydra_main
+
+    return hydra_main(args)

@@ -1,0 +1,29 @@
+"""Reporting errors the user can fix: one line on stderr, traceback only on request."""
+
+from __future__ import annotations
+
+import logging
+import os
+import traceback
+
+from rich.console import Console
+from rich.markup import escape
+
+from nlosfw.common.errors import RunInterrupted, one_line
+
+log = logging.getLogger("nlosfw")
+
+
+def report_user_error(err: BaseException) -> None:
+    """Print ``error: <message>`` as one line on stderr (the traceback too in debug mode)."""
+    console = Console(stderr=True, soft_wrap=True, highlight=False)
+    if os.environ.get("NLOSFW_DEBUG") == "1":
+        console.print(escape("".join(traceback.format_exception(err))), end="")
+    console.print(f"[bold red]error:[/] {escape(one_line(err, whole=True))}")
+
+
+def report_interruption(err: RunInterrupted) -> None:
+    """Print ``interrupted by SIGINT`` (or SIGTERM) as one line on stderr."""
+    console = Console(stderr=True, soft_wrap=True, highlight=False)
+    console.print(f"[bold yellow]interrupted[/] by {err.signal_name}: stopped cleanly "
+                  f"(exit status {err.exit_status})")

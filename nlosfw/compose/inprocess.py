@@ -1,0 +1,129 @@
+"""Runs from Python (:func:`nlosfw.run`): the command line's configuration and pipeline.
+
+The overrides are the command line's; the configuration is composed and checked as the
+command line checks it (:func:`compose_run_config`) before anything is written, and the
+same :class:`~nlosfw.pipeline.Pipeline` runs it. What differs: errors are raised as
+exceptions (:class:`~nlosfw.common.errors.ConfigError`, ...) instead of ending the
+process, the run directory is one the caller names (or a new temporary one), nothing is
+drawn on the console, and the stages' results come back in memory.
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+from nlosfw.common import yaml_safe
+from nlosfw.common.errors import ConfigError, one_line
+from nlosfw.common.files import write_text
+from nlosfw.compose.checks import composition_error, preflight
+from nlosfw.compose.store import (
+    ensure_resolvers,
+    hydra_session,
+    normalise_overrides,
+    register_configs,
+)
+from nlosfw.pipeline import Pipeline, PlainConfig, RunOutput, make_plan
+from nlosfw.plugins import PluginHost, load_plugins
+
+log = logging.getLogger(__name__)
+
+
+def run_in_process(overrides: Sequence[str], output_dir: str | Path | None = None,
+                   config_name: str = "config") -> RunOutput:
+    """Compose, check and run one configuration; see :func:`nlosfw.run`."""
+    if isinstance(overrides, str):
+        raise ConfigError("overrides", f"expected a list of overrides, got the string "
+                          f"{overrides!r} (write [{overrides!r}])")
+    overrides = [str(o) for o in overrides]
+    host = load_plugins()
+    config = compose_run_config(overrides, host, config_name)
+    plan = make_plan(config, host)
+    run_dir = _new_run_dir(output_dir)
+    write_text(run_dir / ".hydra" / "overrides.yaml", yaml_safe.dump(overrides))
+    pipeline = Pipeline(plan, run_dir, host)
+    with _run_log(run_dir / "run.log"):
+        pipeline.run()
+    return RunOutput(dir=run_dir, config=config, metrics=pipeline.metrics,
+                     stages=pipeline.stage_results)
+
+
+def compose_run_config(overrides: Sequence[str], host: PluginHost,
+                       config_name: str = "config") -> PlainConfig:
+    """The resolved configuration of one run, checked as the command line checks it.
+
+    ``overrides`` are the command line's (``+group=name`` included); a sweep, a flag or
+    a ``hydra.*`` setting is refused with a one-line :class:`ConfigError`.
+    """
+    from hydra import compose
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    overrides = normalise_overrides([str(o) for o in overrides])
+    for text in overrides:
+        if text.startswith("-"):
+            raise ConfigError("overrides", f"{text!r} is a command-line flag; give only "
+                              "overrides such as 'model=interp'")
+    try:
+        parsed = OverridesParser.create().parse_overrides(overrides)
+    except HydraException as err:
+        raise ConfigError("overrides", f"cannot parse: {one_line(err, whole=True)}") from None
+    for ov, text in zip(parsed, overrides, strict=True):
+        if ov.is_sweep_override():
+            raise ConfigError("overrides", f"{text!r} is a sweep; one call runs one "
+                              "configuration: call it once per value, or sweep with "
+                              "python -m nlosfw -m ...")
+        if ov.key_or_group.split("/")[0].split(".")[0] == "hydra":
+            raise ConfigError("overrides", f"{text!r}: Hydra's own settings do not apply here "
+                              "(choose the run directory with output_dir=)")
+    register_configs(host)
+    ensure_resolvers()
+    with hydra_session():
+        preflight(overrides, host, config_name)
+        try:
+            cfg = compose(config_name=config_name, overrides=list(overrides))
+        except (HydraException, OmegaConfBaseException) as err:
+            raise composition_error(err) from None
+    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    if not isinstance(plain, dict):  # a composed config is a mapping
+        raise ConfigError("", f"config {config_name!r} is not a mapping")
+    return {str(k): v for k, v in plain.items()}
+
+
+def _new_run_dir(output_dir: str | Path | None) -> Path:
+    """``output_dir`` (created; it must be new or empty), or a new temporary directory."""
+    if output_dir is None:
+        path = Path(tempfile.mkdtemp(prefix="nlosfw-run-"))
+        log.info("run directory: %s", path)
+        return path
+    path = Path(output_dir).expanduser()
+    if path.exists() and not path.is_dir():
+        raise ConfigError("output_dir", f"{path} is a file; give a new or empty directory")
+    if path.is_dir() and any(path.iterdir()):
+        raise ConfigError("output_dir", f"{path} already holds files; give a new or empty "
+                          "directory (nothing is written over an earlier run)")
+    path.mkdir(parents=True, exist_ok=True)
+    return path.resolve()
+
+
+@contextmanager
+def _run_log(path: Path) -> Iterator[None]:
+    """nlosfw's log records at INFO and above into the run's ``run.log`` while it runs."""
+    handler = logging.FileHandler(path, encoding="utf-8")
+    handler.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] %(message)s"))
+    logger = logging.getLogger("nlosfw")
+    level = logger.level
+    logger.addHandler(handler)
+    if logger.getEffectiveLevel() > logging.INFO:
+        logger.setLevel(logging.INFO)
+    try:
+        yield
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(level)
+        handler.close()

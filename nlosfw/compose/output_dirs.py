@@ -1,0 +1,122 @@
+"""The output directories of a command, checked before Hydra writes anything into them.
+
+Hydra creates a run's directory and writes ``.hydra/`` there before the job starts, so a
+refusal found by the job itself (:mod:`nlosfw.pipeline.lifecycle`) would come after Hydra has
+already overwritten an earlier run's ``.hydra/``. The preflight therefore resolves the
+run directory (``hydra.run.dir``) or the sweep's job directories (``hydra.sweep.dir`` with
+the default ``hydra.sweep.subdir``, jobs numbered as Hydra's basic sweeper numbers them)
+and applies the same verdict first, and checks that they can be written at all.
+"""
+
+from __future__ import annotations
+
+import errno
+import itertools
+import logging
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from nlosfw.common.errors import ConfigError
+from nlosfw.pipeline.files import PLANNED_NAMES
+from nlosfw.pipeline.lifecycle import HYDRA_FILES, inspect_run_dir, verdict
+
+log = logging.getLogger(__name__)
+
+#: ``hydra.sweep.subdir`` as Hydra sets it by default: one directory per job number.
+_DEFAULT_SUBDIR = "${hydra.job.num}"
+
+Compose = Callable[[list[str], bool], Any]
+"""Composes the overrides (with Hydra's own config when the flag is true)."""
+
+
+def check_output_dirs(compose: Compose, overrides: Sequence[str], first: Sequence[str],
+                      sweep_params: Sequence[str], multirun: bool) -> None:
+    """Refuse (one-line :class:`ConfigError`) an unwritable output location, a run directory
+    that holds a live run or files in the way, or a sweep resumed with another
+    configuration. ``overrides`` are the command's overrides, ``first`` the same with the
+    first value of each swept one, ``sweep_params`` the ``hydra.sweeper.params`` a preset
+    declares (as ``key=values``)."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
+
+    cfg = compose(list(first), True)
+    key = "hydra.sweep.dir" if multirun else "hydra.run.dir"
+    try:
+        where = Path(str(OmegaConf.select(cfg, key, throw_on_missing=True))).absolute()
+    except OmegaConfBaseException:  # resolved by Hydra at run time only: the job checks
+        return
+    _check_writable(where, key)
+    if not multirun:
+        plain = OmegaConf.to_container(compose(list(first), False), resolve=True,
+                                       enum_to_str=True)
+        overwrite = bool(OmegaConf.select(cfg, "output.overwrite", default=False))
+        earlier = inspect_run_dir(where, (*PLANNED_NAMES, *HYDRA_FILES))  # Hydra's too
+        verdict(where, earlier, plain, overwrite=overwrite, resume=False)  # type: ignore[arg-type]
+        return
+    subdir = OmegaConf.to_container(cfg.hydra.sweep, resolve=False).get("subdir")  # type: ignore[union-attr]
+    sweeper = OmegaConf.select(cfg, "hydra.runtime.choices", default={}).get("hydra/sweeper")
+    if not where.is_dir() or subdir != _DEFAULT_SUBDIR or sweeper != "basic":
+        return
+    _check_resumed_sweep(compose, where, [*sweep_params, *overrides],
+                         bool(OmegaConf.select(cfg, "output.overwrite", default=False)))
+
+
+def _check_writable(path: Path, option: str) -> None:
+    """Refuse a location whose nearest existing folder cannot be written."""
+    target = path
+    while not target.exists() and target != target.parent:
+        target = target.parent
+    if not target.is_dir():
+        raise ConfigError(option, f"{target} is not a directory")
+    if not os.access(target, os.W_OK | os.X_OK):
+        try:  # tell a read-only file system from missing permissions
+            probe = os.open(target, os.O_RDONLY)
+            os.close(probe)
+            reason = "permission denied"
+            if hasattr(os, "statvfs") and os.statvfs(target).f_flag & os.ST_RDONLY:
+                reason = "read-only file system"
+        except OSError as err:
+            reason = os.strerror(err.errno or errno.EACCES)
+        raise ConfigError(option, f"{target} cannot be written ({reason}); choose another "
+                                  "output directory")
+
+
+def sweep_jobs(overrides: Sequence[Any]) -> list[list[str]]:
+    """The overrides of every job of a sweep, numbered as Hydra's basic sweeper numbers its
+    job directories: a later override of a key replaces an earlier one (a command-line
+    value replaces a preset's axis), and the jobs are the product of the keys' values in
+    the order the keys first appear."""
+    axes: dict[str, list[str]] = {}
+    for override in overrides:
+        key = override.get_key_element()
+        if override.is_sweep_override():
+            if not override.is_discrete_sweep():
+                raise ConfigError(key, "only comma-separated (choice) sweeps can be resumed")
+            axes[key] = [f"{key}={value}" for value in override.sweep_string_iterator()]
+        else:
+            axes[key] = [f"{key}={override.get_value_element_as_str()}"]
+    return [list(job) for job in itertools.product(*axes.values())]
+
+
+def _check_resumed_sweep(compose: Compose, sweep_dir: Path, arguments: list[str],
+                         overwrite: bool) -> None:
+    """Apply the lifecycle's verdict to every job directory of the sweep that exists."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import OmegaConf
+
+    parsed = OverridesParser.create().parse_overrides(
+        [a for a in arguments if not a.lstrip("+~").startswith("hydra")])
+    jobs = sweep_jobs(parsed)
+    existing = sorted(int(p.name) for p in sweep_dir.iterdir() if p.name.isdigit())
+    for num in existing:
+        if num >= len(jobs):
+            continue
+        job_dir = sweep_dir / str(num)
+        earlier = inspect_run_dir(job_dir, PLANNED_NAMES)
+        if earlier.marker is None and not earlier.in_the_way and earlier.live_pid is None:
+            continue
+        plain = OmegaConf.to_container(compose(list(jobs[num]), False), resolve=True,
+                                       enum_to_str=True)
+        verdict(job_dir, earlier, plain, overwrite=overwrite, resume=True)  # type: ignore[arg-type]

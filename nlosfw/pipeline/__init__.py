@@ -1,0 +1,78 @@
+"""The run engine: a plan's stages in order, reported through the run hooks.
+
+A run is a :class:`RunPlan` (validated settings and built plugins, :func:`make_plan`)
+run by a :class:`Pipeline` into a run directory; its stages hand each other typed results
+(:mod:`~nlosfw.pipeline.results`) and its numbers are a :class:`RunMetrics`
+(``metrics.json``). No Hydra, rich or matplotlib here: the command line composes the
+configuration and draws the console, the report plugin draws the figures.
+
+The names in ``__all__`` are the public API of this stage: plugins, examples and docs
+import only these.
+"""
+
+from nlosfw.pipeline.engine import STAGES, Pipeline, objective
+from nlosfw.pipeline.events import RunEvents
+from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
+from nlosfw.pipeline.metrics import (
+    SCHEMA_VERSION,
+    TIMING_FIELDS,
+    FieldMetrics,
+    ImageScores,
+    ReconstructionMetrics,
+    RunInfo,
+    RunMetrics,
+    metrics_outline,
+    metrics_schema,
+    without_timings,
+)
+from nlosfw.pipeline.plan import PlainConfig, Planned, PlannedModel, RunPlan, make_plan
+from nlosfw.pipeline.results import (
+    CaptureResult,
+    FitResult,
+    FittedModel,
+    ImagedFields,
+    Reconstructions,
+    RunOutput,
+    RunResults,
+    SingleFrequencyImages,
+    StageResults,
+    TransformResult,
+)
+from nlosfw.pipeline.settings import Artefact, RunSettings, run_settings
+
+__all__ = [
+    "Artefact",
+    "CaptureResult",
+    "FieldMetrics",
+    "FitResult",
+    "FittedModel",
+    "ImageScores",
+    "ImagedFields",
+    "PLANNED_NAMES",
+    "Pipeline",
+    "PlainConfig",
+    "Planned",
+    "PlannedModel",
+    "ReconstructionMetrics",
+    "Reconstructions",
+    "RunEvents",
+    "RunFiles",
+    "RunInfo",
+    "RunMetrics",
+    "RunOutput",
+    "RunPlan",
+    "RunResults",
+    "RunSettings",
+    "SCHEMA_VERSION",
+    "STAGES",
+    "SingleFrequencyImages",
+    "StageResults",
+    "TIMING_FIELDS",
+    "TransformResult",
+    "make_plan",
+    "metrics_outline",
+    "metrics_schema",
+    "objective",
+    "run_settings",
+    "without_timings",
+]

@@ -1,0 +1,148 @@
+"""The stages between the capture and the images: its phasor field (``transform``), the
+split and the field models fitted to its training samples (``fit``), and the fields that
+are imaged (``predict``: the true field, the raw samples and every model's prediction)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from functools import partial
+
+from nlosfw.capture.data import Capture
+from nlosfw.common.config import config_to_dict
+from nlosfw.common.hashing import cache_key
+from nlosfw.model.interface import TrainingStep
+from nlosfw.model.protocol import split_field
+from nlosfw.pipeline.context import StageContext
+from nlosfw.pipeline.plan import PlannedModel
+from nlosfw.pipeline.results import (
+    FitResult,
+    FittedModel,
+    ImagedFields,
+    StageResults,
+    TransformResult,
+    required,
+)
+from nlosfw.pipeline.settings import Artefact
+from nlosfw.transform import frequencies as frequencies_module
+from nlosfw.transform.field import PhasorField
+from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
+from nlosfw.transform.frequencies import warn_aliasing
+
+
+def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
+    """The capture's phasor field (cached), and the noise-free capture's; write it."""
+    capture = required(done.capture, "capture")
+    planned = run.plan.transform
+    task = f"phasor field ({planned.name})"
+    canonical = config_to_dict(planned.plugin.config)
+
+    def cached_field(source: Capture, source_key: str) -> tuple[PhasorField, bool]:
+        key = cache_key({"capture": source_key, "transform": planned.name,
+                         "options": canonical, "plugin": planned.version})
+        return run.cache.get_or_compute(
+            "fields", key, lambda: planned.plugin.transform(source),
+            lambda p, f: write_phasor_field(p, f), read_phasor_field)
+
+    run.events.progress(task, 0)
+    with _once_per_message(logging.getLogger(frequencies_module.__name__)):
+        field, hit = cached_field(capture.capture, capture.key)
+        clean = None
+        if capture.clean is not None and capture.clean_key is not None:
+            clean = cached_field(capture.clean, capture.clean_key)[0]
+        _warn_aliasing(field)
+    run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
+                        + (" (cached)" if hit else ""))
+    run.files.write("phasor_field", lambda p: write_phasor_field(p, field),
+                    keep_as=Artefact.phasor_field)
+    return TransformResult(field=field, cache_hit=hit, clean=clean, plugin=planned.name)
+
+
+def fit_stage(run: StageContext, done: StageResults) -> FitResult:
+    """Split the field; fit the selected model, the interp baseline and every ``compare``
+    model to its training samples; write the selected model."""
+    field = required(done.transform, "transform").field
+    s = run.plan.settings.split
+    split = split_field(field, s.sampling, spectral=s.spectral,
+                        spectral_fraction=s.spectral_fraction)
+    models = []
+    for planned in run.plan.models:
+        report = planned.model.fit(split.train_field, on_step=_training_steps(run, planned))
+        run.events.progress(f"fit {planned.name}", report.steps, report.steps,
+                            f"loss {report.final_loss:.3g}")
+        models.append(FittedModel(source=planned.source, plugin=planned.name,
+                                  model=planned.model, report=report))
+        if planned.source == "model":
+            run.files.write("field_model", planned.model.save, kind="field_model",
+                            keep_as=Artefact.model)
+    return FitResult(split=split, models=tuple(models))
+
+
+def predict_stage(run: StageContext, done: StageResults) -> ImagedFields:
+    """The fields to image: true, raw (training samples, all frequencies), every model's
+    prediction of the full field; written as ``fields/<source>.hdf5`` (``output.keep``)."""
+    field = required(done.transform, "transform").field
+    fitted = required(done.fit, "fit")
+    predicted, seconds = {}, {}
+    for index, fm in enumerate(fitted.models):
+        run.events.progress("predict", index, len(fitted.models), f"{fm.source} ({fm.plugin})")
+        start = time.perf_counter()
+        predicted[fm.source] = fm.model.predict_field(
+            field.wall_xyz, field.frequencies, field.geometry, field.weights,
+            metadata={"source": fm.source})
+        seconds[fm.source] = round(time.perf_counter() - start, 4)
+    run.events.progress("predict", len(fitted.models), len(fitted.models),
+                        ", ".join(fm.plugin for fm in fitted.models))
+    fields = ImagedFields(true=field, raw=fitted.split.raw_field(field), predicted=predicted,
+                          seconds=seconds)
+    for source, f in fields.items():
+        run.files.write(f"fields/{source}.hdf5", partial(write_phasor_field, field=f),
+                        kind="phasor_field", keep_as=Artefact.fields)
+    return fields
+
+
+def _training_steps(run: StageContext, planned: PlannedModel
+                    ) -> Callable[[TrainingStep], None]:
+    """``on_step`` of a fit, reporting each step as ``on_training_step``."""
+    return partial(_report_step, run, planned)
+
+
+def _report_step(run: StageContext, planned: PlannedModel, step: TrainingStep) -> None:
+    run.events.training_step(planned.source, planned.name, step.step, step.total_steps,
+                             step.loss, step.val_loss)
+
+
+def _warn_aliasing(field: PhasorField) -> None:
+    """The band's aliasing warning, also for a field from the cache (once per run)."""
+    band = field.metadata.get("band") or {}
+    if band.get("aliases") and band.get("grid_spacing") is not None:
+        warn_aliasing(float(field.frequencies.max()), float(band["grid_spacing"]),
+                      field.geometry.kind, str(band.get("option", "transform")))
+
+
+class _OnceFilter(logging.Filter):
+    """Lets each distinct message through once."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: set[str] = set()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        if message in self.seen:
+            return False
+        self.seen.add(message)
+        return True
+
+
+@contextmanager
+def _once_per_message(logger: logging.Logger) -> Iterator[None]:
+    """Within the block, ``logger`` logs each distinct message once."""
+    once = _OnceFilter()
+    logger.addFilter(once)
+    try:
+        yield
+    finally:
+        logger.removeFilter(once)

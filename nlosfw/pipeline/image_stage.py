@@ -1,0 +1,133 @@
+"""The last stages: every field imaged on the same voxels (``reconstruct``), and the
+report files of a complete run (``report``, written by the report hooks' subscribers)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from functools import partial
+
+import numpy as np
+
+from nlosfw.capture.data import Capture
+from nlosfw.common.progress import accepts_progress
+from nlosfw.image.depths import automatic_depths, depth_span
+from nlosfw.image.interface import Imager
+from nlosfw.image.reconstruction import Reconstruction, wall_voxels
+from nlosfw.image.reconstruction_io import write_reconstruction
+from nlosfw.model.protocol import FieldSplit
+from nlosfw.pipeline.context import StageContext
+from nlosfw.pipeline.results import (
+    FrequencySplit,
+    ImagedFields,
+    Reconstructions,
+    SingleFrequencyImages,
+    StageResults,
+    required,
+)
+from nlosfw.pipeline.settings import Artefact, ReconstructionSettings
+from nlosfw.transform.field import PhasorField
+
+log = logging.getLogger(__name__)
+
+
+def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
+    """Image every field on the same voxels, then each from single frequencies alone."""
+    capture = required(done.capture, "capture").capture
+    split = required(done.fit, "fit").split
+    fields = required(done.fields, "predict")
+    imager = run.plan.imager
+    voxels = run_voxels(run.plan.settings.reconstruction, capture, fields.true)
+    # as in the thesis figures: images from one frequency at a time, too
+    chosen = chosen_frequencies(split,
+                                run.plan.settings.reconstruction.single_frequency_images)
+    sources = fields.by_source()
+    log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
+             len(sources) * (1 + len(chosen)), imager.name, len(sources), ", ".join(sources),
+             fields.true.n_frequencies,
+             "".join(f" and from f = {fields.true.frequencies[i]:.4g} /m ({label})"
+                     for label, i in chosen.items()))
+    by_source: dict[str, Reconstruction] = {}
+    seconds: dict[str, float] = {}
+    for source, field in fields.items():
+        start = time.perf_counter()
+        by_source[source] = _image(run, imager.plugin, field, voxels, f"image {source}")
+        seconds[source] = round(time.perf_counter() - start, 4)
+    singles = _single_frequency_images(run, imager.plugin, fields, voxels, chosen)
+    for source, recon in by_source.items():
+        run.files.write(f"reconstructions/{source}.hdf5",
+                        partial(write_reconstruction, recon=recon),
+                        kind="reconstruction", keep_as=Artefact.reconstructions)
+    return Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds,
+                           single_frequency=tuple(singles), imager=imager.name)
+
+
+def report_stage(run: StageContext, done: StageResults) -> None:
+    """The report files of a complete run (figures, tables), by the report subscribers."""
+    results = done.complete()
+    if results is None:  # the report stage runs only after all the others
+        raise ValueError("the report stage needs every stage's results")
+    run.events.write_report(run.files, results, run.recorder.metrics, run.plan.settings)
+
+
+def run_voxels(settings: ReconstructionSettings, capture: Capture,
+               field: PhasorField) -> np.ndarray:
+    """Planes on the wall's grid at the configured depths, or at ``n_depths`` planes, or
+    (the default) at the band's depth resolution (:mod:`nlosfw.image.depths`), over
+    ``depth_range`` or the depths that hold signal."""
+    if settings.depths:
+        depths = np.asarray(settings.depths, dtype=float)
+    else:
+        span = settings.depth_range or depth_span(capture)
+        depths = (np.linspace(span[0], span[1], settings.n_depths)
+                  if settings.n_depths is not None
+                  else automatic_depths(span, float(field.frequencies.max()),
+                                        field.geometry.kind))
+    return wall_voxels(field, depths)
+
+
+def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:
+    """Up to ``count`` frequency indices to show alone: a training one near the top of the
+    band, then a held-out one (if any), by label."""
+    train = np.asarray(split.train_frequencies)
+    held = np.asarray(split.heldout_frequencies)
+    chosen: dict[FrequencySplit, int] = {"training": int(train[int(0.75 * (train.size - 1))])}
+    if held.size:
+        chosen["held-out"] = int(held[held.size // 2])
+    return dict(list(chosen.items())[:count])
+
+
+def _image(run: StageContext, imager: Imager, field: PhasorField, voxels: np.ndarray,
+           task: str) -> Reconstruction:
+    """One reconstruction, reporting the imager's blocks as the task's progress (when it
+    reports them through ``on_progress``)."""
+    run.events.progress(task, 0)
+    if accepts_progress(imager.reconstruct):
+        return imager.reconstruct(field, voxels, on_progress=run.events.progress_callback(task))
+    recon = imager.reconstruct(field, voxels)
+    run.events.progress(task, 1, 1)
+    return recon
+
+
+def _single_frequency_images(run: StageContext, imager: Imager, fields: ImagedFields,
+                             voxels: np.ndarray, chosen: dict[FrequencySplit, int]
+                             ) -> list[SingleFrequencyImages]:
+    """Every field imaged from each chosen frequency alone."""
+    if not chosen:
+        return []
+    sources = fields.by_source()
+    task, total, count = "single-frequency images", len(chosen) * len(sources), 0
+    singles = []
+    for label, index in chosen.items():
+        images = {}
+        for source, field in sources.items():
+            run.events.progress(task, count, total, f"{source} at {label}")
+            images[source] = imager.reconstruct(field.select(frequency_index=[index]),
+                                                voxels)
+            count += 1
+        singles.append(SingleFrequencyImages(
+            index=index, frequency=float(fields.true.frequencies[index]), split=label,
+            by_source=images))
+    run.events.progress(task, total, total, ", ".join(f"f = {s.frequency:.4g} /m ({s.split})"
+                                                      for s in singles))
+    return singles

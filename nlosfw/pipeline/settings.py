@@ -1,0 +1,246 @@
+"""The run options of ``python -m nlosfw`` outside the plugin and scene groups.
+
+These are the top-level keys of ``conf/config.yaml``. :class:`RunConfig` adds the
+selected scene and plugins to them: it is the schema Hydra composes ``config.yaml``
+against, and :func:`run_settings` validates the settings by name, type and range like
+every other config.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import MISSING
+
+from nlosfw.capture.source import CaptureSource
+from nlosfw.common.config import Choice, config_from_mapping, require
+from nlosfw.common.schema import is_schema_node
+from nlosfw.model.protocol import SpatialPattern, SpatialSampling, SpectralSplit
+from nlosfw.simulate.scene import Scene
+
+#: The config groups that select a scene or a plugin (plus presets and acquisitions).
+SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment",
+                   "acquisition")
+
+#: The selector groups whose choice may be null (nothing selected).
+OPTIONAL_GROUPS = ("experiment", "acquisition")
+
+#: Pipeline stages in order; ``stop_after`` accepts any of them (``simulate`` = ``capture``).
+STAGES = ("capture", "transform", "fit", "predict", "reconstruct", "report")
+
+
+class StopAfter(Choice):
+    """The last stage a run performs (``simulate`` is ``capture``)."""
+
+    capture = "capture"
+    simulate = "simulate"
+    transform = "transform"
+    fit = "fit"
+    predict = "predict"
+    reconstruct = "reconstruct"
+
+
+@dataclass(frozen=True)
+class SplitSettings:
+    """Which samples the field model trains on (thesis: 32x32 of 64x64, 90% of frequencies)."""
+
+    spatial_step: int = 2
+    """Keep every k-th wall sample in x and y for training (pattern grid)."""
+    pattern: SpatialPattern = SpatialPattern.grid
+    """``grid``: every ``spatial_step``-th sample; ``random``: a random ``spatial_fraction``
+    of the wall samples."""
+    spatial_fraction: float | None = None
+    """Pattern random: the fraction of wall samples kept; null: 1 / spatial_step^2 (as many
+    as the grid pattern keeps)."""
+    seed: int = 0
+    """Pattern random: the seed that draws the samples."""
+    spectral: SpectralSplit = SpectralSplit.interleaved
+    """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
+    spectral_fraction: float = 0.1
+    """The fraction of the frequencies held out (``interleaved``: every 1/fraction-th)."""
+
+    def __post_init__(self) -> None:
+        require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
+        require(self.spatial_fraction is None or 0 < self.spatial_fraction <= 1,
+                "spatial_fraction", f"must be in (0, 1] or null, got {self.spatial_fraction}")
+        require(self.spatial_fraction is None or self.pattern == SpatialPattern.random,
+                "spatial_fraction", "applies to pattern random only (the grid pattern keeps "
+                "every spatial_step-th sample); set split.pattern=random or leave it null")
+        require(0 < self.spectral_fraction < 1, "spectral_fraction",
+                f"must be in (0, 1), got {self.spectral_fraction}")
+
+    @property
+    def sampling(self) -> SpatialSampling:
+        """The spatial pattern as the protocol takes it."""
+        return SpatialSampling(pattern=self.pattern, step=self.spatial_step,
+                               fraction=self.spatial_fraction, seed=self.seed)
+
+
+@dataclass(frozen=True)
+class ReconstructionSettings:
+    """The voxels imaged from every field."""
+
+    depths: tuple[float, ...] = ()
+    """[m] Depth planes; empty: planes spanning ``depth_range`` or, when it is not set, the
+    scene's ground truth or the depths the capture's time profile holds signal at."""
+    depth_range: tuple[float, float] | None = None
+    """[m] Near and far depth of the planes when ``depths`` is empty."""
+    n_depths: int | None = None
+    """Number of planes; None (default): a quarter of the shortest wavelength of the band
+    apart in the volume, 1/(4 m f_max) with m = 2 for confocal captures, else 1."""
+    single_frequency_images: int = 2
+    """How many single-frequency images (as in the thesis figures) to add per field."""
+
+    def __post_init__(self) -> None:
+        require(all(d > 0 for d in self.depths), "depths", "every depth must be > 0 (in front "
+                "of the wall)")
+        require(self.n_depths is None or self.n_depths >= 1, "n_depths",
+                f"must be >= 1 or null (automatic), got {self.n_depths}")
+        if self.depth_range is not None:
+            lo, hi = self.depth_range
+            require(0 < lo < hi, "depth_range", f"must satisfy 0 < near < far, got "
+                    f"{self.depth_range}")
+        require(self.single_frequency_images >= 0, "single_frequency_images", "must be >= 0")
+
+
+@dataclass(frozen=True)
+class FigureSettings:
+    """The PNG figures of a run (``figures/``)."""
+
+    enabled: bool = True
+    """Draw the figures (false: metrics and files only)."""
+    dpi: int = 110
+    """Resolution of the PNG files (dots per inch)."""
+
+    def __post_init__(self) -> None:
+        require(self.dpi >= 30, "dpi", f"must be >= 30, got {self.dpi}")
+
+
+@dataclass(frozen=True)
+class CacheSettings:
+    """Captures and phasor fields are cached by a hash of the config that produced them."""
+
+    enabled: bool = True
+    """Read and write the cache (false: compute everything again)."""
+    dir: str = "~/.cache/nlosfw"
+    """Where the cache lives (``$NLOSFW_CACHE_DIR`` when set)."""
+    max_gb: float | None = 20.0
+    """[GB] Size limit: beyond it the least recently used entries are evicted (never one a
+    running process is using); null: no limit."""
+
+    def __post_init__(self) -> None:
+        require(self.max_gb is None or self.max_gb >= 0, "max_gb",
+                f"must be >= 0 (GB) or null, got {self.max_gb}")
+
+
+class Artefact(Choice):
+    """The large files a run can keep (``output.keep``); metrics, config, log and figures are
+    always written."""
+
+    capture = "capture"
+    """``capture.hdf5``: the transient (y-tal's layout)."""
+    phasor_field = "phasor_field"
+    """``phasor_field.hdf5``: the phasor field of the capture."""
+    fields = "fields"
+    """``fields/<source>.hdf5``: every field that is imaged."""
+    model = "model"
+    """``field_model.npz``: the trained field model."""
+    reconstructions = "reconstructions"
+    """``reconstructions/<source>.hdf5``: the reconstruction of every field."""
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """What a run writes besides its metrics, config, log and figures."""
+
+    keep: tuple[Artefact, ...] = (Artefact.capture, Artefact.model)
+    """The large files to write: by default the capture (the run's input, slow to simulate
+    with a ray tracer) and the trained model (slow to train); the phasor field, the imaged
+    fields and the reconstructions follow from them quickly and are left out."""
+    compression: int = 4
+    """gzip level (0-9) for the transient in capture.hdf5."""
+    overwrite: bool = False
+    """Replace an earlier run's files in the run directory (only files that run wrote);
+    without it a directory holding a run is refused."""
+
+    def __post_init__(self) -> None:
+        require(0 <= self.compression <= 9, "compression", f"must be 0-9, got {self.compression}")
+        require(len(set(self.keep)) == len(self.keep), "keep",
+                f"lists an artefact twice: {[str(a) for a in self.keep]}")
+
+
+@dataclass(frozen=True)
+class LimitSettings:
+    """Safety limits checked before a run starts."""
+
+    allow_large: bool = False
+    """Run even when the memory the configuration needs (estimated before anything is
+    allocated) exceeds the memory available."""
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything in a run's config except the selected scene and plugins."""
+
+    stop_after: StopAfter | None = None
+    """The last stage to run (null: every stage)."""
+    capture: CaptureSource = field(default_factory=CaptureSource)
+    """Where the capture comes from (default: simulate the scene)."""
+    split: SplitSettings = field(default_factory=SplitSettings)
+    """Which wall samples and frequencies the field models train on."""
+    reconstruction: ReconstructionSettings = field(default_factory=ReconstructionSettings)
+    """The voxels every field is imaged on."""
+    figures: FigureSettings = field(default_factory=FigureSettings)
+    """The PNG figures."""
+    cache: CacheSettings = field(default_factory=CacheSettings)
+    """The cache of captures and phasor fields."""
+    output: OutputSettings = field(default_factory=OutputSettings)
+    """Which large files the run writes, and whether it may replace an earlier run's."""
+    limits: LimitSettings = field(default_factory=LimitSettings)
+    """Safety limits checked before the run starts."""
+    compare: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """More field models fitted and imaged beside ``model`` and interp: label -> options with
+    the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""
+    thesis: dict[str, Any] = field(default_factory=dict)
+    """Reference numbers of a thesis experiment preset, reported next to ours."""
+
+    def __post_init__(self) -> None:
+        reserved = {"true", "raw", "model", "interp"}
+        for label, options in self.compare.items():
+            require(label not in reserved and label.isidentifier(), f"compare.{label}",
+                    f"labels must be identifiers other than {', '.join(sorted(reserved))}")
+            require(isinstance(options, dict) and bool(options.get("name")),
+                    f"compare.{label}", "needs the plugin name: {name: <model plugin>, ...}")
+
+    @property
+    def last_stage(self) -> str:
+        if self.stop_after is None:
+            return STAGES[-1]
+        return "capture" if self.stop_after == "simulate" else str(self.stop_after)
+
+    def runs(self, stage: str) -> bool:
+        """Whether ``stage`` runs given ``stop_after``."""
+        return STAGES.index(stage) <= STAGES.index(self.last_stage)
+
+
+@dataclass(frozen=True)
+class RunConfig(RunSettings):
+    """The schema of a run's whole config: the settings, the scene and one plugin per kind.
+
+    Only Hydra uses it (as the first entry of ``config.yaml``'s defaults list): each plugin
+    group's entry brings its own schema, the plugin's config class.
+    """
+
+    scene: Scene = MISSING
+    simulator: Any = MISSING
+    transform: Any = MISSING
+    model: Any = MISSING
+    imager: Any = MISSING
+
+
+def run_settings(cfg: Any) -> RunSettings:
+    """The validated settings of a run's config (the node Hydra composed, or a mapping)."""
+    if not is_schema_node(cfg, RunSettings):
+        cfg = {k: v for k, v in dict(cfg).items() if k not in SELECTOR_GROUPS}
+    return config_from_mapping(RunSettings, cfg, "")

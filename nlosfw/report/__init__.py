@@ -1,0 +1,30 @@
+"""Reports: a run's figures and page, a sweep's report, the sparsity study, thesis tables.
+
+The only package that imports matplotlib (when a figure is drawn, never at import). A
+run's report files are written by the report plugin (:mod:`~nlosfw.report.hooks`, a
+subscriber to the run hooks); a sweep's by :func:`write_report`
+(``python -m nlosfw report DIR``).
+
+The names in ``__all__`` are the public API of this stage: plugins, examples and docs
+import only these.
+"""
+
+from nlosfw.report.records import RunRecord, find_runs, read_run
+from nlosfw.report.study import Stat, StudyRow, study_figure, study_rows
+from nlosfw.report.sweep import write_report
+from nlosfw.report.tables import format_cell, markdown_table
+from nlosfw.report.thesis import thesis_comparison
+
+__all__ = [
+    "RunRecord",
+    "Stat",
+    "StudyRow",
+    "find_runs",
+    "format_cell",
+    "markdown_table",
+    "read_run",
+    "study_figure",
+    "study_rows",
+    "thesis_comparison",
+    "write_report",
+]

@@ -1,0 +1,49 @@
+"""The report plugin: the files of a run's report, written by subscribers to the run hooks.
+
+Registered through nlosfw's own entry point (``report`` in the ``nlosfw`` group), like any
+third-party plugin: at the report stage of a complete run, the thesis comparison (for
+thesis presets) and the figures; after ``metrics.json``, the run's ``report.html``.
+matplotlib is imported only when a figure is drawn.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from nlosfw.plugins import hookimpl
+
+if TYPE_CHECKING:
+    from nlosfw.pipeline import RunFiles, RunMetrics, RunResults, RunSettings
+
+
+@hookimpl
+def write_run_report(files: RunFiles, results: RunResults, metrics: RunMetrics,
+                     settings: RunSettings) -> None:
+    """The thesis comparison table (for thesis presets) and the figures."""
+    if settings.thesis:
+        from nlosfw.report.records import RunRecord
+        from nlosfw.report.thesis import thesis_comparison
+
+        record = RunRecord(name=files.run_dir.name, metrics=metrics, thesis=settings.thesis)
+        text = thesis_comparison([record])
+        if text:
+            files.write_text("thesis_comparison.md", text, kind="report")
+    if settings.figures.enabled and metrics.reconstruction is not None:
+        from nlosfw.report.figures import write_figures
+
+        write_figures(files, results, metrics.run, metrics.reconstruction,
+                      settings.figures.dpi)
+
+
+@hookimpl
+def write_run_page(files: RunFiles, metrics: RunMetrics, config: dict[str, object]) -> None:
+    """report.html: the run's figures, metrics, timings and configuration in one page."""
+    from nlosfw.common import yaml_safe
+    from nlosfw.report.html_report import run_report
+
+    overrides: list[str] = []
+    path = files.run_dir / ".hydra" / "overrides.yaml"
+    if path.is_file():
+        overrides = [str(o) for o in yaml_safe.load(path.read_text(encoding="utf-8")) or []]
+    files.write_text("report.html", run_report(files.run_dir, metrics, config, overrides),
+                     kind="report")

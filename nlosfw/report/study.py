@@ -1,0 +1,299 @@
+"""Reconstruction quality against scan sparsity: the runs of a sweep grouped over seeds.
+
+A sweep such as ``python -m nlosfw -m experiment=sparsity`` runs every scene and
+acquisition (the *condition*), every sparsity, every field model and every seed. Each
+run scores every source it imaged (``true``, ``raw``, ``interp``, ``model`` and the
+``compare`` labels) against its full-capture reconstruction. :func:`study_rows`
+groups those scores into one :class:`StudyRow` per condition, sparsity and series (a
+baseline, or a field model with the options its runs changed) and aggregates over the
+seeds: mean, standard deviation (n - 1), minimum and maximum of each score.
+:func:`study_figure` plots them against the undersampling factor, one panel row per
+condition, one line per series.
+
+Overrides decide what separates runs: ``model.seed`` (and ``compare.<label>.seed``)
+are the seeds; other ``model.*`` overrides are options of the model (a separate
+series); ``split.spatial_step``, ``split.pattern``, ``split.spatial_fraction`` and
+``split.seed`` set the sparsity (runs of random patterns drawn with different seeds
+are aggregated like model seeds); everything else (besides the scene, the
+acquisition, the simulator and the noise, which the metrics describe) is part of the
+condition.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from nlosfw.pipeline.metrics import ImageScores, RunMetrics
+from nlosfw.report.quality import unique_legend
+from nlosfw.report.records import RunRecord
+
+#: The scores aggregated, in order (attributes of :class:`~nlosfw.pipeline.metrics.ImageScores`).
+SCORES = ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m")
+
+#: Sources that are not field models: the reference, the samples imaged directly, interp.
+BASELINES = ("true", "raw", "interp")
+
+#: Override keys that the metrics already describe (scene, acquisition) or that run the
+#: sweep (experiment, hydra): never part of a condition's label.
+_DESCRIBED = re.compile(r"^(scene|acquisition|simulator|experiment|capture\.path|stop_after|"
+                        r"scene\.noise\.model|hydra\..*|figures\..*|cache\..*|output\..*)$")
+
+
+@dataclass(frozen=True)
+class Stat:
+    """A score over the runs of a group (None when no run has it)."""
+
+    n: int
+    mean: float | None
+    std: float | None
+    min: float | None
+    max: float | None
+
+    @classmethod
+    def of(cls, values: Sequence[float | None]) -> Stat:
+        xs = [float(v) for v in values if v is not None and math.isfinite(v)]
+        if not xs:
+            return cls(0, None, None, None, None)
+        mean = sum(xs) / len(xs)
+        std = (math.sqrt(sum((x - mean) ** 2 for x in xs) / (len(xs) - 1))
+               if len(xs) > 1 else 0.0)
+        return cls(len(xs), mean, std, min(xs), max(xs))
+
+    def scaled(self, factor: float) -> Stat:
+        """The same statistics of the values times ``factor`` (> 0)."""
+        def times(v: float | None) -> float | None:
+            return None if v is None else factor * v
+
+        return Stat(self.n, times(self.mean), times(self.std), times(self.min), times(self.max))
+
+
+@dataclass(frozen=True)
+class StudyRow:
+    """One condition, sparsity and series, aggregated over its runs (seeds)."""
+
+    condition: str
+    pattern: str
+    undersampling: float
+    train_samples: int
+    series: str
+    kind: str
+    """``reference`` (true), ``baseline`` (raw, interp) or ``model``."""
+    runs: int
+    seeds: tuple[int, ...]
+    scores: dict[str, Stat]
+
+    @property
+    def sparsity(self) -> str:
+        """'16x (256 samples)', with ', random' for random scans."""
+        pattern = ", random" if self.pattern == "random" else ""
+        return f"{self.undersampling:.3g}x ({self.train_samples} samples{pattern})"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"condition": self.condition, "pattern": self.pattern,
+                "undersampling": self.undersampling, "train_samples": self.train_samples,
+                "series": self.series, "kind": self.kind, "runs": self.runs,
+                "seeds": list(self.seeds),
+                "scores": {name: vars(stat) for name, stat in self.scores.items()}}
+
+
+def condition_of(record: RunRecord) -> str:
+    """What was imaged: 'letter_t, analytic', 'letter_t, embree + poisson', or the capture
+    file's name, plus any override that is not a model option, a split or a seed."""
+    m = record.metrics
+    capture = m.capture
+    if capture is not None and capture.source == "file":
+        label = Path(capture.path or "capture").name
+    else:
+        noise = (capture.noise or {}).get("model") if capture is not None else None
+        noisy = f" + {noise}" if noise and noise != "none" else ""
+        label = f"{m.run.scene}, {m.run.simulator}{noisy}"
+    extra = [o for o in record.overrides if _key(o) and not _is_model_or_split(_key(o))
+             and not _DESCRIBED.match(_key(o))]
+    return " ".join([label, *sorted(extra)])
+
+
+def series_of(record: RunRecord, source: str) -> tuple[str, str]:
+    """(series label, kind) of one source of a run: baselines by name; ``model`` as its
+    plugin, compare labels as 'label (plugin)', each with the model options its run
+    overrode (seeds aside)."""
+    if source == "true":
+        return source, "reference"
+    if source in BASELINES:
+        return source, "baseline"
+    entry = record.metrics.field_entry(source)
+    plugin = entry.plugin if entry is not None else source
+    prefix = "model." if source == "model" else f"compare.{source}."
+    options = sorted(o[len(prefix):] for o in record.overrides
+                     if o.startswith(prefix) and not _key(o).endswith(".seed"))
+    name = plugin if source == "model" else f"{source} ({plugin})"
+    return (f"{name} [{' '.join(options)}]" if options else name), "model"
+
+
+def study_rows(records: Sequence[RunRecord]) -> list[StudyRow]:
+    """Every condition x sparsity x series of the completed runs, aggregated over seeds."""
+    groups: dict[tuple[str, str, float, int, str, str], list[tuple[RunMetrics, str]]] = {}
+    for record in records:
+        m = record.metrics
+        if m.status != "completed" or m.reconstruction is None or m.split is None:
+            continue
+        condition = condition_of(record)
+        for source in m.reconstruction.sources:
+            series, kind = series_of(record, source)
+            key = (condition, m.split.pattern, m.split.undersampling, m.split.train_samples,
+                   series, kind)
+            groups.setdefault(key, []).append((m, source))
+    rows = []
+    for (condition, pattern, under, samples, series, kind), members in groups.items():
+        scores = [m.image_scores(source) for m, source in members]
+        seeds = sorted({entry.seed for m, source in members
+                        if (entry := m.field_entry(source)) is not None
+                        and entry.seed is not None}) if kind == "model" else []
+        rows.append(StudyRow(
+            condition=condition, pattern=pattern, undersampling=under, train_samples=samples,
+            series=series, kind=kind, runs=len(members), seeds=tuple(seeds),
+            scores={name: Stat.of([_score(s, name) for s in scores]) for name in SCORES}))
+    order = {"reference": 0, "baseline": 1, "model": 2}
+    rows.sort(key=lambda r: (r.condition, r.pattern, r.undersampling, order[r.kind],
+                             BASELINES.index(r.series) if r.kind != "model" else 0, r.series))
+    return rows
+
+
+def _score(scores: ImageScores | None, name: str) -> float | None:
+    return None if scores is None else getattr(scores, name)
+
+
+def _key(override: str) -> str:
+    return override.split("=", 1)[0].lstrip("+~") if "=" in override else ""
+
+
+#: The split options that set a run's sparsity (the figure's x axis and the pattern).
+_SPARSITY_KEYS = ("split.spatial_step", "split.pattern", "split.spatial_fraction", "split.seed")
+
+
+def _is_model_or_split(key: str) -> bool:
+    return key == "model" or key.startswith(("model.", "compare.")) or key in _SPARSITY_KEYS
+
+
+# ---------------------------------------------------------------------- tables
+def _cell(stat: Stat, digits: int, scale: float = 1.0) -> str:
+    if stat.mean is None:
+        return "-"
+    mean = f"{stat.mean * scale:.{digits}f}"
+    if stat.n > 1 and stat.std is not None:
+        return f"{mean} ± {stat.std * scale:.{digits}f}"
+    return mean
+
+
+#: Columns of the study table: (header, score, decimals, scale).
+_TABLE = (("PSNR (dB)", "psnr", 1, 1.0), ("SSIM", "ssim", 3, 1.0),
+          ("volume PSNR (dB)", "volume_psnr", 1, 1.0), ("volume SSIM", "volume_ssim", 3, 1.0),
+          ("depth RMSE (mm)", "depth_rmse_m", 1, 1000.0))
+
+
+def study_table(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[str]]]:
+    """(header, cells) of the study's markdown table: mean ± std over seeds."""
+    header = ["condition", "sparsity", "source", "runs", "seeds", *[h for h, *_ in _TABLE]]
+    cells = [[r.condition, r.sparsity, r.series, str(r.runs),
+              ",".join(str(s) for s in r.seeds) or "-",
+              *[_reference_cell(r, name) or _cell(r.scores[name], digits, scale)
+                for _, name, digits, scale in _TABLE]]
+             for r in rows]
+    return header, cells
+
+
+def _reference_cell(row: StudyRow, name: str) -> str:
+    """'inf' for the reference's PSNRs (the full capture against itself), else ''."""
+    return "inf" if row.kind == "reference" and name.endswith("psnr") else ""
+
+
+def study_csv_rows(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[Any]]]:
+    """(header, values) of study.csv: every statistic of every score."""
+    header = ["condition", "pattern", "undersampling", "train_samples", "series", "kind", "runs",
+              "seeds"]
+    for name in SCORES:
+        header += [f"{name}_{stat}" for stat in ("mean", "std", "min", "max")]
+    values = []
+    for r in rows:
+        line: list[Any] = [r.condition, r.pattern, f"{r.undersampling:.6g}", r.train_samples,
+                           r.series, r.kind, r.runs, " ".join(str(s) for s in r.seeds)]
+        for name in SCORES:
+            s = r.scores[name]
+            line += ["" if v is None else f"{v:.6g}" for v in (s.mean, s.std, s.min, s.max)]
+        values.append(line)
+    return header, values
+
+
+# ---------------------------------------------------------------------- figure
+#: Panels of the figure: (score, axis label, scale of the plotted values).
+_PANELS = (("psnr", "PSNR of the front view (dB)", 1.0),
+           ("ssim", "SSIM of the front view", 1.0),
+           ("depth_rmse_m", "depth RMSE (mm)", 1000.0))
+_STYLE = {"raw": {"color": "0.45", "linestyle": "--", "marker": "s"},
+          "interp": {"color": "black", "linestyle": ":", "marker": "^"},
+          "true": {"color": "tab:green", "linestyle": "-.", "marker": ""}}
+
+
+def study_figure(rows: Sequence[StudyRow], path: Path, dpi: int = 110) -> None:
+    """Quality against undersampling: a row of panels (PSNR, SSIM, depth RMSE) per
+    condition, a line per series (mean over seeds, bars from min to max), ``raw`` and
+    ``interp`` on every panel (and the full capture's own depth RMSE)."""
+    from matplotlib.figure import Figure
+
+    conditions = list(dict.fromkeys(r.condition for r in rows))
+    panels = [p for p in _PANELS if any(r.scores[p[0]].n for r in rows)]
+    fig = Figure(figsize=(4.6 * len(panels), 3.3 * len(conditions) + 0.8))
+    axes = fig.subplots(len(conditions), len(panels), squeeze=False)
+    unders = sorted({r.undersampling for r in rows})
+    colours: dict[str, Any] = {}
+    for i, condition in enumerate(conditions):
+        mine = [r for r in rows if r.condition == condition]
+        for j, (score, label, scale) in enumerate(panels):
+            ax = axes[i, j]
+            for series in dict.fromkeys((r.series, r.pattern) for r in mine):
+                line = sorted((r for r in mine if (r.series, r.pattern) == series),
+                              key=lambda r: r.undersampling)
+                _plot_series(ax, line, (score, scale), colours)
+            ax.set_xscale("log", base=2)
+            ax.set_xticks(unders, [f"{u:.3g}x" for u in unders])
+            ax.minorticks_off()
+            ax.grid(alpha=0.3)
+            ax.set_ylabel(label)
+            if i == len(conditions) - 1:
+                ax.set_xlabel("wall samples of the full capture per sample kept")
+            if j == 0:
+                ax.set_title(condition, loc="left", fontsize=10)
+    handles, labels = unique_legend(axes)
+    fig.legend(handles, labels, loc="upper center", ncol=min(6, max(1, len(labels))),
+               fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.6 / fig.get_figheight()))
+    fig.savefig(path, dpi=dpi, format="png")
+
+
+def _plot_series(ax: Any, line: Sequence[StudyRow], panel: tuple[str, float],
+                 colours: dict[str, Any]) -> None:
+    score, scale = panel
+    first = line[0]
+    if first.series == "true" and score != "depth_rmse_m":
+        return                                           # the reference: inf and 1
+    stats = [(r.undersampling, r.scores[score].scaled(scale)) for r in line]
+    x = [u for u, s in stats if s.mean is not None]
+    mean = [s.mean for _, s in stats if s.mean is not None]
+    low = [s.mean - s.min for _, s in stats if s.mean is not None and s.min is not None]
+    high = [s.max - s.mean for _, s in stats if s.mean is not None and s.max is not None]
+    if not x:
+        return
+    name = first.series + (" (random)" if first.pattern == "random" else "")
+    if first.kind != "model":
+        style = dict(_STYLE[first.series])
+        if first.series == "true":
+            name = "true (full capture)"
+        ax.plot(x, mean, label=name, linewidth=1.2, markersize=4, **style)
+        return
+    colour = colours.setdefault(first.series, f"C{len(colours) % 10}")
+    ax.errorbar(x, mean, yerr=[low, high], color=colour, marker="o", markersize=4,
+                capsize=3, linewidth=1.5, label=f"{name} (mean, min-max over seeds)")

@@ -1,0 +1,224 @@
+"""A sweep's report (``python -m nlosfw report DIR``): every run under DIR in one report.
+
+Writes into ``DIR/report/`` (or ``report-2``, ... if that exists: earlier reports are
+never overwritten):
+
+* ``report.csv``: one row per run (its scene or capture file, sparsity, seed, field
+  errors and reconstruction scores);
+* ``study.csv``: the runs grouped over seeds (:mod:`nlosfw.report.study`): per condition,
+  sparsity and source, the mean, standard deviation, minimum and maximum of each score;
+* ``report.png``: reconstruction quality against the swept parameter, one line per
+  field model with ``raw`` and ``interp`` on every panel. A sweep over sparsity gets the
+  study's figure (PSNR, SSIM, depth RMSE against the undersampling factor, spread over
+  seeds, :func:`nlosfw.report.study.study_figure`); any other sweep the quality plot of
+  :mod:`nlosfw.report.quality` (SSIM, PSNR and the held-out field error against the swept
+  key);
+* ``report.md``: the figure's numbers and every run as markdown tables, plus thesis
+  comparison tables when presets carry reference numbers;
+* ``report.html``: all of it in one self-contained page, linking each run's own
+  ``report.html``.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import logging
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+from nlosfw.common.errors import DataError
+from nlosfw.common.files import atomic_path, write_text
+from nlosfw.pipeline.metrics import (
+    ErrorMetrics,
+    FieldMetrics,
+    ImageScores,
+    SplitErrors,
+    SplitMetrics,
+)
+from nlosfw.report.html_report import sweep_report
+from nlosfw.report.quality import (
+    QualityTable,
+    quality_figure,
+    quality_points,
+    quality_table,
+    quality_tables,
+    sweep_layout,
+)
+from nlosfw.report.records import RunRecord, find_runs, read_run
+from nlosfw.report.study import SCORES, study_csv_rows, study_figure, study_rows, study_table
+from nlosfw.report.tables import format_cell, markdown_table
+from nlosfw.report.thesis import thesis_comparison
+
+log = logging.getLogger(__name__)
+
+Column = Callable[[RunRecord], Any]
+
+
+def _field(source: str, get: Callable[[FieldMetrics], Any]) -> Column:
+    """A column from field model ``source``'s metrics (empty where it was not fitted)."""
+    def column(record: RunRecord) -> Any:
+        entry = record.metrics.field_entry(source)
+        return None if entry is None else get(entry)
+
+    return column
+
+
+def _nmse(source: str, split: Callable[[SplitErrors], ErrorMetrics]) -> Column:
+    """The NMSE (dB) of field model ``source`` on one set of the protocol."""
+    def nmse(entry: FieldMetrics) -> float | None:
+        return None if entry.splits is None else split(entry.splits).nmse_db
+
+    return _field(source, nmse)
+
+
+def _image(source: str, get: Callable[[ImageScores], Any]) -> Column:
+    """A column from the reconstruction scores of ``source``."""
+    def column(record: RunRecord) -> Any:
+        scores = record.metrics.image_scores(source)
+        return None if scores is None else get(scores)
+
+    return column
+
+
+def _split(get: Callable[[SplitMetrics], Any]) -> Column:
+    """A column from the run's split (empty where the run stopped before it)."""
+    def column(record: RunRecord) -> Any:
+        split = record.metrics.split
+        return None if split is None else get(split)
+
+    return column
+
+
+def _noise(record: RunRecord) -> Any:
+    capture = record.metrics.capture
+    return None if capture is None or not capture.noise else capture.noise.get("model")
+
+
+def _scores(source: str) -> tuple[tuple[str, Column], ...]:
+    """The reconstruction scores of ``source``, one column each."""
+    return tuple((f"{source}_{name}", _image(source, partial(_attr, name=name)))
+                 for name in SCORES)
+
+
+def _attr(scores: ImageScores, name: str) -> Any:
+    return getattr(scores, name)
+
+
+#: Columns of the report, in order: (column name, its value in a run's record).
+COLUMNS: tuple[tuple[str, Column], ...] = (
+    ("run", lambda r: r.name),
+    ("status", lambda r: r.metrics.status),
+    ("scene", lambda r: r.metrics.run.scene),
+    ("simulator", lambda r: r.metrics.run.simulator),
+    ("capture_file", lambda r: r.metrics.run.capture_file),
+    ("capture_format", lambda r: r.metrics.run.capture_format),
+    ("noise", _noise),
+    ("model", lambda r: r.metrics.run.model),
+    ("seed", _field("model", lambda e: e.seed)),
+    ("imager", lambda r: r.metrics.run.imager),
+    ("pattern", _split(lambda s: s.pattern)),
+    ("undersampling", _split(lambda s: s.undersampling)),
+    ("train_samples", _split(lambda s: s.train_samples)),
+    ("overrides", lambda r: " ".join(r.overrides)),
+    ("n_parameters", _field("model", lambda e: e.n_parameters)),
+    ("parameters_per_value", _field("model", lambda e: e.parameters_per_value)),
+    ("fit_seconds", _field("model", lambda e: e.fit.seconds)),
+    ("final_loss", _field("model", lambda e: e.fit.final_loss)),
+    ("model_heldout_pixels_nmse_db", _nmse("model", lambda s: s.heldout_pixels)),
+    ("model_heldout_freqs_nmse_db", _nmse("model", lambda s: s.heldout_frequencies)),
+    ("model_all_nmse_db", _nmse("model", lambda s: s.all)),
+    ("interp_heldout_pixels_nmse_db", _nmse("interp", lambda s: s.heldout_pixels)),
+    ("interp_heldout_freqs_nmse_db", _nmse("interp", lambda s: s.heldout_frequencies)),
+    ("interp_all_nmse_db", _nmse("interp", lambda s: s.all)),
+    *_scores("model"),
+    *_scores("interp"),
+    *_scores("raw"),
+    ("true_depth_rmse_m", _image("true", lambda s: s.depth_rmse_m)),
+    ("total_seconds", lambda r: r.metrics.timings.total),
+)
+
+
+def report_rows(records: Sequence[RunRecord]) -> list[dict[str, str]]:
+    """One row of formatted cells per run, by column name."""
+    return [{name: format_cell(value(r)) for name, value in COLUMNS} for r in records]
+
+
+def to_csv(rows: list[dict[str, str]]) -> str:
+    return csv_text([c for c, _ in COLUMNS], [[row[c] for c, _ in COLUMNS] for row in rows])
+
+
+def csv_text(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    buffer = io.StringIO()
+    writer = csv.writer(buffer)
+    writer.writerow(header)
+    writer.writerows(rows)
+    return buffer.getvalue()
+
+
+def to_markdown(rows: list[dict[str, str]], columns: Sequence[str] | None = None) -> str:
+    columns = list(columns or [c for c, _ in COLUMNS])
+    return markdown_table(columns, [[row.get(c, "") for c in columns] for row in rows])
+
+
+def _free_dir(root: Path) -> Path:
+    target = root / "report"
+    n = 2
+    while target.exists():
+        target = root / f"report-{n}"
+        n += 1
+    return target
+
+
+def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str, str]]]:
+    """Write report.csv, report.md, report.png and report.html for the runs under ``root``
+    into a new
+    report directory (returned, with the table's rows); ``x`` is the override key on the
+    quality plot's x axis (default: chosen by :func:`nlosfw.report.quality.sweep_layout`)."""
+    runs = find_runs(root)
+    if not runs:
+        raise DataError(f"{root}: holds no run (no metrics.json below it)")
+    records = [read_run(r, root) for r in runs]
+    rows = report_rows(records)
+    layout = sweep_layout(records, x)
+    points = quality_points(records, layout)
+    study = study_rows(records)
+    # a sweep over sparsity is a study: its figure and table aggregate the seeds per
+    # condition and sparsity; any other sweep gets the quality plot against its key
+    by_sparsity = x is None and len({(r.pattern, r.undersampling) for r in study}) > 1
+    out = _free_dir(root)
+    out.mkdir(parents=True)
+    write_text(out / "report.csv", to_csv(rows))
+    write_text(out / "study.csv", csv_text(*study_csv_rows(study)))
+    markdown = f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n"
+    if by_sparsity:
+        header, cells = study_table(study)
+        tables = [QualityTable(heading="reconstruction quality against sparsity, mean ± "
+                                       "standard deviation over seeds",
+                               header=tuple(header), rows=tuple(tuple(c) for c in cells))]
+        markdown += ("## Reconstruction quality against sparsity\n\n"
+                     "![reconstruction quality against sparsity](report.png)\n\n"
+                     "Scores against the full capture's reconstruction (amplitudes, each "
+                     "normalised to its maximum; scikit-image PSNR and SSIM at their "
+                     "defaults), mean ± standard deviation over the runs of each row "
+                     "(seeds); `true` is the full capture itself.\n\n"
+                     + markdown_table(header, cells) + "\n")
+    else:
+        tables = quality_tables(points, layout)
+        markdown += (f"## Quality against {layout.x_label}\n\n![quality against "
+                     f"{layout.x_label}](report.png)\n\n{quality_table(points, layout)}\n")
+    markdown += f"## Every run\n\n{to_markdown(rows)}"
+    thesis_tables = thesis_comparison(records)
+    if thesis_tables:
+        markdown += "\n## Next to the thesis\n\n" + thesis_tables
+    write_text(out / "report.md", markdown)
+    with atomic_path(out / "report.png") as tmp:
+        if by_sparsity:
+            study_figure(study, tmp)
+        else:
+            quality_figure(points, layout).savefig(tmp, dpi=110, format="png")
+    write_text(out / "report.html", sweep_report(root, out, records, rows,
+                                                 (out / "report.png").read_bytes(), tables))
+    return out, rows
