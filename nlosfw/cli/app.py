@@ -105,10 +105,15 @@ def _check(config: DictConfig, multirun: bool) -> None:
 
     from nlosfw.plugins import load_plugins
 
-    overrides = OmegaConf.to_container(config.hydra.overrides.task, resolve=False)
+    given = config.hydra.overrides
+    hydra = [str(o) for o in OmegaConf.to_container(given.hydra, resolve=False) or []]
+    task = [str(o) for o in OmegaConf.to_container(given.task, resolve=False) or []]
+    # the user's hydra.* overrides (hydra.run.dir, ...) and the task's, as on the command
+    # line; hydra.mode is Hydra's own record of -m
+    overrides = [o for o in hydra if not o.startswith("hydra.mode=")] + task
     config_name = str(config.hydra.job.config_name or "config")
     try:
-        preflight([str(o) for o in overrides or []], load_plugins(), config_name, multirun)
+        preflight(overrides, load_plugins(), config_name, multirun)
     except NlosfwError as err:
         report_user_error(err)
         raise SystemExit(err.exit_status) from None

@@ -80,7 +80,7 @@ def test_cache_info_and_clean(workdir, tools):
     assert keys(root) == ["bbbb", "cccc"]
     everything = tools.run("cache", "clean")         # $NLOSFW_CACHE_DIR, set by workdir
     assert everything.returncode == 0 and keys(root) == []
-    assert tools.run("cache", "info").stdout.strip() == f"cache {root}: 0 entries, 0 bytes"
+    assert tools.run("cache", "info").stdout.strip() == f"cache {root}: 0 entries, 0 B"
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -160,11 +160,11 @@ def test_enospc_injected_into_a_cache_write_leaves_no_entry(tmp_path, monkeypatc
 # ------------------------------------------------------------------------ read-only
 def test_a_read_only_output_directory_is_refused_before_anything(workdir, tools,
                                                                  read_only_dir):
-    for args in ((f"hydra.run.dir={read_only_dir}/run",),
-                 ("-m", "model=interp,nearest", f"hydra.sweep.dir={read_only_dir}/sweep")):
-        result = tools.run(*tools.QUICK, *args)
+    for flags, args in (((), (f"hydra.run.dir={read_only_dir}/run",)),
+                        (("-m",), ("model=interp,nearest", f"hydra.sweep.dir={read_only_dir}/sweep"))):
+        result = tools.run(*flags, *tools.QUICK, *args)
         assert result.returncode == 2
-        key = "hydra.sweep.dir" if "-m" in args else "hydra.run.dir"
+        key = "hydra.sweep.dir" if flags else "hydra.run.dir"
         assert re.fullmatch(
             rf"error: {key}: {read_only_dir} cannot be written \((read-only file system|"
             r"permission denied)\); choose another output directory",
