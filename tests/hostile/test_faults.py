@@ -161,7 +161,8 @@ def test_enospc_injected_into_a_cache_write_leaves_no_entry(tmp_path, monkeypatc
 def test_a_read_only_output_directory_is_refused_before_anything(workdir, tools,
                                                                  read_only_dir):
     for flags, args in (((), (f"hydra.run.dir={read_only_dir}/run",)),
-                        (("-m",), ("model=interp,nearest", f"hydra.sweep.dir={read_only_dir}/sweep"))):
+                        (("-m",), ("model=interp,nearest",
+                                   f"hydra.sweep.dir={read_only_dir}/sweep"))):
         result = tools.run(*flags, *tools.QUICK, *args)
         assert result.returncode == 2
         key = "hydra.sweep.dir" if flags else "hydra.run.dir"
