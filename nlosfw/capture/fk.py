@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.formats import CaptureFormat
+from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.matfile import (
     read_mat_array,
@@ -66,7 +66,7 @@ _EXPECTED = ("meas, the histograms [N, N, T] (32 ps bins) of a confocal scan of 
              "wall, as in the Stanford f-k captures")
 
 
-class FkFormat(CaptureFormat):
+class FkFormat(CaptureFormat[CaptureFormatConfig]):
     """Stanford f-k ``.mat`` captures (``meas``, per-pixel delays in ``tof.mat``); read only."""
 
     def detect(self, path: Path) -> bool:

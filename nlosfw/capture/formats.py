@@ -14,7 +14,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, TypeVar
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.preprocess import Preprocessing
@@ -27,7 +27,10 @@ class CaptureFormatConfig:
     """Options shared by every capture format (none yet)."""
 
 
-class CaptureFormat(Configurable, ABC):
+FormatConfigT = TypeVar("FormatConfigT", bound=CaptureFormatConfig)
+
+
+class CaptureFormat(Configurable[FormatConfigT], ABC):
     """Reads (and optionally writes) capture files of one layout."""
 
     config_class: ClassVar[type] = CaptureFormatConfig

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.formats import CaptureFormat
+from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.matfile import (
     read_mat_array,
@@ -63,7 +63,7 @@ _EXPECTED = ("rect_data, the histograms [N, N, T] (uint16, 4 ps bins), and width
              "side of the scanned square in metres, as in the Stanford LCT captures")
 
 
-class LctFormat(CaptureFormat):
+class LctFormat(CaptureFormat[CaptureFormatConfig]):
     """Stanford LCT ``.mat`` captures (``rect_data`` and ``width``); read only."""
 
     def detect(self, path: Path) -> bool:

@@ -41,15 +41,6 @@ class ScanLayout:
             xy = xy[:, ::-1]
         return xy
 
-    def from_xy(self, array: np.ndarray) -> np.ndarray:
-        """The inverse of :meth:`to_xy`: ``[x, y, ...]`` back to MATLAB's ``[i, j, ...]``."""
-        ij = array
-        if self.y_reversed:
-            ij = ij[:, ::-1]
-        if self.x_reversed:
-            ij = ij[::-1]
-        return ij if self.x_axis == 0 else np.swapaxes(ij, 0, 1)
-
     def to_dict(self) -> dict[str, Any]:
         return {"x_axis": self.x_axis, "x_reversed": self.x_reversed,
                 "y_reversed": self.y_reversed}

@@ -30,7 +30,7 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
-from nlosfw.capture.formats import CaptureFormat
+from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.matfile import (
     hdf5_keys,
     hdf5_shape,
@@ -64,7 +64,7 @@ def points(value: Any, path: Path, name: str, count: int | None = None) -> np.nd
     return n3
 
 
-class WisconsinFormat(CaptureFormat):
+class WisconsinFormat(CaptureFormat[CaptureFormatConfig]):
     """Wisconsin/Zaragoza phasor-field ``.mat`` captures (``MAT_PHASOR_FIELDS``); read only."""
 
     def detect(self, path: Path) -> bool:

@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.formats import CaptureFormat
+from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.hdf5 import (
     NLOSFW_CAPTURE_TYPE,
     capture_from_fields,
@@ -41,7 +41,7 @@ def _nlosfw_type(path: Path) -> str | None:
     return found.decode() if isinstance(found, bytes) else str(found)
 
 
-class YtalFormat(CaptureFormat):
+class YtalFormat(CaptureFormat[CaptureFormatConfig]):
     """y-tal HDF5 captures (``tal.io.write_capture``); reads and writes."""
 
     def detect(self, path: Path) -> bool:

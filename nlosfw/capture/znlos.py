@@ -15,7 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.formats import CaptureFormat
+from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.hdf5 import capture_from_fields, read_fields
 from nlosfw.capture.matfile import hdf5_keys, hdf5_shape
 from nlosfw.capture.znlos_layout import data_transient_shape, znlos_to_ytal
@@ -25,7 +25,7 @@ from nlosfw.common.errors import DataError
 SIGNATURE = ("data", "deltaT", "t0", "cameraGridPositions")
 
 
-class ZnlosFormat(CaptureFormat):
+class ZnlosFormat(CaptureFormat[CaptureFormatConfig]):
     """Zaragoza NLOS dataset (HDF5_ZNLOS) files; read only."""
 
     def detect(self, path: Path) -> bool:

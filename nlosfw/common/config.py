@@ -12,12 +12,13 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-from collections.abc import Mapping
-from typing import Any, ClassVar, TypeVar
+from collections.abc import Collection, Mapping
+from typing import Any, ClassVar, Generic, TypeVar
 
 from nlosfw.common.errors import ConfigError
 
 T = TypeVar("T")
+C = TypeVar("C")
 
 
 class Choice(str, enum.Enum):
@@ -32,7 +33,8 @@ class Choice(str, enum.Enum):
         return str(self.value)
 
 
-def config_from_mapping(cls: type[T], mapping: Mapping[str, Any] | None, where: str = "") -> T:
+def config_from_mapping(cls: type[T], mapping: T | Mapping[str, object] | None,
+                        where: str = "") -> T:
     """Build the dataclass ``cls`` from ``mapping``, validating names, types and ranges.
 
     Missing keys take the dataclass defaults; an instance of ``cls`` is returned as is, and
@@ -98,13 +100,20 @@ def _plain(value: Any) -> Any:
     return value
 
 
-class Configurable:
-    """Base of every plugin: holds a validated, immutable config instance of ``config_class``."""
+class Configurable(Generic[C]):
+    """Base of every plugin: holds a validated, immutable config instance of ``config_class``.
+
+    A plugin class states its config type as the parameter (``class Mine(FieldModel[MyConfig])``,
+    so ``self.config`` is a ``MyConfig``) and may declare what it can do in ``capabilities``
+    (names from its kind's vocabulary, :data:`nlosfw.plugins.capabilities.VOCABULARY`; ``None``:
+    the kind's defaults), which the registry and the conformance kit read.
+    """
 
     config_class: ClassVar[type] = object
+    capabilities: ClassVar[Collection[str] | None] = None
 
-    def __init__(self, config: Any = None) -> None:
-        self.config: Any = config_from_mapping(self.config_class, config)
+    def __init__(self, config: C | Mapping[str, object] | None = None) -> None:
+        self.config: C = config_from_mapping(self.config_class, config)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({config_to_dict(self.config)})"

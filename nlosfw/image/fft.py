@@ -127,7 +127,7 @@ class _Volume:
     cdtype: type
 
 
-class FFTImager(PropagationImager):
+class FFTImager(PropagationImager[FFTImagerConfig]):
     """Fast RSD for planes parallel to the wall on a regular grid (both capture kinds)."""
 
     config_class = FFTImagerConfig

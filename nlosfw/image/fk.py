@@ -41,7 +41,7 @@ from nlosfw.transform.field import PhasorField
 _MARGIN_STEPS = 4
 
 
-class FKImager(TransientImager):
+class FKImager(TransientImager[TransientImagerConfig]):
     """f-k migration (Lindell 2019) of confocal fields."""
 
     config_class = TransientImagerConfig

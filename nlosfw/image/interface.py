@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, TypeVar
 
 import numpy as np
 
@@ -19,7 +19,10 @@ class ImagerConfig:
     """Options shared by every imager (none yet)."""
 
 
-class Imager(Configurable, ABC):
+ImagerConfigT = TypeVar("ImagerConfigT", bound=ImagerConfig)
+
+
+class Imager(Configurable[ImagerConfigT], ABC):
     """Propagates a :class:`PhasorField` into the hidden volume and images it."""
 
     config_class: ClassVar[type] = ImagerConfig

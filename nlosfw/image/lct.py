@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import scipy.fft
@@ -84,7 +84,10 @@ class _Cone:
     shape: tuple[int, int, int]
 
 
-class LightConeImager(TransientImager):
+LightConeConfigT = TypeVar("LightConeConfigT", bound=LightConeConfig)
+
+
+class LightConeImager(TransientImager[LightConeConfigT]):
     """What ``lct`` and ``fbp`` share: the resampled data and the light-cone kernel."""
 
     config_class: ClassVar[type] = LightConeConfig
@@ -134,7 +137,7 @@ class LightConeImager(TransientImager):
         return cache[key]
 
 
-class LCTImager(LightConeImager):
+class LCTImager(LightConeImager[LCTImagerConfig]):
     """Light-cone transform with a Wiener filter (O'Toole 2018), confocal fields."""
 
     config_class = LCTImagerConfig
@@ -150,7 +153,7 @@ class LCTImager(LightConeImager):
                         "snr": float(self.config.snr)}
 
 
-class FBPImager(LightConeImager):
+class FBPImager(LightConeImager[LightConeConfig]):
     """Backprojection (the light cone's adjoint) and a Laplacian along depth, confocal fields."""
 
     imager_name = "fbp"

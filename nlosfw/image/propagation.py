@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -111,7 +111,10 @@ class FrequencySum:
         return self.acc.copy()
 
 
-class PropagationImager(Imager):
+PropagationConfigT = TypeVar("PropagationConfigT", bound=PropagationConfig)
+
+
+class PropagationImager(Imager[PropagationConfigT]):
     """Base of the imagers that propagate each frequency with the shared RSD kernel."""
 
     config_class: ClassVar[type] = PropagationConfig

@@ -44,7 +44,7 @@ class RSDImagerConfig(PropagationConfig):
                 f"must be -1 (all cores) or >= 1, got {self.workers}")
 
 
-class RSDImager(PropagationImager):
+class RSDImager(PropagationImager[RSDImagerConfig]):
     """Direct RSD sum of the phasor field at arbitrary voxels (exact, slower than ``fft``)."""
 
     config_class = RSDImagerConfig

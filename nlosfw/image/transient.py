@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -115,7 +115,10 @@ class VoxelPlanes:
     shape: tuple[int, ...]
 
 
-class TransientImager(Imager):
+TransientConfigT = TypeVar("TransientConfigT", bound=TransientImagerConfig)
+
+
+class TransientImager(Imager[TransientConfigT]):
     """Base of the imagers that work on the field's transient (see the module docstring)."""
 
     config_class: ClassVar[type] = TransientImagerConfig

@@ -6,7 +6,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
@@ -52,7 +52,10 @@ class FitReport:
     history: list[dict[str, float]] = field(default_factory=list)
 
 
-class FieldModel(Configurable, ABC):
+ModelConfigT = TypeVar("ModelConfigT", bound=FieldModelConfig)
+
+
+class FieldModel(Configurable[ModelConfigT], ABC):
     """A continuous representation F(x, y, omega) -> P fitted to a discrete phasor field."""
 
     config_class: ClassVar[type] = FieldModelConfig

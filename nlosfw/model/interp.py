@@ -33,6 +33,7 @@ Outside the training hull (``extrapolation``):
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -139,13 +140,13 @@ def _triangulation(points: np.ndarray) -> Delaunay | None:
         return None
 
 
-class InterpFieldModel(FieldModel):
+class InterpFieldModel(FieldModel[InterpConfig]):
     """Tensor-product cubic spline of the complex field over (y, x, f), or Clough-Tocher
     over scattered samples; see the module doc."""
 
     config_class = InterpConfig
 
-    def __init__(self, config: Any = None) -> None:
+    def __init__(self, config: InterpConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
         self._samples: _Samples | _Scattered | None = None
 

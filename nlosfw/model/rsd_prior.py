@@ -45,7 +45,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -172,13 +172,13 @@ class _Fitted:
     scale: float
 
 
-class RSDPriorFieldModel(FieldModel):
+class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
     """The wall field of a fitted non-negative voxel albedo (see the module docstring)."""
 
     config_class = RSDPriorConfig
     family = MODEL_NAME
 
-    def __init__(self, config: Any = None) -> None:
+    def __init__(self, config: RSDPriorConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
         self._fitted: _Fitted | None = None
 

@@ -95,7 +95,7 @@ class _IndexStream:
         return np.concatenate(parts).astype(np.int64)
 
 
-class NeuralFieldModel(FieldModel):
+class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
     """A neural field F(x, y, f) -> P (multi mode) or one F_f(x, y) per frequency (single).
 
     A subclass names its network and engine (:func:`nlosfw.plugins.network_model` makes
@@ -112,7 +112,7 @@ class NeuralFieldModel(FieldModel):
     network_factory: ClassVar[Callable[..., Any]]
     network_presets: ClassVar[Mapping[str, Preset]] = {}
 
-    def __init__(self, config: Any = None) -> None:
+    def __init__(self, config: NeuralFieldConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
         self._shape: FieldShape | None = None
         self._norm: FieldNormalisation | None = None

@@ -18,6 +18,7 @@ from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_
 from nlosfw.plugins.networks import (
     ENGINES,
     NetworkEngine,
+    NetworkKwargs,
     NetworkOptions,
     NetworkRegistrar,
     NetworkSpec,
@@ -26,7 +27,14 @@ from nlosfw.plugins.networks import (
     register_thesis_networks,
     thesis_network_model,
 )
-from nlosfw.plugins.registry import LazyFactory, PluginSpec, Registry, import_object
+from nlosfw.plugins.registry import (
+    LazyFactory,
+    PluginSpec,
+    Registrar,
+    RegistrationKwargs,
+    Registry,
+    import_object,
+)
 
 __all__ = [
     "CAPABILITIES",
@@ -38,12 +46,15 @@ __all__ = [
     "INTERFACES",
     "LazyFactory",
     "NetworkEngine",
+    "NetworkKwargs",
     "NetworkOptions",
     "NetworkRegistrar",
     "NetworkSpec",
     "PluginHost",
     "PluginKind",
     "PluginSpec",
+    "Registrar",
+    "RegistrationKwargs",
     "Registry",
     "RUN_KINDS",
     "hookimpl",

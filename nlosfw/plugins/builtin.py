@@ -9,14 +9,17 @@ Capabilities (what the conformance kit checks) are listed in
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from nlosfw.plugins.capabilities import Capability as C
 from nlosfw.plugins.hookspecs import hookimpl
 
+if TYPE_CHECKING:
+    from nlosfw.plugins.registry import Registrar
+
 
 @hookimpl
-def register_simulators(register: Any) -> None:
+def register_simulators(register: Registrar) -> None:
     register(
         "analytic",
         "nlosfw.simulate.analytic:AnalyticSimulator",
@@ -29,7 +32,7 @@ def register_simulators(register: Any) -> None:
 
 
 @hookimpl
-def register_phasor_transforms(register: Any) -> None:
+def register_phasor_transforms(register: Registrar) -> None:
     register(
         "fft",
         "nlosfw.transform.fft:FFTTransform",
@@ -49,7 +52,7 @@ def register_phasor_transforms(register: Any) -> None:
 
 
 @hookimpl
-def register_field_models(register: Any) -> None:
+def register_field_models(register: Registrar) -> None:
     register(
         "interp",
         "nlosfw.model.interp:InterpFieldModel",
@@ -74,7 +77,7 @@ def register_field_models(register: Any) -> None:
 
 
 @hookimpl
-def register_imagers(register: Any) -> None:
+def register_imagers(register: Registrar) -> None:
     register(
         "rsd",
         "nlosfw.image.rsd:RSDImager",
@@ -117,7 +120,7 @@ def register_imagers(register: Any) -> None:
 
 
 @hookimpl
-def register_capture_formats(register: Any) -> None:
+def register_capture_formats(register: Registrar) -> None:
     register(
         "nlosfw",
         "nlosfw.capture.ytal:NlosfwFormat",

@@ -19,6 +19,8 @@ if TYPE_CHECKING:  # the run's types, for the run hooks' annotations only
     from nlosfw.pipeline.metrics import RunMetrics
     from nlosfw.pipeline.results import RunResults
     from nlosfw.pipeline.settings import RunSettings
+    from nlosfw.plugins.networks import NetworkRegistrar
+    from nlosfw.plugins.registry import Registrar
 
 PROJECT = "nlosfw"
 hookspec = pluggy.HookspecMarker(PROJECT)
@@ -27,22 +29,22 @@ hookimpl = pluggy.HookimplMarker(PROJECT)
 
 # ------------------------------------------------------------------ registration
 @hookspec
-def register_simulators(register: Any) -> None:
+def register_simulators(register: Registrar) -> None:
     """Register :class:`~nlosfw.simulate.Simulator` plugins: ``register(name, factory, ...)``."""
 
 
 @hookspec
-def register_phasor_transforms(register: Any) -> None:
+def register_phasor_transforms(register: Registrar) -> None:
     """Register :class:`~nlosfw.transform.PhasorTransform` plugins."""
 
 
 @hookspec
-def register_field_models(register: Any) -> None:
+def register_field_models(register: Registrar) -> None:
     """Register :class:`~nlosfw.model.FieldModel` plugins."""
 
 
 @hookspec
-def register_networks(register: Any) -> None:
+def register_networks(register: NetworkRegistrar) -> None:
     """Register networks for the shared neural trainer (see :mod:`nlosfw.plugins.networks`).
 
     ``register(name, engine="torch" | "jax", factory="module:function",
@@ -52,12 +54,12 @@ def register_networks(register: Any) -> None:
 
 
 @hookspec
-def register_imagers(register: Any) -> None:
+def register_imagers(register: Registrar) -> None:
     """Register :class:`~nlosfw.image.Imager` plugins."""
 
 
 @hookspec
-def register_capture_formats(register: Any) -> None:
+def register_capture_formats(register: Registrar) -> None:
     """Register :class:`~nlosfw.capture.CaptureFormat` plugins (readers and writers of capture
     files; capabilities ``readable``, ``writable``)."""
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 from nlosfw.common.errors import PluginError
 from nlosfw.model.inr_networks import FIELD_NETWORKS
@@ -33,6 +33,9 @@ from nlosfw.plugins.registry import (
     import_object,
     registration_options,
 )
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 
 class NetworkEngine(str, Enum):
@@ -130,7 +133,7 @@ class NetworkOptions:
     description: str = ""
     requires: Mapping[str, str] | None = None
     """Further importable modules the network needs -> their pip requirements."""
-    test_config: Mapping[str, Any] | None = None
+    test_config: Mapping[str, object] | None = None
     """Small, fast options for the conformance kit."""
     expected_failures: Mapping[str, str] | None = None
     """Conformance check name -> why it is expected to fail."""
@@ -141,6 +144,22 @@ class NetworkOptions:
     :data:`nlosfw.plugins.capabilities.VOCABULARY`); default :data:`NETWORK_CAPABILITIES`."""
 
 
+class NetworkKwargs(TypedDict, total=False):
+    """The keyword options of a ``register(name, ...)`` call in a ``register_networks`` hook,
+    typed (what they mean: :class:`NetworkOptions`; ``engine``, ``factory`` and ``config``
+    are required)."""
+
+    engine: str
+    factory: str | Callable[..., Any]
+    config: str | type
+    description: str
+    requires: Mapping[str, str] | None
+    test_config: Mapping[str, object] | None
+    expected_failures: Mapping[str, str] | None
+    presets: Mapping[str, Preset] | None
+    capabilities: Iterable[str | Capability] | None
+
+
 @dataclass
 class NetworkRegistrar:
     """The ``register`` callable handed to ``register_networks`` hooks of one plugin module;
@@ -148,7 +167,7 @@ class NetworkRegistrar:
 
     models: Registrar
 
-    def __call__(self, name: str, **options: Any) -> None:
+    def __call__(self, name: str, **options: Unpack[NetworkKwargs]) -> None:
         """Register network ``name`` as the field model ``<name>_<engine>`` (see
         :class:`NetworkOptions`)."""
         who = f"{self.models.distribution}: network {name!r}"

@@ -12,7 +12,7 @@ import importlib.util
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import MISSING, dataclass, field, fields
-from typing import Any, Literal, TypeVar, overload
+from typing import TYPE_CHECKING, Any, Literal, TypedDict, TypeVar, overload
 
 from nlosfw.capture.formats import CaptureFormat
 from nlosfw.common.config import Configurable, config_from_mapping
@@ -23,6 +23,9 @@ from nlosfw.plugins.capabilities import Capability, parse_capabilities
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.simulate.interface import Simulator
 from nlosfw.transform.interface import PhasorTransform
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
 
 T = TypeVar("T")
 
@@ -77,14 +80,15 @@ class PluginSpec:
     requires: tuple[tuple[str, str], ...] = ()
     """(importable module, pip requirement) pairs the factory needs."""
     description: str = ""
-    test_config: Mapping[str, Any] = field(default_factory=dict)
+    test_config: Mapping[str, object] = field(default_factory=dict)
     """Small, fast settings used by the conformance checks."""
     expected_failures: Mapping[str, str] = field(default_factory=dict)
     """Conformance check (``check_x`` or ``check_x[variant]``) -> the known bug that makes
     it fail; it runs as a strict xfail. Not for what the plugin cannot do: declare
     ``capabilities`` instead."""
-    declared_capabilities: tuple[Capability, ...] | None = None
-    """What the plugin declared it can do (``None``: declared nothing, see :attr:`capabilities`)."""
+    declared_capabilities: tuple[str, ...] | None = None
+    """What the plugin declared it can do in its ``register()`` call (``None``: nothing
+    there; the class's ``capabilities`` then apply, see :attr:`capabilities`)."""
 
     def __post_init__(self) -> None:
         if self.declared_capabilities is not None:
@@ -105,9 +109,34 @@ class PluginSpec:
 
     @property
     def capabilities(self) -> frozenset[Capability]:
-        """The declared capabilities, or the kind's defaults when it declared none
-        (:data:`nlosfw.plugins.capabilities.DEFAULTS`)."""
-        return parse_capabilities(self.kind, self.label, self.declared_capabilities)
+        """What the plugin can do: as declared in its ``register()`` call, else as its class
+        declares (its ``capabilities`` class attribute; the factory is imported to read it),
+        else the kind's defaults (:data:`nlosfw.plugins.capabilities.DEFAULTS`)."""
+        declared = self.declared_capabilities
+        if declared is None:
+            declared = self.class_capabilities()
+        return parse_capabilities(self.kind, self.label, declared)
+
+    @property
+    def capabilities_origin(self) -> Literal["registration", "class", "defaults"]:
+        """Where :attr:`capabilities` come from."""
+        if self.declared_capabilities is not None:
+            return "registration"
+        return "class" if self.class_capabilities() is not None else "defaults"
+
+    def class_capabilities(self) -> tuple[str, ...] | None:
+        """The ``capabilities`` the plugin's class declares (``None``: none, or the factory
+        is not a class, or cannot be imported)."""
+        if self.missing_requirements():
+            return None
+        try:
+            factory = self.load()
+        except PluginError:
+            return None
+        declared = getattr(factory, "capabilities", None) if isinstance(factory, type) else None
+        if declared is None:
+            return None
+        return _as_tuple(declared, self.kind, self.label)
 
     def missing_requirements(self) -> list[tuple[str, str]]:
         """Required modules that cannot be found (checked without importing them)."""
@@ -268,19 +297,19 @@ class Registry:
         return [self._specs[(kind, n)] for n in self.names(kind)]
 
     @overload
-    def create(self, kind: Literal[PluginKind.SIMULATOR], name: str,
+    def create(self, kind: Literal[PluginKind.SIMULATOR, "simulator"], name: str,
                options: PluginOptions = None) -> Simulator: ...
     @overload
-    def create(self, kind: Literal[PluginKind.PHASOR_TRANSFORM], name: str,
+    def create(self, kind: Literal[PluginKind.PHASOR_TRANSFORM, "transform"], name: str,
                options: PluginOptions = None) -> PhasorTransform: ...
     @overload
-    def create(self, kind: Literal[PluginKind.FIELD_MODEL], name: str,
+    def create(self, kind: Literal[PluginKind.FIELD_MODEL, "model"], name: str,
                options: PluginOptions = None) -> FieldModel: ...
     @overload
-    def create(self, kind: Literal[PluginKind.IMAGER], name: str,
+    def create(self, kind: Literal[PluginKind.IMAGER, "imager"], name: str,
                options: PluginOptions = None) -> Imager: ...
     @overload
-    def create(self, kind: Literal[PluginKind.CAPTURE_FORMAT], name: str,
+    def create(self, kind: Literal[PluginKind.CAPTURE_FORMAT, "capture_format"], name: str,
                options: PluginOptions = None) -> CaptureFormat: ...
     @overload
     def create(self, kind: PluginKind | str, name: str,
@@ -306,7 +335,7 @@ class Registry:
         return (PluginKind(kind), name) in self._specs
 
 
-def registration_options(cls: type[T], options: Mapping[str, Any], who: str) -> T:
+def registration_options(cls: type[T], options: Mapping[str, object], who: str) -> T:
     """The options dataclass ``cls`` of one ``register(...)`` call; a one-line
     :class:`PluginError` names an unknown or a missing option and the valid ones."""
     valid = [f.name for f in fields(cls)]  # type: ignore[arg-type]
@@ -331,13 +360,25 @@ class RegistrationOptions:
     config: str | type | None = None
     requires: Sequence[str] | Mapping[str, str] = ()
     description: str = ""
-    test_config: Mapping[str, Any] | None = None
+    test_config: Mapping[str, object] | None = None
     expected_failures: Mapping[str, str] | None = None
     capabilities: Iterable[str | Capability] | None = None
     """What the plugin can do, from its kind's vocabulary
     (:data:`nlosfw.plugins.capabilities.VOCABULARY`; a name outside it is a one-line
     :class:`PluginError`); ``None`` takes the kind's defaults. The conformance kit picks
     its checks from them."""
+
+
+class RegistrationKwargs(TypedDict, total=False):
+    """The keyword options of a ``register(name, factory, ...)`` call, typed (what they mean:
+    :class:`RegistrationOptions`)."""
+
+    config: str | type | None
+    requires: Sequence[str] | Mapping[str, str]
+    description: str
+    test_config: Mapping[str, object] | None
+    expected_failures: Mapping[str, str] | None
+    capabilities: Iterable[str | Capability] | None
 
 
 @dataclass
@@ -351,8 +392,10 @@ class Registrar:
     registry: Registry
 
     def __call__(self, name: str, factory: str | Callable[..., Any] | LazyFactory,
-                 **options: Any) -> None:
-        """Register plugin ``name`` of this hook's kind, with :class:`RegistrationOptions`."""
+                 **options: Unpack[RegistrationKwargs]) -> None:
+        """Register plugin ``name`` of this hook's kind, with :class:`RegistrationOptions`
+        (an unknown option is a one-line :class:`PluginError`). Capabilities given here
+        take the place of those the plugin's class declares."""
         if not name or not name.replace("_", "").replace("-", "").isalnum():
             raise PluginError(f"{self.distribution}: invalid {self.kind.value} plugin name "
                               f"{name!r}; use letters, digits, '_' and '-'")
@@ -368,17 +411,20 @@ class Registrar:
             description=opts.description, test_config=dict(opts.test_config or {}),
             expected_failures=dict(opts.expected_failures or {}),
             declared_capabilities=(None if opts.capabilities is None
-                                   else _as_tuple(opts.capabilities)),
+                                   else _as_tuple(opts.capabilities, self.kind,
+                                                  f"{self.distribution}: {self.kind.value} "
+                                                  f"plugin '{name}'")),
         )
         if self.accept(spec):
             self.registry.add(spec)
 
 
-def _as_tuple(capabilities: Any) -> Any:
-    """A tuple of the declared names; a single string or enum member is left for
-    :func:`parse_capabilities` to refuse."""
-    if isinstance(capabilities, (str, Capability)) or not isinstance(capabilities, Iterable):
-        return capabilities
+def _as_tuple(capabilities: Iterable[str | Capability], kind: PluginKind, who: str
+              ) -> tuple[str, ...]:
+    """A tuple of the declared names; a single name instead of a list is a one-line
+    :class:`PluginError` (from :func:`parse_capabilities`)."""
+    if isinstance(capabilities, str) or not isinstance(capabilities, Iterable):
+        parse_capabilities(kind, who, capabilities)
     return tuple(capabilities)
 
 

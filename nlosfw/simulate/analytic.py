@@ -45,7 +45,7 @@ class AnalyticConfig(SimulatorConfig):
         require(self.max_pairs >= 1, "max_pairs", f"must be >= 1, got {self.max_pairs}")
 
 
-class AnalyticSimulator(Simulator):
+class AnalyticSimulator(Simulator[AnalyticConfig]):
     """Closed-form transients of points and patches; quadrature for planar items."""
 
     config_class = AnalyticConfig

@@ -6,7 +6,7 @@ import dataclasses
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, TypeVar
 
 import numpy as np
 
@@ -26,7 +26,10 @@ class SimulatorConfig:
     """Seed of every random choice (sampling and noise): same seed, same capture."""
 
 
-class Simulator(Configurable, ABC):
+SimulatorConfigT = TypeVar("SimulatorConfigT", bound=SimulatorConfig)
+
+
+class Simulator(Configurable[SimulatorConfigT], ABC):
     """Renders a :class:`~nlosfw.simulate.Scene` into a transient :class:`Capture`.
 
     Subclasses implement :meth:`render` (noise-free transport of a validated

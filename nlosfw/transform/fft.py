@@ -77,7 +77,7 @@ class FFTTransformConfig(PhasorTransformConfig):
                 "frequencies", "give either an explicit list or a band (f_min, f_max), not both")
 
 
-class FFTTransform(PhasorTransform):
+class FFTTransform(PhasorTransform[FFTTransformConfig]):
     """Temporal DFT of a single-spot or confocal capture at a set of frequencies.
 
     Exact DFT bins go through a zero-padded real FFT, other frequencies through

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import ClassVar, TypeVar
 
 from nlosfw.capture.data import Capture
 from nlosfw.common.config import Configurable
@@ -16,7 +16,10 @@ class PhasorTransformConfig:
     """Options shared by every phasor transform (none yet)."""
 
 
-class PhasorTransform(Configurable, ABC):
+TransformConfigT = TypeVar("TransformConfigT", bound=PhasorTransformConfig)
+
+
+class PhasorTransform(Configurable[TransformConfigT], ABC):
     """Turns a time-domain :class:`Capture` into a :class:`PhasorField`."""
 
     config_class: ClassVar[type] = PhasorTransformConfig

@@ -114,7 +114,7 @@ class GaussianWavelet:
                 ).astype(np.complex128)
 
 
-class WaveletTransform(PhasorTransform):
+class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
     """Spectral bins of Liu's Gaussian virtual illumination with their weights.
 
     See the module docstring for the kernel, the weights and the sign convention.
@@ -128,6 +128,7 @@ class WaveletTransform(PhasorTransform):
         spacing = wall_spacing(cfg.grid_spacing, capture, required=cfg.wavelength is None)
         wavelength = cfg.wavelength
         if wavelength is None:
+            assert spacing is not None  # wall_spacing required it
             wavelength = cfg.wavelength_factor * spacing * path_multiplier(capture.kind)
         return GaussianWavelet(wavelength, cfg.n_cycles * wavelength / 6.0), spacing
 

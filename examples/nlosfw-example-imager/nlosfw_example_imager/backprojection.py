@@ -7,7 +7,7 @@ from nlosfw.image import ProgressCallback, laser_phase, path_multiplier, phasor_
 from nlosfw_example_imager.hooks import BackprojectionConfig
 
 
-class BackprojectionImager(Imager):
+class BackprojectionImager(Imager[BackprojectionConfig]):
     """Each voxel v sums every wall sample's phasor, delayed by the path back to v:
 
         I(v) = | sum_f w_f L_f(v) sum_s P'_f(s) exp(2 pi i f m |v - s|) / |v - s| |^2

@@ -1,9 +1,9 @@
 """Registers the imager (the module the entry point names); imports nothing heavy."""
 
 from dataclasses import dataclass
-from typing import Any
 
 from nlosfw import ImagerConfig, hookimpl, require
+from nlosfw.plugins import Registrar
 
 
 @dataclass(frozen=True)
@@ -18,7 +18,7 @@ class BackprojectionConfig(ImagerConfig):
 
 
 @hookimpl
-def register_imagers(register: Any) -> None:
+def register_imagers(register: Registrar) -> None:
     register(
         "example_backprojection",                               # imager=example_backprojection
         "nlosfw_example_imager.backprojection:BackprojectionImager",   # imported when used

@@ -1,10 +1,10 @@
 """Registers the network (the module the entry point names); imports no torch."""
 
 from dataclasses import dataclass
-from typing import Any
 
 from nlosfw import hookimpl
 from nlosfw.model import NeuralFieldConfig
+from nlosfw.plugins import NetworkRegistrar
 
 
 @dataclass(frozen=True)
@@ -19,7 +19,7 @@ class FourierConfig(NeuralFieldConfig):
 
 
 @hookimpl
-def register_networks(register: Any) -> None:
+def register_networks(register: NetworkRegistrar) -> None:
     register("example_fourier", engine="torch",
              factory="nlosfw_example_network.network:FourierFeatureMLP",
              config=FourierConfig,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import zipfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 
 from nlosfw import DataError, FieldModel, FieldModelConfig, FitError, FitReport, PhasorField
 from nlosfw.common import Choice, config_from_mapping, config_to_dict
+from nlosfw.model import check_query, check_training_field
 
 _FORMAT = "nlosfw-example-nearest"
 
@@ -41,19 +42,20 @@ class _Samples:
     values: np.ndarray
 
 
-class NearestFieldModel(FieldModel):
+class NearestFieldModel(FieldModel[NearestConfig]):
     """Copies the nearest training wall sample; interpolates between training frequencies."""
 
     config_class = NearestConfig
+    # what the conformance kit checks (nlosfw.plugins.CAPABILITIES["model"])
+    capabilities = ("multi_frequency", "single_frequency", "save_load")
 
-    def __init__(self, config: NearestConfig | None = None) -> None:
+    def __init__(self, config: NearestConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
         self._samples: _Samples | None = None
 
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Callable | None = None) -> FitReport:
-        if field.values.size == 0 or not np.any(field.values):
-            raise FitError("field: empty or all zero; nothing to fit")
+        check_training_field(field, "nearest")
         order = np.argsort(field.frequencies)
         self._samples = _Samples(xy=field.wall_xyz[..., :2].reshape(-1, 2),
                                  freqs=field.frequencies[order],
@@ -64,12 +66,7 @@ class NearestFieldModel(FieldModel):
         if self._samples is None:
             raise FitError("nearest: predict called before fit or load")
         known = self._samples
-        wall_xy = np.asarray(wall_xy, dtype=float)
-        if wall_xy.shape[-1:] != (2,) or not np.all(np.isfinite(wall_xy)):
-            raise DataError("wall_xy: must be finite (x, y) pairs, shape (..., 2)")
-        freqs = np.atleast_1d(np.asarray(frequencies, dtype=float))
-        if not np.all(np.isfinite(freqs)) or np.any(freqs <= 0):
-            raise DataError("frequencies: must be finite and > 0 (cycles per metre)")
+        wall_xy, freqs = check_query(wall_xy, frequencies, "nearest")
         _, nearest = cKDTree(known.xy).query(wall_xy.reshape(-1, 2))
         at_points = known.values[:, nearest]                      # (F_train, N)
         if self.config.frequency_interpolation == "nearest" or known.freqs.size == 1:

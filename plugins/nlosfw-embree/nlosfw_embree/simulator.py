@@ -89,7 +89,7 @@ class _Tally:
                       self.unobstructed + other.unobstructed)
 
 
-class EmbreeSimulator(Simulator):
+class EmbreeSimulator(Simulator[EmbreeConfig]):
     """Monte Carlo (or randomised QMC) three-bounce transport with Embree occlusion rays."""
 
     config_class = EmbreeConfig

@@ -5,12 +5,15 @@ Nothing here imports jax: the factory is named by import path.
 
 from __future__ import annotations
 
-from typing import Any
-
-from nlosfw.plugins import hookimpl, register_field_networks, register_thesis_networks
+from nlosfw.plugins import (
+    NetworkRegistrar,
+    hookimpl,
+    register_field_networks,
+    register_thesis_networks,
+)
 
 
 @hookimpl
-def register_networks(register: Any) -> None:
+def register_networks(register: NetworkRegistrar) -> None:
     register_thesis_networks(register, engine="jax", factory="nlosfw_jax.networks:thesis_network")
     register_field_networks(register, engine="jax", factory="nlosfw_jax.networks:field_network")

@@ -5,14 +5,12 @@ Nothing here imports mitsuba, drjit or mitransient.
 
 from __future__ import annotations
 
-from typing import Any
-
 from nlosfw.plugins import Capability as C
-from nlosfw.plugins import hookimpl
+from nlosfw.plugins import Registrar, hookimpl
 
 
 @hookimpl
-def register_simulators(register: Any) -> None:
+def register_simulators(register: Registrar) -> None:
     register(
         "mitsuba",
         "nlosfw_mitsuba.simulator:MitsubaSimulator",

@@ -79,7 +79,7 @@ def load_mitsuba(variant: str) -> Any:
     return mi
 
 
-class MitsubaSimulator(Simulator):
+class MitsubaSimulator(Simulator[MitsubaConfig]):
     """Transient path tracing with Mitsuba 3 and mitransient, in nlosfw's conventions."""
 
     config_class = MitsubaConfig

@@ -5,13 +5,16 @@ Nothing here imports torch: the factory is named by import path.
 
 from __future__ import annotations
 
-from typing import Any
-
-from nlosfw.plugins import hookimpl, register_field_networks, register_thesis_networks
+from nlosfw.plugins import (
+    NetworkRegistrar,
+    hookimpl,
+    register_field_networks,
+    register_thesis_networks,
+)
 
 
 @hookimpl
-def register_networks(register: Any) -> None:
+def register_networks(register: NetworkRegistrar) -> None:
     register_thesis_networks(register, engine="torch",
                              factory="nlosfw_torch.networks:thesis_network")
     register_field_networks(register, engine="torch", factory="nlosfw_torch.networks:field_network")
