@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlosfw.model import FrequencySmoothness, error_metrics, second_difference_matrix, split_field
+from nlosfw.model import split_field
+from nlosfw.model.protocol import error_metrics
+from nlosfw.model.smoothness import FrequencySmoothness, second_difference_matrix
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 

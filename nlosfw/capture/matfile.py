@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.common.errors import DataError, one_line
 
@@ -157,7 +158,7 @@ def require_variables(path: Path, names: Sequence[str], expected: str) -> dict[s
     return found
 
 
-def read_mat_array(path: Path, name: str, dtype: Any = None) -> np.ndarray:
+def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None) -> np.ndarray:
     """Variable ``name`` of a v5 or v7.3 file in MATLAB's axis order (``dtype``: convert
     while reading, so a large v7.3 array is never held in two types at once)."""
     if is_hdf5(path):

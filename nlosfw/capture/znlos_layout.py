@@ -7,12 +7,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.common.errors import DataError
 
 
-def _xy3(arr: Any) -> np.ndarray:
+def _xy3(arr: npt.ArrayLike) -> np.ndarray:
     """ZNLOS stores point grids as (3, ...) (MATLAB order); y-tal fully transposes them."""
     arr = np.asarray(arr, dtype=np.float64)
     return np.transpose(arr) if arr.shape[0] == 3 else arr

@@ -6,7 +6,7 @@ import only these."""
 
 
 from nlosfw.common.progress import ProgressCallback
-from nlosfw.image.depths import automatic_depths, depth_span, depth_step
+from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.fft import FFTImager, FFTImagerConfig
 from nlosfw.image.fk import FKImager
 from nlosfw.image.interface import Imager, ImagerConfig
@@ -14,7 +14,6 @@ from nlosfw.image.lct import FBPImager, LCTImager, LCTImagerConfig, LightConeCon
 from nlosfw.image.propagation import PropagationConfig, PropagationImager
 from nlosfw.image.reconstruction import (
     Reconstruction,
-    cell_centres,
     plane_voxels,
     volume_voxels,
     wall_voxels,
@@ -22,10 +21,8 @@ from nlosfw.image.reconstruction import (
 from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
 from nlosfw.image.rsd import RSDImager, RSDImagerConfig
 from nlosfw.image.rsd_kernel import (
-    kernel,
     laser_phase,
     path_multiplier,
-    phasor_series,
     phasor_steps,
     wall_field,
 )
@@ -40,36 +37,28 @@ from nlosfw.image.scores import (
     ssim,
 )
 from nlosfw.image.transient import (
-    Falloff,
     TransientImager,
     TransientImagerConfig,
-    full_band_frequencies,
 )
 
 __all__ = [
     "amplitude",
     "automatic_depths",
-    "cell_centres",
     "depth_rmse",
     "depth_span",
-    "depth_step",
-    "Falloff",
     "FBPImager",
     "FFTImager",
     "FFTImagerConfig",
     "FKImager",
-    "full_band_frequencies",
     "image_metrics",
     "Imager",
     "ImagerConfig",
-    "kernel",
     "LCTImager",
     "LCTImagerConfig",
     "LightConeConfig",
     "laser_phase",
     "normalise",
     "path_multiplier",
-    "phasor_series",
     "phasor_steps",
     "plane_voxels",
     "ProgressCallback",

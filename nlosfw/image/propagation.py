@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
@@ -49,7 +50,7 @@ class PropagationConfig(ImagerConfig):
         require(np.isfinite(self.time), "time", f"must be a finite number, got {self.time}")
 
 
-def check_voxels(voxels: Any) -> np.ndarray:
+def check_voxels(voxels: npt.ArrayLike) -> np.ndarray:
     """Voxels as float64 (..., 3) in front of the wall; DataError otherwise."""
     v = np.asarray(voxels, dtype=np.float64)
     if v.ndim not in (2, 3, 4) or v.shape[-1] != 3:
@@ -132,7 +133,7 @@ class PropagationImager(Imager[PropagationConfigT]):
         return Reconstruction(intensity=intensity, voxels=voxels, metadata=meta)
 
     def reconstruct_time_resolved(self, field: PhasorField, voxels: np.ndarray,
-                                  times: Any) -> np.ndarray:
+                                  times: npt.ArrayLike) -> np.ndarray:
         """Intensities (n_times, *voxels.shape[:-1]) at several virtual times (m of path).
 
         Time t images the virtual pulse t metres of path after it focuses at the

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.common.errors import DataError
 from nlosfw.transform.field import PhasorField
@@ -104,7 +105,7 @@ def plane_voxels(depth: float, x_range: tuple[float, float], y_range: tuple[floa
     return volume_voxels([depth], x_range, y_range, shape)[0]
 
 
-def volume_voxels(depths: Any, x_range: tuple[float, float], y_range: tuple[float, float],
+def volume_voxels(depths: npt.ArrayLike, x_range: tuple[float, float], y_range: tuple[float, float],
                   shape: tuple[int, int]) -> np.ndarray:
     """A stack of planes parallel to the wall, shape (Z, Y, X, 3).
 
@@ -125,7 +126,7 @@ def cell_centres(bounds: tuple[float, float], n: int) -> np.ndarray:
     return lo + (np.arange(n) + 0.5) * step
 
 
-def wall_voxels(field: PhasorField, depths: Any) -> np.ndarray:
+def wall_voxels(field: PhasorField, depths: npt.ArrayLike) -> np.ndarray:
     """Planes at ``depths`` (m) on the wall grid of ``field``, shape (Z, Y, X, 3).
 
     The planes span the wall's grid cells (each voxel faces one wall sample), as every

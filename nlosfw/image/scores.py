@@ -17,9 +17,8 @@ the variant some papers report; the run's scores never use it.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.common.errors import DataError
 from nlosfw.image.reconstruction import Reconstruction
@@ -145,7 +144,7 @@ def _nearest_cells(n_old: int, n_new: int) -> np.ndarray:
     return np.minimum(((np.arange(n_new) + 0.5) * n_old / n_new).astype(np.int64), n_old - 1)
 
 
-def _pair(a: Any, b: Any) -> tuple[np.ndarray, np.ndarray]:
+def _pair(a: npt.ArrayLike, b: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     if a.shape != b.shape:
         raise DataError(f"images differ in shape: {a.shape} vs {b.shape}")

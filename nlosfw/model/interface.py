@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, ClassVar, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Configurable, require
@@ -106,7 +107,8 @@ def check_training_field(field: PhasorField, who: str) -> None:
         raise FitError(f"{who}: the field's values are all zero; nothing to fit")
 
 
-def check_query(wall_xy: Any, frequencies: Any, who: str) -> tuple[np.ndarray, np.ndarray]:
+def check_query(wall_xy: npt.ArrayLike, frequencies: npt.ArrayLike, who: str
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Validated (wall points (..., 2) float64, frequencies (F,) float64) for ``predict``."""
     xy = np.asarray(wall_xy, dtype=np.float64)
     f = np.atleast_1d(np.asarray(frequencies, dtype=np.float64))

@@ -45,10 +45,9 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -381,7 +380,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         return model
 
 
-def _pair(values: Any) -> tuple[float, float]:
+def _pair(values: Sequence[float]) -> tuple[float, float]:
     return float(values[0]), float(values[1])
 
 

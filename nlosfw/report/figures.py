@@ -11,7 +11,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -241,7 +241,7 @@ def _truth_panel(ax: Any, truth_depth: np.ndarray | None, depth_scale: Mapping[s
     ax.set_title("ground truth: depth\n(depth row's colour scale)")
 
 
-def _shared_scale(maps: Any) -> float:
+def _shared_scale(maps: Iterable[np.ndarray]) -> float:
     """One colour scale for several error maps: the largest 99th percentile (outliers clip)."""
     values = [float(np.percentile(m, 99)) for m in maps if np.size(m)]
     return max(values + [1e-12])

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
@@ -56,7 +57,7 @@ def wall_grid(n: int = 16, size: float = 1.0) -> np.ndarray:
 
 
 def point_phasor_field(target: tuple[float, float, float] = TINY_TARGET, n: int = 16,
-                       size: float = 1.0, frequencies: Any = (4.0,),
+                       size: float = 1.0, frequencies: npt.ArrayLike = (4.0,),
                        confocal: bool = False) -> PhasorField:
     """Exact phasor field of one point scatterer on the n x n :func:`wall_grid` of ``size``.
 
@@ -67,7 +68,7 @@ def point_phasor_field(target: tuple[float, float, float] = TINY_TARGET, n: int 
     return point_field(target, (n, n), size / n, frequencies, confocal=confocal)
 
 
-def smooth_field(n: int = 16, frequencies: Any = None, seed: int = 0,
+def smooth_field(n: int = 16, frequencies: npt.ArrayLike | None = None, seed: int = 0,
                  n_waves: int = 3) -> PhasorField:
     """A smooth synthetic complex field: a sum of a few plane waves over (x, y, f).
 
@@ -90,7 +91,8 @@ def smooth_field(n: int = 16, frequencies: Any = None, seed: int = 0,
                                                 laser_point=np.zeros(3)))
 
 
-def tiny_voxels(depths: Any = (0.5, 0.6, 0.7), n: int = 16, size: float = 1.0) -> np.ndarray:
+def tiny_voxels(depths: npt.ArrayLike = (0.5, 0.6, 0.7), n: int = 16, size: float = 1.0
+                ) -> np.ndarray:
     """A small stack of planes (Z, Y, X, 3) facing the wall, matching :func:`wall_grid`."""
     return volume_voxels(depths, (-size / 2, size / 2), (-size / 2, size / 2), (n, n))
 
@@ -111,7 +113,8 @@ def rect_wall_grid(shape: tuple[int, int] = (6, 8), spacing: float = 0.1,
 
 
 def point_field(target: tuple[float, float, float], shape: tuple[int, int] = (12, 16),
-                spacing: float = 1 / 16, frequencies: Any = (4.0,), weights: Any = None,
+                spacing: float = 1 / 16, frequencies: npt.ArrayLike = (4.0,),
+                weights: npt.ArrayLike | None = None,
                 confocal: bool = False, device_legs: bool = False) -> PhasorField:
     """Exact phasor field of a point scatterer on a (ny, nx) wall grid.
 
@@ -153,7 +156,7 @@ def gaussian_band(centre: float, sigma_f: float, n: int = 9,
     return f, w.astype(np.complex128)
 
 
-def aligned_voxels(wall: np.ndarray, depths: Any) -> np.ndarray:
+def aligned_voxels(wall: np.ndarray, depths: npt.ArrayLike) -> np.ndarray:
     """Planes (Z, Y, X, 3) at ``depths`` whose (x, y) are exactly the wall points (Y, X, 3)."""
     depths = np.atleast_1d(np.asarray(depths, dtype=float))
     vox = np.repeat(np.asarray(wall, dtype=float)[None], depths.size, axis=0)

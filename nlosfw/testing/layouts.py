@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat
@@ -107,7 +108,7 @@ def _square_scan(capture: Capture, bin_ps: float, layout: str) -> tuple[int, flo
 
 
 # ------------------------------------------------------------------------------ layouts
-def write_lct(path: Path, capture: Capture, dtype: Any = None) -> Path:
+def write_lct(path: Path, capture: Capture, dtype: npt.DTypeLike | None = None) -> Path:
     """``capture`` as a Stanford LCT file: ``rect_data`` [N, N, T] (``dtype``: e.g. uint16
     as published, default the capture's) and ``width``."""
     n, half = _square_scan(capture, LCT_BIN_PS, "the LCT layout")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -11,6 +12,8 @@ import numpy as np
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import DataError
 
+#: What :meth:`PhasorField.select` takes per axis: an index, a slice, or indices.
+Index = int | slice | Sequence[int] | np.ndarray
 
 @dataclass(frozen=True, eq=False)
 class PhasorField:
@@ -86,8 +89,8 @@ class PhasorField:
         """(dy, dx) in metres if the wall points form a regular axis-aligned grid, else None."""
         return regular_grid_spacing(self.wall_xyz)
 
-    def select(self, frequency_index: Any = slice(None), y: Any = slice(None),
-               x: Any = slice(None)) -> PhasorField:
+    def select(self, frequency_index: Index = slice(None), y: Index = slice(None),
+               x: Index = slice(None)) -> PhasorField:
         """A sub-field: some frequencies and/or a window or stride of wall samples."""
         fi = np.arange(self.n_frequencies)[frequency_index]
         fi = np.atleast_1d(fi)

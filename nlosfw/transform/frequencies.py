@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import ConfigError, DataError
 
@@ -39,7 +40,7 @@ def path_multiplier(kind: CaptureKind) -> int:
     return 2 if kind is CaptureKind.CONFOCAL else 1
 
 
-def wall_spacing(configured: float | None, capture: Any, required: bool) -> float | None:
+def wall_spacing(configured: float | None, capture: Capture, required: bool) -> float | None:
     """Δ for a transform: ``configured`` if set, else the capture's sensor grid spacing.
 
     When the capture has no spacing (a single wall point), returns None if the
