@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -71,11 +71,30 @@ class NetworkBuild:
     """Names the model (or file) in error messages."""
 
 
-class Engine(ABC):
+#: A backend's network (a ``torch.nn.Module``, a JAX pytree of arrays, ...).
+NetT = TypeVar("NetT")
+#: A backend's loss handle (a device scalar read back only when needed).
+LossT = TypeVar("LossT")
+#: A backend's copy of the trainable state (see :meth:`Engine.snapshot`).
+SnapT = TypeVar("SnapT")
+
+
+class DeviceArray(Protocol):
+    """An array of a backend on its device: all the shared code needs is its shape."""
+
+    @property
+    def shape(self) -> Sequence[int]: ...
+
+
+ArrT = TypeVar("ArrT", bound=DeviceArray)
+
+
+class Engine(ABC, Generic[NetT, ArrT, LossT, SnapT]):
     """A network's state and Adam's on one device, with training steps and forward passes.
 
     A backend implements the methods marked abstract; each takes and returns numpy
-    arrays at its boundary, so the trainer never sees a tensor.
+    arrays at its boundary, so the trainer never sees a tensor. Its type parameters are the
+    backend's network, device array, loss handle and state snapshot.
     """
 
     def __init__(self, build: NetworkBuild, state: Mapping[str, np.ndarray] | None = None
@@ -84,10 +103,10 @@ class Engine(ABC):
         or else from its initial state."""
         self.build = build
         self.n_networks = build.n_networks
-        self.x: Any = None
-        self.y: Any = None
-        self.val_x: Any = None
-        self.val_y: Any = None
+        self.x: ArrT | None = None
+        self.y: ArrT | None = None
+        self.val_x: ArrT | None = None
+        self.val_y: ArrT | None = None
         template = self.make_network(0)
         own = self.network_state(template)
         trainable = self.trainable(template)
@@ -100,36 +119,36 @@ class Engine(ABC):
 
     # ------------------------------------------------------------------ backend: building
     @abstractmethod
-    def make_network(self, index: int) -> Any:
+    def make_network(self, index: int) -> NetT:
         """Network number ``index`` built by the factory, with its own seeded initialisation
         (different networks for different indices, the same for the same seed)."""
 
     @abstractmethod
-    def network_state(self, network: Any) -> dict[str, np.ndarray]:
+    def network_state(self, network: NetT) -> dict[str, np.ndarray]:
         """Every array of ``network`` (trainable and fixed) by name, as numpy copies."""
 
     @abstractmethod
-    def trainable(self, network: Any) -> set[str]:
+    def trainable(self, network: NetT) -> set[str]:
         """Names of the arrays Adam trains (the others stay fixed)."""
 
     @abstractmethod
-    def place(self, network: Any, state: Mapping[str, np.ndarray]) -> None:
+    def place(self, network: NetT, state: Mapping[str, np.ndarray]) -> None:
         """Put ``network`` with ``state`` (leading axis K in single mode) on the device and
         create Adam's state for its trainable arrays."""
 
     # ------------------------------------------------------------------ backend: training
     @abstractmethod
-    def to_device(self, a: np.ndarray) -> Any:
+    def to_device(self, a: np.ndarray) -> ArrT:
         """``a`` as an array of the backend on the device (floating point as float32)."""
 
     @abstractmethod
     def step(self, idx: np.ndarray | None, lr: float, smooth: SmoothnessBatch | None = None
-             ) -> Any:
+             ) -> LossT:
         """One Adam step on the batch ``idx`` (None: all data), with the penalty of ``smooth``
         added to the loss; returns a handle of the data loss (the mean squared error)."""
 
     @abstractmethod
-    def mean_loss(self, handles: list[Any]) -> float:
+    def mean_loss(self, handles: list[LossT]) -> float:
         """Mean of the losses behind ``handles`` (synchronises with the device)."""
 
     @abstractmethod
@@ -138,11 +157,11 @@ class Engine(ABC):
 
 
     @abstractmethod
-    def snapshot(self) -> Any:
+    def snapshot(self) -> SnapT:
         """A copy of the current trainable state that :meth:`restore` can bring back."""
 
     @abstractmethod
-    def restore(self, snapshot: Any) -> None:
+    def restore(self, snapshot: SnapT) -> None:
         """Bring back the state saved by :meth:`snapshot`."""
 
     @abstractmethod
@@ -161,6 +180,18 @@ class Engine(ABC):
         self.x, self.y = self.to_device(x), self.to_device(y)
         self.val_x = None if val_x is None else self.to_device(val_x)
         self.val_y = None if val_y is None else self.to_device(val_y)
+
+    def training_data(self) -> tuple[ArrT, ArrT]:
+        """The training inputs and targets on the device (set by :meth:`set_data`)."""
+        if self.x is None or self.y is None:
+            raise FitError(f"{self.build.who}: no training data; call set_data() first")
+        return self.x, self.y
+
+    def validation_data(self) -> tuple[ArrT, ArrT]:
+        """The validation inputs and targets on the device (see :meth:`n_validation`)."""
+        if self.val_x is None or self.val_y is None:
+            raise FitError(f"{self.build.who}: no validation data")
+        return self.val_x, self.val_y
 
     def n_validation(self) -> int:
         """Rows of validation data (0: none)."""
@@ -198,7 +229,7 @@ class Engine(ABC):
                 for k in range(0, xp.shape[0], chunk)]
         return np.concatenate(outs, axis=-2)[..., :n, :]
 
-    def _initial_state(self, template: Any, own: dict[str, np.ndarray]
+    def _initial_state(self, template: NetT, own: dict[str, np.ndarray]
                        ) -> dict[str, np.ndarray]:
         declared = getattr(template, "initial_state", None)
         fixed = dict(declared(self.n_networks, self.build.config.seed)) if declared else {}

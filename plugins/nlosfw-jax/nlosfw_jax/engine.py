@@ -184,7 +184,7 @@ class JaxEngine(Engine):
             self.to_device(smooth.x), self.to_device(smooth.matrix),
             jnp.asarray(smooth.weight, dtype=jnp.float32))
         self.params, self.opt_state, loss = _step(
-            self.params, self.rest, self.opt_state, (self.x, self.y, index, penalty),
+            self.params, self.rest, self.opt_state, (*self.training_data(), index, penalty),
             jnp.asarray(lr, dtype=jnp.float32), bool(self.n_networks))
         return loss
 
@@ -192,8 +192,9 @@ class JaxEngine(Engine):
         return float(np.mean(np.asarray(jax.device_get(handles), dtype=np.float64)))
 
     def squared_error(self, start: int, stop: int) -> tuple[float, int]:
-        y = self.val_y[..., start:stop, :]
-        err = _sum_squared_error(self.params, self.rest, self.val_x[start:stop], y,
+        val_x, val_y = self.validation_data()
+        y = val_y[..., start:stop, :]
+        err = _sum_squared_error(self.params, self.rest, val_x[start:stop], y,
                                  bool(self.n_networks))
         return float(err), int(np.prod(y.shape))
 

@@ -113,7 +113,7 @@ class TorchEngine(Engine):
 
     def step(self, idx: np.ndarray | None, lr: float, smooth: SmoothnessBatch | None = None
              ) -> Any:
-        x, y = self.x, self.y
+        x, y = self.training_data()
         state = {**self.fixed, **self.params}
         with self._threads():
             if idx is not None:
@@ -137,7 +137,8 @@ class TorchEngine(Engine):
         return float(torch.stack(handles).mean().item())
 
     def squared_error(self, start: int, stop: int) -> tuple[float, int]:
-        x, y = self.val_x[start:stop], self.val_y[..., start:stop, :]
+        val_x, val_y = self.validation_data()
+        x, y = val_x[start:stop], val_y[..., start:stop, :]
         with self._threads(), torch.no_grad():
             out = self._apply({**self.fixed, **self.params}, x)
             return float(torch.sum(torch.square(out - y)).item()), int(y.numel())
