@@ -42,7 +42,7 @@ if TYPE_CHECKING:
     from nlosfw.pipeline import RunOutput
 
 
-def simulate_scene(scene: Scene | str | Mapping[str, Any], simulator: str = "analytic",
+def simulate_scene(scene: Scene | str | Mapping[str, object], simulator: str = "analytic",
                    **options: Any) -> Capture:
     """The transient capture of ``scene`` rendered by simulator plugin ``simulator``.
 
@@ -145,7 +145,7 @@ def run(overrides: Sequence[str] = (), *, output_dir: str | Path | None = None,
     return run_in_process(overrides, output_dir, config_name)
 
 
-def _scene(scene: Scene | str | Mapping[str, Any]) -> Scene:
+def _scene(scene: Scene | str | Mapping[str, object]) -> Scene:
     if isinstance(scene, Scene):
         return scene
     if isinstance(scene, str):

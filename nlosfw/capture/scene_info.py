@@ -17,7 +17,7 @@ import numpy as np
 from nlosfw.common.errors import DataError
 
 
-def check_scene_info(info: Mapping[str, Any]) -> None:
+def check_scene_info(info: Mapping[str, object]) -> None:
     """Raise :class:`DataError` naming the key when a part nlosfw reads is malformed."""
     truth = info.get("ground_truth")
     if truth is not None:
@@ -49,7 +49,7 @@ def _array(value: Any, key: str) -> np.ndarray:
     return arr
 
 
-def _map(truth: Mapping[str, Any], name: str) -> np.ndarray | None:
+def _map(truth: Mapping[str, object], name: str) -> np.ndarray | None:
     if truth.get(name) is None:
         return None
     arr = _array(truth[name], f"ground_truth.{name}")
@@ -59,7 +59,7 @@ def _map(truth: Mapping[str, Any], name: str) -> np.ndarray | None:
     return arr
 
 
-def _numbers(volume: Mapping[str, Any], name: str, sizes: tuple[int, ...]) -> None:
+def _numbers(volume: Mapping[str, object], name: str, sizes: tuple[int, ...]) -> None:
     if volume.get(name) is None:
         return
     arr = _array(volume[name], f"volume.{name}").reshape(-1)

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
 
 from rich.table import Table
 
+from nlosfw.common.config import Scalar
 from nlosfw.pipeline.metrics import RunMetrics
 
 
-def _fmt(value: Any, digits: int = 3) -> str:
+def _fmt(value: Scalar, digits: int = 3) -> str:
     if value is None:
         return "-"
     if isinstance(value, float):

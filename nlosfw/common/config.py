@@ -18,6 +18,9 @@ from typing import Any, ClassVar, Generic, TypeVar
 from nlosfw.common.errors import ConfigError
 
 T = TypeVar("T")
+
+#: A plain scalar value: of a config option, a metric, a table cell.
+Scalar = str | int | float | bool | None
 C = TypeVar("C")
 
 

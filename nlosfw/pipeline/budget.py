@@ -192,7 +192,7 @@ def check_memory(config: Any, available: int | None = None,
                       "make it smaller, or set limits.allow_large=true to run anyway")
 
 
-def memory_summary(config: Mapping[str, Any], file_shape: FileShape | None = None) -> str:
+def memory_summary(config: Mapping[str, object], file_shape: FileShape | None = None) -> str:
     """The estimate as one line (for the log)."""
     parts = estimate_memory(config, file_shape)
     total = sum(p.nbytes for p in parts)

@@ -34,7 +34,7 @@ import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, TypedDict
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
@@ -63,8 +63,20 @@ class Verdict(enum.Enum):
     replace = "replace"        # output.overwrite=true: remove the earlier run's files
 
 
+class RunMarker(TypedDict):
+    """The marker file's content: which run (process, host, configuration hash) claimed
+    which files of the directory."""
+
+    format: str
+    version: int
+    pid: int | str
+    host: str
+    config_hash: str
+    files: list[str]
+
+
 # --------------------------------------------------------------------- configuration
-def _result_options(config: Mapping[str, Any]) -> dict[str, Any]:
+def _result_options(config: Mapping[str, object]) -> dict[str, object]:
     """``config`` (plain) without :data:`RUN_CONTROL_OPTIONS`."""
     plain = yaml_safe.to_plain(dict(config))
     for dotted in RUN_CONTROL_OPTIONS:
@@ -77,12 +89,12 @@ def _result_options(config: Mapping[str, Any]) -> dict[str, Any]:
     return plain
 
 
-def config_hash(config: Mapping[str, Any]) -> str:
+def config_hash(config: Mapping[str, object]) -> str:
     """SHA-256 of the canonical JSON of a run's configuration, run-control options left out."""
     return canonical_digest(_result_options(config))
 
 
-def first_difference(old: Mapping[str, Any], new: Mapping[str, Any]
+def first_difference(old: Mapping[str, object], new: Mapping[str, object]
                      ) -> tuple[str, Any, Any] | None:
     """(dotted option, old value, new value) of the first option that differs, or None."""
     a, b = _flatten(_result_options(old)), _flatten(_result_options(new))
@@ -93,9 +105,9 @@ def first_difference(old: Mapping[str, Any], new: Mapping[str, Any]
     return None
 
 
-def _flatten(value: Any, prefix: str = "") -> dict[str, Any]:
+def _flatten(value: Any, prefix: str = "") -> dict[str, object]:
     if isinstance(value, dict) and value:
-        out: dict[str, Any] = {}
+        out: dict[str, object] = {}
         for key, item in value.items():
             out.update(_flatten(item, f"{prefix}.{key}" if prefix else str(key)))
         return out
@@ -114,7 +126,7 @@ class EarlierRun:
 
     live_pid: str | None = None
     """``pid@host`` of a run holding the directory's lock right now."""
-    marker: Mapping[str, Any] | None = None
+    marker: RunMarker | None = None
     """The earlier run's marker (None: no nlosfw run claimed anything here)."""
     status: str | None = None
     """The earlier run's ``metrics.json`` status (None: it wrote none)."""
@@ -124,7 +136,7 @@ class EarlierRun:
     @property
     def files(self) -> tuple[str, ...]:
         """The files the earlier run claimed (relative paths)."""
-        return tuple((self.marker or {}).get("files", ()))
+        return () if self.marker is None else tuple(self.marker["files"])
 
 
 def inspect_run_dir(run_dir: Path, planned: Iterable[str], check_live: bool = True
@@ -137,7 +149,7 @@ def inspect_run_dir(run_dir: Path, planned: Iterable[str], check_live: bool = Tr
         return EarlierRun()
     live = _lock_holder(run_dir / LOCK_NAME) if check_live else None
     marker = _read_marker(run_dir / MARKER_NAME)
-    claimed = {f.split("/", 1)[0] for f in (marker or {}).get("files", ())}
+    claimed = {f.split("/", 1)[0] for f in ([] if marker is None else marker["files"])}
     if marker is not None:  # Hydra's files beside an earlier run are that run's
         claimed.update(HYDRA_FILES)
     in_the_way = tuple(name for name in planned
@@ -151,7 +163,7 @@ def inspect_run_dir(run_dir: Path, planned: Iterable[str], check_live: bool = Tr
     return EarlierRun(live_pid=live, marker=marker, status=status, in_the_way=in_the_way)
 
 
-def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, Any], *,
+def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object], *,
             overwrite: bool, resume: bool) -> Verdict:
     """What a run of ``config`` does with ``run_dir`` holding ``earlier``; a refusal is a
     one-line :class:`ConfigError` (exit status 2) and leaves the directory as it was.
@@ -174,12 +186,12 @@ def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, Any], *,
         raise ConfigError("output.overwrite", f"{run_dir} already holds {article} {state} run; "
                           "choose another directory, or set output.overwrite=true to replace "
                           "its files")
-    if earlier.marker.get("config_hash") != config_hash(config):
+    if earlier.marker["config_hash"] != config_hash(config):
         raise _differs(run_dir, config)
     return Verdict.skip if state in FINISHED else Verdict.set_aside
 
 
-def _differs(run_dir: Path, config: Mapping[str, Any]) -> ConfigError:
+def _differs(run_dir: Path, config: Mapping[str, object]) -> ConfigError:
     """The refusal of a resumed sweep job whose configuration is not the earlier one's."""
     hint = ("this sweep directory was run with another configuration; use a new "
             "hydra.sweep.dir, or output.overwrite=true to replace its runs")
@@ -202,13 +214,13 @@ class RunHold:
     when the run ends (the marker stays, the lock goes).
     """
 
-    def __init__(self, run_dir: Path, lock: IO[str], marker: dict[str, Any]) -> None:
+    def __init__(self, run_dir: Path, lock: IO[str], marker: RunMarker) -> None:
         self.run_dir = run_dir
         self._lock = lock
         self._marker = marker
 
     @classmethod
-    def acquire(cls, run_dir: Path, config: Mapping[str, Any], planned: Iterable[str], *,
+    def acquire(cls, run_dir: Path, config: Mapping[str, object], planned: Iterable[str], *,
                 overwrite: bool, resume: bool) -> RunHold | None:
         """Lock ``run_dir``, judge what it holds and act on it: None when the run is to be
         skipped (a finished job of a resumed sweep), else the hold. Raises the refusals of
@@ -242,16 +254,15 @@ class RunHold:
         lock.truncate()
         lock.write(f"{os.getpid()}@{socket.gethostname()}\n")
         lock.flush()
-        marker = {"format": MARKER_FORMAT, "version": 1, "pid": os.getpid(),
-                  "host": socket.gethostname(), "config_hash": config_hash(config),
-                  "files": []}
+        marker = RunMarker(format=MARKER_FORMAT, version=1, pid=os.getpid(),
+                           host=socket.gethostname(), config_hash=config_hash(config), files=[])
         return cls(run_dir, lock, marker)
 
     def claim(self, name: str) -> None:
         """Record ``name`` (relative to the run directory) as this run's, before writing it."""
         if name in self._marker["files"]:
             return
-        self._marker = {**self._marker, "files": [*self._marker["files"], name]}
+        self._marker = RunMarker(**{**self._marker, "files": [*self._marker["files"], name]})
         write_text(self.run_dir / MARKER_NAME, json.dumps(self._marker, indent=1) + "\n",
                    overwrite=True)
 
@@ -286,7 +297,7 @@ def _lock_holder(path: Path) -> str | None:
     return None
 
 
-def _read_marker(path: Path) -> dict[str, Any] | None:
+def _read_marker(path: Path) -> RunMarker | None:
     if not path.is_file():
         return None
     try:
@@ -297,7 +308,13 @@ def _read_marker(path: Path) -> dict[str, Any] | None:
     if not (isinstance(marker, dict) and marker.get("format") == MARKER_FORMAT
             and isinstance(marker.get("files"), list)):
         raise DataError(f"{path}: not an nlosfw run marker")
-    return marker
+    pid = marker.get("pid")
+    version = marker.get("version")
+    return RunMarker(format=MARKER_FORMAT, version=version if isinstance(version, int) else 1,
+                     pid=pid if isinstance(pid, (int, str)) else "",
+                     host=str(marker.get("host", "")),
+                     config_hash=str(marker.get("config_hash", "")),
+                     files=[str(f) for f in marker["files"]])
 
 
 # ------------------------------------------------------------------- acting on files
@@ -310,7 +327,7 @@ def _claimed_paths(run_dir: Path, earlier: EarlierRun) -> list[Path]:
         path = run_dir / name
         if root in path.resolve().parents and (path.is_file() or path.is_symlink()):
             out.append(path)
-    pid = str((earlier.marker or {}).get("pid", ""))
+    pid = "" if earlier.marker is None else str(earlier.marker["pid"])
     dirs = {run_dir, *((run_dir / name).parent for name in earlier.files)}
     for folder in dirs:
         if not folder.is_dir() or root not in [folder.resolve(), *folder.resolve().parents]:
@@ -361,7 +378,7 @@ def _remove_empty_parents(run_dir: Path, names: Iterable[str]) -> None:
 
 
 @contextlib.contextmanager
-def held(run_dir: Path, config: Mapping[str, Any], planned: Iterable[str], *,
+def held(run_dir: Path, config: Mapping[str, object], planned: Iterable[str], *,
          overwrite: bool, resume: bool) -> Iterator[RunHold | None]:
     """:meth:`RunHold.acquire` for a block, released when it ends (None: skip the run)."""
     hold = RunHold.acquire(run_dir, config, planned, overwrite=overwrite, resume=resume)

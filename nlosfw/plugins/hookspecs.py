@@ -10,7 +10,7 @@ Plugins may implement any subset of the hooks, and may omit arguments.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import pluggy
 
@@ -70,12 +70,12 @@ def register_capture_formats(register: Registrar) -> None:
 # metrics recorder, the command line's console reporter, the report plugin
 # ``nlosfw.report.hooks``), so a third-party plugin sees exactly what they see.
 @hookspec
-def on_run_start(run_dir: str, config: dict[str, Any]) -> None:
+def on_run_start(run_dir: str, config: dict[str, object]) -> None:
     """A run begins; ``config`` is the resolved configuration as plain data."""
 
 
 @hookspec
-def on_run_end(run_dir: str, metrics: dict[str, Any], status: str) -> None:
+def on_run_end(run_dir: str, metrics: dict[str, object], status: str) -> None:
     """A run ends; ``status`` is ``completed``, ``stopped`` (``stop_after``) or ``failed``.
 
     ``metrics`` is what metrics.json holds.
@@ -130,5 +130,5 @@ def write_run_report(files: RunFiles, results: RunResults, metrics: RunMetrics,
 
 
 @hookspec
-def write_run_page(files: RunFiles, metrics: RunMetrics, config: dict[str, Any]) -> None:
+def write_run_page(files: RunFiles, metrics: RunMetrics, config: dict[str, object]) -> None:
     """After ``metrics.json``: write the run's page (``report.html``) through ``files``."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -25,6 +25,9 @@ from nlosfw.pipeline.files import RunFiles
 from nlosfw.pipeline.metrics import ImageScores, ReconstructionMetrics, RunInfo
 from nlosfw.pipeline.results import CaptureResult, RunResults
 from nlosfw.transform.field import PhasorField
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 _SOURCE_TITLES = {"true": "true field", "raw": "raw (training samples)",
                   "interp": "interp baseline"}
@@ -223,7 +226,7 @@ def _score_label(scores: ImageScores | None, source: str) -> str:
     return f"{shown} vs true" if shown else ""
 
 
-def _truth_panel(ax: Any, truth_depth: np.ndarray | None, depth_scale: Mapping[str, Any],
+def _truth_panel(ax: Axes, truth_depth: np.ndarray | None, depth_scale: Mapping[str, Any],
                  extent: list[float]) -> None:
     """The scene's ground-truth depth as seen from the wall (when the capture carries one),
     on the depth row's colour scale.
@@ -237,7 +240,8 @@ def _truth_panel(ax: Any, truth_depth: np.ndarray | None, depth_scale: Mapping[s
         return
     depth = np.asarray(truth_depth, dtype=float).T          # (X, Y) -> (Y, X) image
     depth = np.where(depth > 0, depth, np.nan)
-    ax.imshow(depth, origin="lower", extent=extent, **depth_scale)
+    ax.imshow(depth, origin="lower", extent=(extent[0], extent[1], extent[2], extent[3]),
+              **depth_scale)
     ax.set_title("ground truth: depth\n(depth row's colour scale)")
 
 

@@ -15,9 +15,9 @@ import html
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
 
 from nlosfw.common import yaml_safe
+from nlosfw.common.config import Scalar
 from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.report.quality import QualityTable, parse_overrides
 from nlosfw.report.records import RunRecord
@@ -47,7 +47,7 @@ def page(title: str, sections: Sequence[str]) -> str:
             f"<h1>{html.escape(title)}</h1>\n{body}\n</body>\n</html>\n")
 
 
-def table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+def table(header: Sequence[str], rows: Sequence[Sequence[Scalar]]) -> str:
     """An HTML table; cells are escaped, None is empty, floats have 4 significant digits."""
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(format_cell(c))}</td>" for c in row)
@@ -89,7 +89,7 @@ _FIGURES = (
 )
 
 
-def run_report(run_dir: Path, metrics: RunMetrics, config: Mapping[str, Any],
+def run_report(run_dir: Path, metrics: RunMetrics, config: Mapping[str, object],
                overrides: Sequence[str] = ()) -> str:
     """The HTML of a run's ``report.html`` (figures read from ``run_dir/figures``)."""
     info = metrics.run
@@ -159,7 +159,7 @@ def _run_figures(run_dir: Path) -> str:
 
 
 def _run_inputs(metrics: RunMetrics) -> str:
-    rows: list[list[Any]] = []
+    rows: list[list[Scalar]] = []
     if metrics.capture is not None:
         c = metrics.capture
         rows += [["capture", c.source if c.path is None else f"file {c.path}"],

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -27,6 +27,9 @@ from matplotlib.figure import Figure
 from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import markdown_table
+
+if TYPE_CHECKING:
+    from matplotlib.artist import Artist
 
 #: The sources every run images besides its field models.
 BASELINES = ("interp", "raw")
@@ -310,10 +313,10 @@ def _cell(point: QualityPoint | None) -> str:
     return f"{point.mean:.4g} ({min(point.values):.4g} to {max(point.values):.4g})"
 
 
-def unique_legend(axes: Any) -> tuple[list[Any], list[str]]:
+def unique_legend(axes: np.ndarray) -> tuple[list[Artist], list[str]]:
     """The legend entries of every panel in ``axes`` (an array of matplotlib axes), each
     label once, in the order first seen: one figure legend for panels sharing lines."""
-    handles: list[Any] = []
+    handles: list[Artist] = []
     labels: list[str] = []
     for ax in axes.ravel():
         for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):

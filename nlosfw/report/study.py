@@ -26,11 +26,16 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from nlosfw.common.config import Scalar
 from nlosfw.pipeline.metrics import ImageScores, RunMetrics
 from nlosfw.report.quality import unique_legend
 from nlosfw.report.records import RunRecord
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.typing import ColorType
 
 #: The scores aggregated, in order (attributes of :class:`~nlosfw.pipeline.metrics.ImageScores`).
 SCORES = ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m")
@@ -211,7 +216,7 @@ def _reference_cell(row: StudyRow, name: str) -> str:
     return "inf" if row.kind == "reference" and name.endswith("psnr") else ""
 
 
-def study_csv_rows(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[Any]]]:
+def study_csv_rows(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[Scalar]]]:
     """(header, values) of study.csv: every statistic of every score."""
     header = ["condition", "pattern", "undersampling", "train_samples", "series", "kind", "runs",
               "seeds"]
@@ -219,7 +224,7 @@ def study_csv_rows(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[Any]]
         header += [f"{name}_{stat}" for stat in ("mean", "std", "min", "max")]
     values = []
     for r in rows:
-        line: list[Any] = [r.condition, r.pattern, f"{r.undersampling:.6g}", r.train_samples,
+        line: list[Scalar] = [r.condition, r.pattern, f"{r.undersampling:.6g}", r.train_samples,
                            r.series, r.kind, r.runs, " ".join(str(s) for s in r.seeds)]
         for name in SCORES:
             s = r.scores[name]
@@ -249,7 +254,7 @@ def study_figure(rows: Sequence[StudyRow], path: Path, dpi: int = 110) -> None:
     fig = Figure(figsize=(4.6 * len(panels), 3.3 * len(conditions) + 0.8))
     axes = fig.subplots(len(conditions), len(panels), squeeze=False)
     unders = sorted({r.undersampling for r in rows})
-    colours: dict[str, Any] = {}
+    colours: dict[str, ColorType] = {}
     for i, condition in enumerate(conditions):
         mine = [r for r in rows if r.condition == condition]
         for j, (score, label, scale) in enumerate(panels):
@@ -274,8 +279,8 @@ def study_figure(rows: Sequence[StudyRow], path: Path, dpi: int = 110) -> None:
     fig.savefig(path, dpi=dpi, format="png")
 
 
-def _plot_series(ax: Any, line: Sequence[StudyRow], panel: tuple[str, float],
-                 colours: dict[str, Any]) -> None:
+def _plot_series(ax: Axes, line: Sequence[StudyRow], panel: tuple[str, float],
+                 colours: dict[str, ColorType]) -> None:
     score, scale = panel
     first = line[0]
     if first.series == "true" and score != "depth_rmse_m":
@@ -289,10 +294,11 @@ def _plot_series(ax: Any, line: Sequence[StudyRow], panel: tuple[str, float],
         return
     name = first.series + (" (random)" if first.pattern == "random" else "")
     if first.kind != "model":
-        style = dict(_STYLE[first.series])
+        style = _STYLE[first.series]
         if first.series == "true":
             name = "true (full capture)"
-        ax.plot(x, mean, label=name, linewidth=1.2, markersize=4, **style)
+        ax.plot(x, mean, label=name, linewidth=1.2, markersize=4, color=style["color"],
+                linestyle=style["linestyle"], marker=style["marker"])
         return
     colour = colours.setdefault(first.series, f"C{len(colours) % 10}")
     ax.errorbar(x, mean, yerr=[low, high], color=colour, marker="o", markersize=4,

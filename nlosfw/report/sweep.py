@@ -27,8 +27,8 @@ import logging
 from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any
 
+from nlosfw.common.config import Scalar
 from nlosfw.common.errors import DataError
 from nlosfw.common.files import atomic_path, write_text
 from nlosfw.pipeline.metrics import (
@@ -54,12 +54,12 @@ from nlosfw.report.thesis import thesis_comparison
 
 log = logging.getLogger(__name__)
 
-Column = Callable[[RunRecord], Any]
+Column = Callable[[RunRecord], Scalar]
 
 
-def _field(source: str, get: Callable[[FieldMetrics], Any]) -> Column:
+def _field(source: str, get: Callable[[FieldMetrics], Scalar]) -> Column:
     """A column from field model ``source``'s metrics (empty where it was not fitted)."""
-    def column(record: RunRecord) -> Any:
+    def column(record: RunRecord) -> Scalar:
         entry = record.metrics.field_entry(source)
         return None if entry is None else get(entry)
 
@@ -74,25 +74,25 @@ def _nmse(source: str, split: Callable[[SplitErrors], ErrorMetrics]) -> Column:
     return _field(source, nmse)
 
 
-def _image(source: str, get: Callable[[ImageScores], Any]) -> Column:
+def _image(source: str, get: Callable[[ImageScores], Scalar]) -> Column:
     """A column from the reconstruction scores of ``source``."""
-    def column(record: RunRecord) -> Any:
+    def column(record: RunRecord) -> Scalar:
         scores = record.metrics.image_scores(source)
         return None if scores is None else get(scores)
 
     return column
 
 
-def _split(get: Callable[[SplitMetrics], Any]) -> Column:
+def _split(get: Callable[[SplitMetrics], Scalar]) -> Column:
     """A column from the run's split (empty where the run stopped before it)."""
-    def column(record: RunRecord) -> Any:
+    def column(record: RunRecord) -> Scalar:
         split = record.metrics.split
         return None if split is None else get(split)
 
     return column
 
 
-def _noise(record: RunRecord) -> Any:
+def _noise(record: RunRecord) -> Scalar:
     capture = record.metrics.capture
     return None if capture is None or not capture.noise else capture.noise.get("model")
 
@@ -103,7 +103,7 @@ def _scores(source: str) -> tuple[tuple[str, Column], ...]:
                  for name in SCORES)
 
 
-def _attr(scores: ImageScores, name: str) -> Any:
+def _attr(scores: ImageScores, name: str) -> Scalar:
     return getattr(scores, name)
 
 
@@ -150,7 +150,7 @@ def to_csv(rows: list[dict[str, str]]) -> str:
     return csv_text([c for c, _ in COLUMNS], [[row[c] for c, _ in COLUMNS] for row in rows])
 
 
-def csv_text(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+def csv_text(header: Sequence[str], rows: Sequence[Sequence[Scalar]]) -> str:
     buffer = io.StringIO()
     writer = csv.writer(buffer)
     writer.writerow(header)

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+
+from nlosfw.common.config import Scalar
 
 
-def format_cell(value: Any) -> str:
+def format_cell(value: Scalar) -> str:
     """A table cell: empty for None, 4 significant digits for a float, else ``str``."""
     if value is None:
         return ""

@@ -13,8 +13,8 @@ field-model source they compare with (``model`` or an entry of ``compare``)::
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
+from nlosfw.common.config import Scalar
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import markdown_table
 
@@ -25,7 +25,7 @@ _TABLE_51 = ("hidden scene", "loss L2 (ours)", "loss L2 (thesis)", "training s (
              "training s (thesis)", "steps (ours)", "steps (thesis)", "run")
 
 
-def _fmt(value: Any, spec: str = ".4g") -> str:
+def _fmt(value: Scalar, spec: str = ".4g") -> str:
     if value is None:
         return "-"
     if isinstance(value, (int, float)):
