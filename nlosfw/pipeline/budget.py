@@ -47,16 +47,17 @@ class MemoryPart:
     nbytes: float
 
 
-def _get(config: Any, dotted: str, default: Any = None) -> Any:
-    node = config
+def _get(config: Mapping[str, object] | None, dotted: str, default: object = None) -> Any:
+    node: object = config
     for key in dotted.split("."):
-        if node is None or not hasattr(node, "get"):
+        if not isinstance(node, Mapping):
             return default
         node = node.get(key)
     return default if node is None else node
 
 
-def _capture_shape(config: Any, file_shape: FileShape | None) -> tuple[int, int, int, str] | None:
+def _capture_shape(config: Mapping[str, object], file_shape: FileShape | None
+                   ) -> tuple[int, int, int, str] | None:
     """(B, S, L, why) from ``capture.path`` (its header, through ``file_shape``) or the
     scene; None when the file's size is unknown."""
     path = _get(config, "capture.path")
@@ -73,7 +74,7 @@ def _capture_shape(config: Any, file_shape: FileShape | None) -> tuple[int, int,
     return bins, sensors, 1, (f"scene.wall.resolution {list(res)} × scene.time.bins {bins}")
 
 
-def _n_frequencies(config: Any, bins: int) -> int:
+def _n_frequencies(config: Mapping[str, object], bins: int) -> int:
     given = _get(config, "transform.frequencies")
     if given:
         return len(given)
@@ -81,7 +82,7 @@ def _n_frequencies(config: Any, bins: int) -> int:
     return int(count) if count is not None else max(1, bins // 2)  # at most the DFT's bins
 
 
-def _n_depths(config: Any, bins: int) -> int:
+def _n_depths(config: Mapping[str, object], bins: int) -> int:
     """Depth planes: as configured, else at most what the automatic rule can choose (planes
     at least half a wall spacing apart over half the time window, at most its maximum)."""
     from nlosfw.image.depths import MAX_AUTOMATIC_PLANES
@@ -101,14 +102,15 @@ def _n_depths(config: Any, bins: int) -> int:
     return max(2, min(MAX_AUTOMATIC_PLANES, math.ceil(ratio) + 1))
 
 
-def _history(options: Any) -> float:
+def _history(options: Mapping[str, object] | None) -> float:
     steps, every = _get(options, "steps"), _get(options, "eval_every", 1)
     if steps is None:
         return 0.0
     return float(steps) / max(int(every), 1) * _HISTORY_ENTRY
 
 
-def estimate_memory(config: Any, file_shape: FileShape | None = None) -> list[MemoryPart]:
+def estimate_memory(config: Mapping[str, object], file_shape: FileShape | None = None
+                    ) -> list[MemoryPart]:
     """The parts of the memory a run of ``config`` (composed, validated) needs, in bytes;
     ``file_shape``: how to size a ``capture.path`` from its header (none: unknown, no
     estimate for such a run)."""
@@ -173,7 +175,7 @@ def _cgroup_room() -> int | None:
     return None
 
 
-def check_memory(config: Any, available: int | None = None,
+def check_memory(config: Mapping[str, object], available: int | None = None,
                  file_shape: FileShape | None = None) -> None:
     """Refuse (one-line :class:`ConfigError`) a run whose estimated memory exceeds what is
     available, unless ``limits.allow_large`` is true. ``available``: bytes (default: this

@@ -12,11 +12,14 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
-from typing import Any
+from typing import TYPE_CHECKING
 
 from nlosfw.common.errors import USER_ERROR_EXIT_STATUS, NlosfwError, PluginError
 from nlosfw.plugins.manager import load_plugins
 from nlosfw.testing.kit import check_plan, select_specs
+
+if TYPE_CHECKING:
+    import pytest
 
 
 class _Selection:
@@ -25,7 +28,7 @@ class _Selection:
     def __init__(self, names: tuple[str, ...]) -> None:
         self.names = names
 
-    def pytest_configure(self, config: Any) -> None:
+    def pytest_configure(self, config: pytest.Config) -> None:
         from nlosfw.testing.conformance import SELECTED
 
         config.stash[SELECTED] = self.names

@@ -28,7 +28,7 @@ import numpy as np
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.model.interface import FieldModelConfig
+from nlosfw.model.interface import FieldModel, FieldModelConfig
 from nlosfw.model.model_files import write_model_file
 from nlosfw.model.protocol import error_metrics, split_field
 from nlosfw.plugins.capabilities import Capability
@@ -82,7 +82,7 @@ def _tolerance(spec: PluginSpec) -> float:
     return FIT_TOLERANCE.get(_family(spec), DEFAULT_TOLERANCE)
 
 
-def _fitted(spec: PluginSpec, field: PhasorField | None = None, **options: Any) -> Any:
+def _fitted(spec: PluginSpec, field: PhasorField | None = None, **options: Any) -> FieldModel:
     model = spec.create({**spec.test_config, **options})
     model.fit(fit_fixture(physical=_physical(spec)) if field is None else field)
     return model

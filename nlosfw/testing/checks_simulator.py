@@ -19,10 +19,12 @@ from typing import Any
 
 import numpy as np
 
+from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import GridFormat, HFormat
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import PluginSpec
+from nlosfw.simulate.interface import Simulator
 from nlosfw.simulate.physics import bin_index, three_bounce
 from nlosfw.simulate.scene import Scene, scene_from_config
 from nlosfw.testing import fixtures
@@ -33,7 +35,7 @@ from nlosfw.testing.selection import DEVICE_LEGS, GEOMETRIES, combine, requires
 ENERGY_RTOL = 0.05
 
 
-def _simulate(spec: PluginSpec, scene: Scene) -> Any:
+def _simulate(spec: PluginSpec, scene: Scene) -> Capture:
     return spec.create(dict(spec.test_config)).simulate(scene)
 
 
@@ -241,6 +243,6 @@ SIMULATOR_CHECKS = (
 )
 
 
-def _simulate_config(simulator: Any, config: dict[str, Any]) -> Any:
+def _simulate_config(simulator: Simulator, config: dict[str, Any]) -> Capture:
     """Simulate the scene of a plain config mapping (validated on the way)."""
     return simulator.simulate(scene_from_config(config))

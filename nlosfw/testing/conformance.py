@@ -7,8 +7,6 @@ selected names in :data:`SELECTED`).
 
 from __future__ import annotations
 
-from typing import Any
-
 import pytest
 
 from nlosfw.plugins.registry import PluginSpec
@@ -19,7 +17,7 @@ from nlosfw.testing.selection import PlannedCheck
 SELECTED = pytest.StashKey[tuple[str, ...]]()
 
 
-def pytest_generate_tests(metafunc: Any) -> None:
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
     """Parametrize ``test_conformance`` over the planned (plugin, check) pairs."""
     if {"spec", "check"} <= set(metafunc.fixturenames):
         names = metafunc.config.stash.get(SELECTED, None)

@@ -22,14 +22,14 @@ from nlosfw.model.thesis_networks import (
     network_inputs,
     thesis_architecture,
 )
-from nlosfw.model.trainer import field_inputs
+from nlosfw.model.trainer import NeuralFieldModel, field_inputs
 
 #: (family, mode) pairs every engine must evaluate like the numpy reference.
 ENGINE_CASES = [(family, mode) for family in ("tanh", "pe", "siren")
                 for mode in ("multi", "single")]
 
 
-def assert_engine_matches_numpy(model_class: Any, mode: str, rtol: float = 2e-5,
+def assert_engine_matches_numpy(model_class: type[NeuralFieldModel], mode: str, rtol: float = 2e-5,
                                 atol: float = 2e-5) -> None:
     """A thesis network's field-model class (e.g. ``SirenTorch``) evaluates like
     :func:`forward_numpy` on the weights of :func:`init_parameters`.
