@@ -8,14 +8,17 @@ import numpy as np
 import pytest
 
 from nlosfw import Capability, ConfigError, DataError, PluginError, PluginKind
+from nlosfw.image.fft import FFTImager
 from nlosfw.plugins import CAPABILITIES, DEFAULT_CAPABILITIES, hookimpl, load_plugins
 from nlosfw.testing import (
     GEOMETRIES,
+    check_cases,
     check_plan,
     checks_for,
     combine,
     parametrize_with_checks,
     requires,
+    spec_of,
     variant,
 )
 from nlosfw.testing.kit import pytest_params
@@ -245,3 +248,53 @@ def test_command_prints_the_plan_and_runs_the_checks(tmp_path):
     assert bad.returncode == 2
     assert bad.stderr.startswith("error: unknown plugin 'no_such_plugin'; valid: ")
     assert bad.stderr.count("\n") == 1
+
+
+# ------------------------------------------------------------ capabilities on the class
+class _ConfocalOnlyImager(FFTImager):
+    """An FFT imager that declares, on its class, that it images confocal fields only."""
+
+    capabilities = ("confocal", Capability.PLANE_VOXELS)
+
+
+class _TypoImager(FFTImager):
+    capabilities = ("confocal", "plane_voxel")
+
+
+def test_capabilities_declared_on_the_class_are_read_by_the_registry_and_the_kit():
+    spec = fake_spec("imager", "classy", factory=_ConfocalOnlyImager)
+    assert spec.declared_capabilities is None
+    assert spec.capabilities == {Capability.CONFOCAL, Capability.PLANE_VOXELS}
+    assert spec.capabilities_origin == "class"
+    applied, skipped = planned(spec)
+    assert "check_imager_focuses_point[confocal]" in applied
+    assert "check_imager_focuses_point[single_spot]" in skipped
+
+
+def test_capabilities_given_to_register_take_the_place_of_the_class_ones():
+    spec = fake_spec("imager", "both", factory=_ConfocalOnlyImager,
+                     capabilities=["single_spot", "plane_voxels"])
+    assert spec.capabilities == {Capability.SINGLE_SPOT, Capability.PLANE_VOXELS}
+    assert spec.capabilities_origin == "registration"
+
+
+def test_an_unknown_capability_on_the_class_is_a_one_line_error():
+    spec = fake_spec("imager", "typo_class", factory=_TypoImager)
+    with pytest.raises(PluginError, match=r"^nlosfw-fake: imager plugin 'typo_class' declares "
+                       r"unknown capability 'plane_voxel'; valid: "):
+        _ = spec.capabilities
+
+
+def test_the_kit_checks_a_plugin_instance_with_its_config_and_class_capabilities():
+    imager = _ConfocalOnlyImager({"workers": 1})
+    spec = spec_of(imager)
+    assert (spec.kind, spec.name) == (PluginKind.IMAGER, "_ConfocalOnlyImager")
+    assert spec.test_config["workers"] == 1
+    assert spec.capabilities == {Capability.CONFOCAL, Capability.PLANE_VOXELS}
+    assert spec.create(dict(spec.test_config)).config == imager.config
+    ids = [p.id for p in pytest_params(check_cases(plugins=[imager]))]
+    assert "imager:_ConfocalOnlyImager-check_config_round_trip" in ids
+    checks = {p.values[1].name: p.values[1] for p in pytest_params(check_cases(plugins=[imager]))}
+    checks["check_config_round_trip"](spec)          # runs on the instance's spec
+    with pytest.raises(PluginError, match="implements none of the plugin interfaces"):
+        spec_of(object())  # type: ignore[arg-type]

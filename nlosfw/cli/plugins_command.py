@@ -167,8 +167,8 @@ def _options_table(spec: PluginSpec, options: Sequence[OptionDoc]) -> Table:
 
 
 def _capabilities_text(spec: PluginSpec) -> str:
-    origin = "declared" if spec.declared_capabilities is not None else \
-        "declares none: the kind's defaults"
+    origin = {"registration": "declared", "class": "declared by its class",
+              "defaults": "declares none: the kind's defaults"}[spec.capabilities_origin]
     meanings = CAPABILITIES.get(spec.kind.value, {})
     lines = [f"[bold]capabilities[/] ({origin})"]
     for capability in sorted(spec.capabilities, key=lambda c: c.value):

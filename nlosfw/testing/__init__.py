@@ -43,6 +43,7 @@ from nlosfw.testing.kit import (
     check_plan,
     checks_for,
     parametrize_with_checks,
+    spec_of,
 )
 from nlosfw.testing.selection import (
     DEVICE_LEGS,
@@ -76,6 +77,7 @@ __all__ = [
     "combine",
     "fixtures",
     "parametrize_with_checks",
+    "spec_of",
     "requires",
     "relative_l2",
     "rendered",

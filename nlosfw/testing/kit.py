@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
+from nlosfw.common.config import Configurable, config_to_dict
 from nlosfw.common.errors import PluginError
-from nlosfw.plugins.kinds import PluginKind
+from nlosfw.plugins.kinds import INTERFACES, PluginKind
 from nlosfw.plugins.registry import PluginSpec, Registry
 from nlosfw.testing.selection import CheckPlan, PlannedCheck, plan_check
+
+if TYPE_CHECKING:
+    import pytest
 
 Check = Callable[..., None]
 
@@ -67,11 +71,31 @@ def select_specs(registry: Registry | None = None, kinds: Iterable[str] | None =
                  or {spec.name, spec.qualified_name, spec.distribution} & wanted_names)]
 
 
+def spec_of(plugin: Configurable, name: str | None = None) -> PluginSpec:
+    """A plugin instance as the kit checks it: its class is the factory, its config the
+    test options, its capabilities those its class declares (``capabilities``), its kind
+    the interface it implements; ``name`` defaults to the class's name."""
+    cls = type(plugin)
+    kind = next((PluginKind(k) for k, iface in INTERFACES.items() if isinstance(plugin, iface)),
+                None)
+    if kind is None:
+        raise PluginError(f"{cls.__name__} implements none of the plugin interfaces "
+                          f"({', '.join(i.__name__ for i in INTERFACES.values())})")
+    return PluginSpec(kind=kind, name=name or cls.__name__, factory=cls,
+                      distribution=cls.__module__.partition(".")[0], config=cls.config_class,
+                      description=(cls.__doc__ or "").strip().partition("\n")[0],
+                      test_config=config_to_dict(plugin.config))
+
+
 def check_cases(registry: Registry | None = None, kinds: Iterable[str] | None = None,
-                names: Iterable[str] | None = None) -> list[tuple[PluginSpec, PlannedCheck]]:
-    """Every planned (plugin, check) pair, skipped ones included (see ``skip_reason``)."""
-    return [(spec, planned) for spec in select_specs(registry, kinds, names)
-            for planned in check_plan(spec).checks]
+                names: Iterable[str] | None = None, plugins: Iterable[Configurable] = ()
+                ) -> list[tuple[PluginSpec, PlannedCheck]]:
+    """Every planned (plugin, check) pair, skipped ones included (see ``skip_reason``): of
+    the registered plugins, or of the plugin instances ``plugins`` when given."""
+    instances = list(plugins)
+    specs = ([spec_of(p) for p in instances] if instances
+             else select_specs(registry, kinds, names))
+    return [(spec, planned) for spec in specs for planned in check_plan(spec).checks]
 
 
 def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]:
@@ -97,10 +121,14 @@ def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]
 
 
 def parametrize_with_checks(registry: Registry | None = None, kinds: Iterable[str] | None = None,
-                            names: Iterable[str] | None = None) -> Any:
+                            names: Iterable[str] | None = None,
+                            plugins: Iterable[Configurable] = ()) -> pytest.MarkDecorator:
     """A ``pytest.mark.parametrize("spec, check", ...)`` over every planned (plugin, check)
-    pair; checks that do not apply are reported as skipped with the reason."""
+    pair of the registered plugins, or of the plugin instances ``plugins``
+    (``parametrize_with_checks(plugins=[MyModel()])``, checked with their config and the
+    capabilities their class declares); checks that do not apply are reported as skipped
+    with the reason."""
     import pytest
 
-    return pytest.mark.parametrize("spec, check",
-                                   pytest_params(check_cases(registry, kinds, names)))
+    return pytest.mark.parametrize(
+        "spec, check", pytest_params(check_cases(registry, kinds, names, plugins)))

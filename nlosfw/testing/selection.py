@@ -183,7 +183,7 @@ class CheckPlan:
         """The plan as text: the capabilities, then one line per planned check."""
         spec = self.spec
         origin = " (declares none: the kind's defaults)" \
-            if spec.declared_capabilities is None else ""
+            if spec.capabilities_origin == "defaults" else ""
         lines = [f"{spec.qualified_name} from {spec.distribution}",
                  f"  capabilities: {format_capabilities(spec.capabilities)}{origin}"]
         for planned in self.checks:
