@@ -23,7 +23,6 @@ transient, so there is no square root of the histogram (see
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 import scipy.fft
@@ -48,7 +47,7 @@ class FKImager(TransientImager[TransientImagerConfig]):
     imager_name = "fk"
 
     def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
-                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, Any]]:
+                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         dz = dt / 2
         far = math.hypot(float(depths.max()) + _MARGIN_STEPS * dz, grid.lateral_reach)
         n = math.ceil(2 * far / dt) + 1                        # t from 0 to the farthest path

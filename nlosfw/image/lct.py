@@ -144,7 +144,7 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
     imager_name = "lct"
 
     def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
-                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, Any]]:
+                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         cone = self._cone(grid, depths, dt)
         r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone,
                               self.config.snr)
@@ -159,7 +159,7 @@ class FBPImager(LightConeImager[LightConeConfig]):
     imager_name = "fbp"
 
     def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
-                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, Any]]:
+                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         cone = self._cone(grid, depths, dt)
         r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone, None)
         dz = dt / 2

@@ -158,7 +158,7 @@ class PropagationImager(Imager[PropagationConfigT]):
         reporting finished blocks to ``on_progress``
         (:class:`~nlosfw.common.progress.ProgressCounter` counts them)."""
 
-    def _metadata(self, field: PhasorField, voxels: np.ndarray) -> dict[str, Any]:
+    def _metadata(self, field: PhasorField, voxels: np.ndarray) -> dict[str, object]:
         return {
             "imager": self.imager_name,
             "frequencies": [float(f) for f in field.frequencies],

@@ -23,7 +23,7 @@ class Reconstruction:
 
     intensity: np.ndarray
     voxels: np.ndarray
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, object] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "intensity", np.asarray(self.intensity))

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from dataclasses import dataclass
-from typing import Any, ClassVar, TypeVar
+from typing import ClassVar, TypeVar
 
 import numpy as np
 
@@ -146,7 +146,7 @@ class TransientImager(Imager[TransientConfigT]):
         image = volume.real ** 2 + volume.imag ** 2
         intensity = image[np.arange(planes.depths.size)[:, None, None], planes.rows, planes.cols]
         progress.advance()
-        meta: dict[str, Any] = {
+        meta: dict[str, object] = {
             "imager": self.imager_name,
             "frequencies": [float(f) for f in field.frequencies],
             "weights_applied": False,
@@ -162,7 +162,7 @@ class TransientImager(Imager[TransientConfigT]):
 
     @abstractmethod
     def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
-                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, Any]]:
+                window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         """(complex volume (len(depths), Y, X) over the whole wall grid, metadata)."""
 
     def transient(self, field: PhasorField, grid: WallGrid, times: np.ndarray,

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from functools import partial
 
@@ -116,8 +116,8 @@ def _report_step(run: StageContext, planned: PlannedModel, step: TrainingStep) -
 
 def _warn_aliasing(field: PhasorField) -> None:
     """The band's aliasing warning, also for a field from the cache (once per run)."""
-    band = field.metadata.get("band") or {}
-    if band.get("aliases") and band.get("grid_spacing") is not None:
+    band = field.metadata.get("band")
+    if isinstance(band, Mapping) and band.get("aliases") and band.get("grid_spacing") is not None:
         warn_aliasing(float(field.frequencies.max()), float(band["grid_spacing"]),
                       field.geometry.kind, str(band.get("option", "transform")))
 

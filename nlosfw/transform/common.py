@@ -11,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -69,7 +68,7 @@ class FieldOptions:
     method: str
     remove_device_legs: bool
     weights: np.ndarray | None = None
-    metadata: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    metadata: Mapping[str, object] = dataclasses.field(default_factory=dict)
 
 
 def transform_capture(capture: Capture, frequencies: np.ndarray,
@@ -97,7 +96,7 @@ def transform_capture(capture: Capture, frequencies: np.ndarray,
         geometry = dataclasses.replace(geometry, t_accounts_first_and_last_bounces=False)
     values = to_field_layout(flat, capture)
     del flat
-    info: dict[str, Any] = {
+    info: dict[str, object] = {
         "transform": options.transform,
         "method": used,
         "capture_kind": capture.kind.value,

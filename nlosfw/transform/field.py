@@ -33,7 +33,7 @@ class PhasorField:
     wall_xyz: np.ndarray
     geometry: CaptureGeometry
     weights: np.ndarray | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, object] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__

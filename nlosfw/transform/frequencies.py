@@ -20,7 +20,6 @@ factor :data:`DEFAULT_BAND_RATIO` lower.
 from __future__ import annotations
 
 import logging
-from typing import Any
 
 import numpy as np
 
@@ -122,7 +121,7 @@ def warn_aliasing(f_max: float, spacing: float | None, kind: CaptureKind, option
 
 
 def band_info(frequencies: np.ndarray, spacing: float | None, kind: CaptureKind,
-              option: str) -> dict[str, Any]:
+              option: str) -> dict[str, object]:
     """What a transform records about its band in the field's metadata (``band``): the wall
     spacing it was checked against, the aliasing limit, whether it aliases, the option."""
     f_max = float(np.max(frequencies))

@@ -27,7 +27,6 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import scipy.fft
@@ -132,7 +131,7 @@ class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
             wavelength = cfg.wavelength_factor * spacing * path_multiplier(capture.kind)
         return GaussianWavelet(wavelength, cfg.n_cycles * wavelength / 6.0), spacing
 
-    def frequencies_for(self, capture: Capture) -> tuple[np.ndarray, np.ndarray, dict[str, Any]]:
+    def frequencies_for(self, capture: Capture) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
         """(frequencies, weights, description) of the kept bins for ``capture``."""
         cfg = self.config
         wavelet, spacing = self.wavelet_for(capture)
