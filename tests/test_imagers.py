@@ -16,6 +16,7 @@ import pytest
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common import cores
 from nlosfw.common.errors import DataError
 from nlosfw.image.fft import FFTImager
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
@@ -347,23 +348,43 @@ def test_fft_blocks_threads_and_uncached_spectra_equal_rsd(kind):
 
 @pytest.mark.parametrize("imager", [FFTImager({"workers": 2}),
                                     RSDImager({"workers": 2, "chunk_mb": 0.01})])
-def test_imagers_start_no_more_blocks_after_an_error(imager):
+def test_imagers_start_no_more_blocks_after_an_error(imager, monkeypatch):
     """An error in one thread (here the progress callback) stops the imaging: the planes
-    (voxel blocks) not yet started are cancelled, not computed before the error is raised."""
+    (voxel blocks) not yet started are cancelled, not computed before the error is raised.
+
+    A block a thread takes up after the error is held until the thread pool shuts down
+    (the error has reached the caller, which cancelled what had not started), however
+    slowly the caller is scheduled: two blocks before the error, at most one more per
+    thread after it. Without the cancelling the threads would go on to all 40."""
+    failed, stopping = threading.Event(), threading.Event()
+
+    class Watched(cores.ThreadPoolExecutor):
+        def submit(self, fn, /, *args, **kwargs):
+            def held(*a, **k):
+                if failed.is_set():
+                    assert stopping.wait(600), "the thread pool did not shut down in 600 s"
+                return fn(*a, **k)
+
+            return super().submit(held, *args, **kwargs)
+
+        def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+            stopping.set()
+            super().shutdown(wait, cancel_futures=cancel_futures)
+
+    monkeypatch.setattr(cores, "ThreadPoolExecutor", Watched)
     field = random_field(shape=(6, 8))
     voxels = fixtures.aligned_voxels(field.wall_xyz, np.linspace(0.3, 0.9, 40))
     calls: list[int] = []
-    first = threading.Lock()
 
     def on_progress(done: int, total: int) -> None:
         calls.append(done)
-        if first.acquire(blocking=False):
+        if done == 1:
+            failed.set()
             raise RuntimeError("stop here")
-        threading.Event().wait(0.05)             # later planes are slow to finish
 
     with pytest.raises(RuntimeError, match="stop here"):
         imager.reconstruct(field, voxels, on_progress=on_progress)
-    assert 1 <= len(calls) <= 5 and calls[0] == 1
+    assert stopping.is_set() and 1 <= len(calls) <= 4 and calls[0] == 1
 
 
 def test_metadata_names_the_imager_and_frequencies():

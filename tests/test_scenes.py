@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +12,7 @@ import yaml
 
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.resources import config_dir
 from nlosfw.simulate.builtin_scenes import builtin_scene, builtin_scene_config, builtin_scene_names
 from nlosfw.simulate.geometry import sample_surface, validate_scene
 from nlosfw.simulate.scene import Scene, scene_from_config
@@ -33,7 +33,7 @@ BLOCKS = ("wall", "capture", "time", "noise")
 
 @pytest.mark.parametrize("name", builtin_scene_names())
 def test_scene_files_hold_scene_fields_and_share_the_blocks(name):
-    text = (files("nlosfw.conf") / "scene" / f"{name}.yaml").read_text()
+    text = (config_dir() / "scene" / f"{name}.yaml").read_text()
     data = yaml.safe_load(text)
     fields = {f.name for f in dataclasses.fields(Scene)}
     assert set(data) - {"defaults"} <= fields
@@ -182,7 +182,7 @@ def test_scene_base_lists_every_option_and_each_can_be_overridden():
     def fields(cls):
         return {f.name: f for f in dataclasses.fields(cls)}
 
-    base = yaml.safe_load((files("nlosfw.conf") / "scene" / "base" / "default.yaml").read_text())
+    base = yaml.safe_load((config_dir() / "scene" / "base" / "default.yaml").read_text())
     assert set(base) == set(BLOCKS)
     for block in BLOCKS:
         assert set(base[block]) == set(fields(fields(Scene)[block].default_factory)), block

@@ -36,6 +36,7 @@ from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
 from nlosfw.pipeline.image_stage import reconstruct_stage, report_stage
 from nlosfw.pipeline.interrupts import as_interruption, signals_raise
 from nlosfw.pipeline.metrics import RunError, RunInfo, RunMetrics, Status
+from nlosfw.pipeline.pause import pause_point
 from nlosfw.pipeline.plan import RunPlan
 from nlosfw.pipeline.recorder import MetricsRecorder
 from nlosfw.pipeline.results import StageResults
@@ -140,6 +141,7 @@ class Pipeline:
             start = time.perf_counter()
             self.events.stage_start(stage.name)
             log.info("stage %s: started", stage.name, extra=FILE_ONLY)
+            pause_point(stage.name)           # tests only: NLOSFW_TEST_PAUSE holds the run
             result = stage.run(context, self.stage_results)
             if result is not None:
                 self.stage_results = self.stage_results.with_result(result)

@@ -33,6 +33,7 @@ from nlosfw.common.files import atomic_path, write_text
 from nlosfw.pipeline.events import RunEvents
 from nlosfw.pipeline.lifecycle import RunHold
 from nlosfw.pipeline.metrics import RunMetrics, metrics_schema_text
+from nlosfw.pipeline.pause import pause_point
 from nlosfw.pipeline.settings import Artefact
 
 log = logging.getLogger(__name__)
@@ -85,6 +86,7 @@ class RunFiles:
         self._claim(final)
         with atomic_path(final) as tmp:
             writer(tmp)
+            pause_point(final.relative_to(self.run_dir).as_posix())  # tests only
         self.events.artefact_written(str(final), kind or name)
         return final
 

@@ -1,6 +1,11 @@
 """Helpers of the hostile suite: the command line as a user runs it, small real file systems,
 read-only places, runs to interrupt.
 
+A run to interrupt, or to keep alive while other commands try its directory, is held at a
+pause point (:mod:`nlosfw.pipeline.pause`: ``tools.start_held``, ``tools.wait_held``,
+``tools.release``), never made slow: the tests wait on files and processes, with generous
+timeouts, and never on the clock.
+
 Test modules reach the helpers through the ``tools`` fixture (``tools.nlosfw(...)``,
 ``tools.QUICK``, ...). Small file systems are real tmpfs mounts: mounted directly when
 this process may (root), else inside a user namespace (``unshare -rm``) around the
@@ -24,6 +29,8 @@ from pathlib import Path
 
 import pytest
 
+from nlosfw.pipeline.pause import ENV as PAUSE_ENV
+
 #: A run of a few seconds: the tiny scene, the interp baseline, the fast imager.
 QUICK = ("scene=tiny", "model=interp", "imager=fft", "figures.enabled=false",
          "transform.n_frequencies=21", "reconstruction.n_depths=4")
@@ -34,7 +41,7 @@ def nlosfw(*args: str, cwd: Path, env: dict[str, str] | None = None,
     """``python -m nlosfw ARGS`` in a subprocess (``prefix``: a wrapper command)."""
     full_env = {**os.environ, "COLUMNS": "200", **(env or {})}
     return subprocess.run([*prefix, sys.executable, "-m", "nlosfw", *args], cwd=cwd,
-                          env=full_env, capture_output=True, text=True, timeout=300,
+                          env=full_env, capture_output=True, text=True, timeout=900,
                           check=False)
 
 
@@ -62,7 +69,7 @@ def workdir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 # ------------------------------------------------------------------- file systems
 def _try(cmd: Sequence[str]) -> bool:
     try:
-        return subprocess.run(list(cmd), capture_output=True, timeout=30).returncode == 0
+        return subprocess.run(list(cmd), capture_output=True, timeout=120).returncode == 0
     except (OSError, subprocess.TimeoutExpired):
         return False
 
@@ -199,32 +206,61 @@ def start_run(*args: str, cwd: Path, env: dict[str, str] | None = None) -> subpr
                             start_new_session=True)
 
 
-def wait_for_stage(run_dir: Path, stage: str, proc: subprocess.Popen,
-                   timeout: float = 120.0) -> None:
-    """Wait until ``run.log`` says ``stage`` started (the run is busy in it)."""
+def start_held(point: str, *args: str, cwd: Path) -> tuple[subprocess.Popen, Path]:
+    """``python -m nlosfw ARGS`` started in the background and held at pause point
+    ``point`` (:mod:`nlosfw.pipeline.pause`); the run and the pause point's directory."""
+    pause = Path(cwd) / f"pause-{uuid.uuid4().hex[:8]}"
+    proc = start_run(*args, cwd=cwd, env={PAUSE_ENV: f"{point}:{pause}"})
+    return proc, pause
+
+
+def wait_held(pause: Path, proc: subprocess.Popen, timeout: float = 600.0) -> None:
+    """Wait until the run ``proc`` is held at its pause point (``pause/reached`` names it);
+    fail saying so when it ends first or ``timeout`` seconds pass."""
+    reached = pause / "reached"
     deadline = time.monotonic() + timeout
-    log = run_dir / "run.log"
-    while time.monotonic() < deadline:
-        if log.exists() and f"stage {stage}: started" in log.read_text():
-            time.sleep(0.3)
-            return
+    while not reached.exists():
         if proc.poll() is not None:
             out, err = proc.communicate()
-            raise AssertionError(f"the run ended before stage {stage}:\n{out}\n{err}")
+            raise AssertionError(f"the run (exit status {proc.returncode}) ended before "
+                                 f"reaching its pause point {pause}:\n{out}\n{err}")
+        if time.monotonic() > deadline:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, err = proc.communicate()
+            raise AssertionError(f"the run did not reach its pause point ({reached} was not "
+                                 f"written) within {timeout:.0f} s:\n{out}\n{err}")
         time.sleep(0.05)
-    proc.kill()
-    raise AssertionError(f"stage {stage} did not start within {timeout} s")
+    assert reached.read_text().strip() == str(proc.pid), "another process reached the point"
+
+
+def release(pause: Path) -> None:
+    """Let a run held at the pause point ``pause`` go on."""
+    (pause / "release").touch()
+
+
+def finish(proc: subprocess.Popen, timeout: float = 600.0) -> tuple[int, str, str]:
+    """Wait for the run to end; its exit status and output (killed, failing, after
+    ``timeout`` seconds)."""
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, err = proc.communicate()
+        raise AssertionError(f"the run did not end within {timeout:.0f} s:\n{out}\n{err}"
+                             ) from None
+    return proc.returncode, out, err
 
 
 def stop(proc: subprocess.Popen, sig: int) -> tuple[int, str, str]:
     """Send ``sig`` to the run; its exit status and output."""
     proc.send_signal(sig)
     try:
-        out, err = proc.communicate(timeout=60)
+        out, err = proc.communicate(timeout=600)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         out, err = proc.communicate()
-        raise AssertionError(f"the run did not stop on {sig}:\n{out}\n{err}") from None
+        raise AssertionError(f"the run did not stop within 600 s of {sig}:\n{out}\n{err}"
+                             ) from None
     return proc.returncode, out, err
 
 
@@ -251,7 +287,10 @@ class Tools:
     one_error_line = staticmethod(one_error_line)
     temporaries = staticmethod(temporaries)
     start_run = staticmethod(start_run)
-    wait_for_stage = staticmethod(wait_for_stage)
+    start_held = staticmethod(start_held)
+    wait_held = staticmethod(wait_held)
+    release = staticmethod(release)
+    finish = staticmethod(finish)
     stop = staticmethod(stop)
 
 

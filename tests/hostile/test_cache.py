@@ -51,17 +51,17 @@ def test_an_entry_in_use_by_another_process_is_never_evicted(tmp_path):
     age(tmp_path, "aaaa", 100)
     age(tmp_path, "bbbb", 50)
     lock = tmp_path / "blobs" / "aaaa.lock"
-    holder = subprocess.Popen(
-        [sys.executable, "-c", "import fcntl, sys, time; f = open(sys.argv[1], 'a'); "
-         "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); time.sleep(60)", str(lock)],
-        stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen(     # holds the lock until its stdin closes, however long
+        [sys.executable, "-c", "import fcntl, sys; f = open(sys.argv[1], 'a'); "
+         "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); sys.stdin.read()",
+         str(lock)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
-        assert holder.stdout.readline().strip() == "held"
+        assert holder.stdout.readline().strip() == "held", "the lock holder did not start"
         put(cache, "cccc")                           # aaaa is oldest but busy: bbbb goes
         assert keys(tmp_path) == ["aaaa", "cccc"]
     finally:
         holder.kill()
-        holder.wait()
+        holder.communicate(timeout=600)
 
 
 def test_cache_info_and_clean(workdir, tools):

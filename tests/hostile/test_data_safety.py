@@ -11,9 +11,6 @@ import pytest
 
 from nlosfw.pipeline.lifecycle import LOCK_NAME, MARKER_NAME
 
-#: A capture stage of about a minute (many small patches, little memory): time to act.
-SLOW = ("simulator.patch_size=0.0005", "stop_after=simulate")
-
 
 def snapshot(root: Path, skip: tuple[str, ...] = ()) -> dict[str, bytes]:
     """Every file under ``root`` (relative path -> bytes), leaving out names in ``skip``."""
@@ -93,10 +90,12 @@ def test_a_second_run_in_a_finished_runs_directory(workdir, tools):
 
 
 def test_a_live_run_is_refused_and_its_files_untouched(workdir, tools):
+    """Two more runs try the directory of a run held in its capture stage: both refused,
+    the held run undisturbed (it then stops on SIGTERM, as any run does)."""
     run = workdir / "run"
-    proc = tools.start_run(*tools.QUICK, *SLOW, "hydra.run.dir=run", cwd=workdir)
+    proc, pause = tools.start_held("capture", *tools.QUICK, "hydra.run.dir=run", cwd=workdir)
     try:
-        tools.wait_for_stage(run, "capture", proc)
+        tools.wait_held(pause, proc)
         before = snapshot(run, skip=("run.log",))
         lock_text = (run / LOCK_NAME).read_text().strip()
         assert lock_text.startswith(f"{proc.pid}@")
@@ -107,18 +106,18 @@ def test_a_live_run_is_refused_and_its_files_untouched(workdir, tools):
                 f"error: {run}: another nlosfw run (process {lock_text}) is writing there; "
                 "wait for it to end or choose another directory")
             assert snapshot(run, skip=("run.log",)) == before
-        assert proc.poll() is None  # still running, undisturbed
+        assert proc.poll() is None  # still held, undisturbed
     finally:
-        status, _, _ = tools.stop(proc, signal.SIGTERM)
-    assert status == 143
+        status, _, err = tools.stop(proc, signal.SIGTERM)
+    assert status == 143, err
 
 
 def test_kill_9_leaves_no_partial_file_and_the_directory_is_not_reused_silently(workdir, tools):
     run = workdir / "run"
-    proc = tools.start_run(*tools.QUICK, *SLOW, "hydra.run.dir=run", cwd=workdir)
-    tools.wait_for_stage(run, "capture", proc)
+    proc, pause = tools.start_held("capture", *tools.QUICK, "hydra.run.dir=run", cwd=workdir)
+    tools.wait_held(pause, proc)
     proc.send_signal(signal.SIGKILL)
-    proc.communicate(timeout=30)
+    tools.finish(proc)
     assert not tools.temporaries(run)
     assert not (run / "capture.hdf5").exists() and not (run / "metrics.json").exists()
     marker = json.loads((run / MARKER_NAME).read_text())

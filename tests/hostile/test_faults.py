@@ -184,10 +184,13 @@ def test_a_read_only_cache_disables_the_cache_with_a_warning(workdir, tools, rea
 # -------------------------------------------------------------------------- signals
 @pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_stops_the_run_cleanly(workdir, tools, sig, status):
+    """The run is held with capture.hdf5 written at its temporary path, not yet published:
+    the signal removes the temporary and records where the run stopped."""
     run = workdir / "run"
-    proc = tools.start_run(*tools.QUICK, "simulator.patch_size=0.0005", "hydra.run.dir=run",
-                           cwd=workdir)
-    tools.wait_for_stage(run, "capture", proc)
+    proc, pause = tools.start_held("capture.hdf5", *tools.QUICK, "hydra.run.dir=run",
+                                   cwd=workdir)
+    tools.wait_held(pause, proc)
+    assert [p.suffix for p in tools.temporaries(run)] == [".hdf5"]   # mid-write
     code, out, err = tools.stop(proc, sig)
     assert code == status, err
     name = signal.Signals(sig).name

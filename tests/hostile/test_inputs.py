@@ -3,7 +3,7 @@ non-finite geometry. Each ends with one line before any output exists."""
 
 from __future__ import annotations
 
-import time
+import tracemalloc
 from pathlib import Path
 
 import h5py
@@ -54,12 +54,18 @@ BOMB = "a: &a [x, x, x, x, x, x, x, x, x]\n" + "".join(
                                 "structure)"),
 ])
 def test_metadata_yaml_is_bounded(tmp_path, text, problem):
+    """Refused from the node graph, before anything is expanded: reading the file takes
+    no more memory than a small capture does (the bomb expanded is 3.5e9 values)."""
     path = capture_file(tmp_path / "c.hdf5", scene_info=text)
-    start = time.perf_counter()
-    with pytest.raises(DataError) as caught:
-        read_capture(path)
+    tracemalloc.start()
+    try:
+        with pytest.raises(DataError) as caught:
+            read_capture(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
     assert str(caught.value) == f"{path}: field 'scene_info' is refused: {problem}"
-    assert time.perf_counter() - start < 5
+    assert peak < 16e6, f"reading the refused metadata peaked at {peak / 1e6:.1f} MB"
 
 
 def test_an_alias_bomb_is_refused_on_the_command_line(workdir, tools):
@@ -102,7 +108,6 @@ def test_metadata_cannot_run_code(tmp_path):
      "the training history (model.steps / model.eval_every"),
 ])
 def test_huge_sizes_are_refused_with_the_estimate(workdir, tools, overrides, what):
-    start = time.perf_counter()
     result = tools.run("scene=tiny", "model=interp", *overrides)
     assert result.returncode == 2
     line = tools.one_error_line(result)
@@ -110,8 +115,7 @@ def test_huge_sizes_are_refused_with_the_estimate(workdir, tools, overrides, wha
     assert f", most of it for {what}" in line
     assert line.endswith(" are available; make it smaller, or set limits.allow_large=true "
                          "to run anyway")
-    assert no_output(workdir) and not (workdir / "cache").exists()
-    assert time.perf_counter() - start < 30
+    assert no_output(workdir) and not (workdir / "cache").exists()   # refused up front
 
 
 def test_a_capture_file_declaring_a_huge_transient_is_refused_before_it_is_read(workdir,

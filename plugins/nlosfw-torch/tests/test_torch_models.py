@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import time
 
 import numpy as np
 import pytest
@@ -74,16 +75,21 @@ def test_divergence_is_a_one_line_fit_error():
         model.predict(np.zeros((2, 2)), [2.0])
 
 
-def test_early_stopping_and_time_budget():
+def test_early_stopping_and_time_budget(monkeypatch):
     field = _point_field(12, 6)
     # a validation field the training data contradicts: validation loss only rises
     contrary = field.replace(values=-field.values)
     model = SirenTorch({**FAST, "steps": 2000, "eval_every": 10, "patience": 3})
     report = model.fit(field, validation=contrary)
     assert report.stopped_early and report.steps < 2000
+    # the budget against a clock that reads 0.25 s later at each look (the start, then
+    # once a step), not the machine's: the loop stops at the first step past 0.3 s
+    clock = iter(np.arange(10**4) * 0.25)
+    monkeypatch.setattr(time, "perf_counter", lambda: float(next(clock)))
     model = SirenTorch({**FAST, "steps": 10**6, "max_seconds": 0.3})
     report = model.fit(field)
-    assert report.steps < 10**6 and report.seconds < 5
+    monkeypatch.undo()
+    assert report.steps == 2 and not report.stopped_early
 
 
 def test_single_mode_blends_neighbouring_networks():
