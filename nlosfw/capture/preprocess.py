@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from nlosfw.capture.data import Capture
+from nlosfw.capture.data import MAX_DELTA_T, MIN_DELTA_T, Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.common.config import Choice, require
@@ -103,6 +103,11 @@ class BinWidth:
         for name in ("ps", "metres"):
             value = getattr(self, name)
             require(value is None or value > 0, name, f"must be > 0, got {value}")
+        width = self.in_metres
+        require(width is None or MIN_DELTA_T <= width <= MAX_DELTA_T,
+                "ps" if self.ps is not None else "metres",
+                f"gives a bin width of {width:g} m; valid: {MIN_DELTA_T:g} to {MAX_DELTA_T:g} m "
+                f"({MIN_DELTA_T / METRES_PER_PS:g} to {MAX_DELTA_T / METRES_PER_PS:g} ps)")
 
     @property
     def is_set(self) -> bool:
@@ -409,10 +414,20 @@ def subtract_background(capture: Capture, background: Capture) -> Capture:
         raise ConfigError("capture.background", "its scan points differ from the capture's")
     H = capture.H.astype(np.result_type(capture.H, background.H), copy=True)
     H -= background.H
+    if not np.any(H):
+        raise ConfigError("capture.background", "subtracting it leaves nothing: it equals the "
+                                                "capture (give the background measurement)")
     return capture.replace(H=H)
 
 
 # --------------------------------------------------------------------------- scan grid
+def _two_points_left(capture: Capture, k: int, option: str) -> None:
+    nx, ny = capture.grid_shape
+    if k >= min(nx, ny):
+        raise ConfigError(option, f"{k} leaves fewer than 2 x 2 points of the {nx}x{ny} scan "
+                                  f"grid; valid: 1 to {max(min(nx, ny) - 1, 1)}")
+
+
 def _need_grid(capture: Capture, option: str) -> None:
     if capture.H_format is not HFormat.T_Sx_Sy or capture.sensor_grid_format is not \
             GridFormat.X_Y_3:
@@ -503,6 +518,7 @@ def transpose_scan(capture: Capture, option: str = "capture.transpose") -> Captu
 def bin_scan(capture: Capture, k: int, option: str = "capture.bin") -> Capture:
     """Sum each k x k block of scan points into one, at the block's mean position."""
     _need_grid(capture, option)
+    _two_points_left(capture, k, option)
     nx, ny = capture.grid_shape
     if nx % k or ny % k:
         raise ConfigError(option, f"{k} does not divide the scan grid {nx}x{ny}; valid: a "
@@ -520,6 +536,7 @@ def bin_scan(capture: Capture, k: int, option: str = "capture.bin") -> Capture:
 def stride_scan(capture: Capture, k: int, option: str = "capture.stride") -> Capture:
     """Every k-th scan point in x and in y (from the first)."""
     _need_grid(capture, option)
+    _two_points_left(capture, k, option)
     H = capture.H[:, ::k, ::k].copy()
     grid = capture.sensor_grid_xyz[::k, ::k].copy()
     normals = capture.sensor_grid_normals

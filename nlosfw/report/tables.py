@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from nlosfw.common.text import markdown
+
 
 def format_cell(value: Any) -> str:
     """A table cell: empty for None, 4 significant digits for a float, else ``str``."""
@@ -16,8 +18,8 @@ def format_cell(value: Any) -> str:
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A markdown table (cells with '|' escaped)."""
+    """A markdown table (cells escaped: no raw HTML, no links, '|' kept in its cell)."""
     def line(cells: Sequence[str]) -> str:
-        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+        return "| " + " | ".join(markdown(c) for c in cells) + " |"
 
     return "\n".join([line(header), "|" + "---|" * len(header), *map(line, rows)]) + "\n"
