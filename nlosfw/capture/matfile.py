@@ -83,6 +83,9 @@ def mat_variables(path: Path) -> dict[str, MatVariable]:
     if mat_version(path) == 5:
         import scipy.io
 
+        if not _mat5_complete(path):
+            raise DataError(f"{path}: not a readable MATLAB file (truncated or corrupt: a "
+                            "variable ends past the end of the file)")
         try:
             found = scipy.io.whosmat(str(path))
         except Exception as err:  # scipy raises several types for damaged files
@@ -91,6 +94,29 @@ def mat_variables(path: Path) -> dict[str, MatVariable]:
         return {name: MatVariable(name, tuple(int(n) for n in shape), str(cls))
                 for name, shape, cls in found}
     raise DataError(f"{path}: not a MATLAB .mat file (version 5 or 7.3) nor HDF5")
+
+
+def _mat5_complete(path: Path) -> bool:
+    """Whether every top-level element of a MATLAB 5 file ends inside the file (a truncated
+    file's last one does not; scipy lists the variables before it without complaint)."""
+    import struct
+
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(128)
+        order = "<" if head[126:128] == b"IM" else ">"
+        pos = 128
+        while pos < size:
+            f.seek(pos)
+            tag = f.read(8)
+            if len(tag) < 8:
+                return False
+            kind, nbytes = struct.unpack(order + "II", tag)
+            end = pos + 8 + nbytes
+            if end > size:
+                return False
+            pos = end + (0 if kind == 15 else -nbytes % 8)   # 15: compressed, no padding
+    return True
 
 
 def _hdf5_variable(name: str, node: Any) -> MatVariable:

@@ -104,10 +104,11 @@ class BinWidth:
             value = getattr(self, name)
             require(value is None or value > 0, name, f"must be > 0, got {value}")
         width = self.in_metres
-        require(width is None or MIN_DELTA_T <= width <= MAX_DELTA_T,
-                "ps" if self.ps is not None else "metres",
-                f"gives a bin width of {width:g} m; valid: {MIN_DELTA_T:g} to {MAX_DELTA_T:g} m "
-                f"({MIN_DELTA_T / METRES_PER_PS:g} to {MAX_DELTA_T / METRES_PER_PS:g} ps)")
+        if width is not None and not MIN_DELTA_T <= width <= MAX_DELTA_T:
+            raise ConfigError("ps" if self.ps is not None else "metres",
+                              f"gives a bin width of {width:g} m; valid: {MIN_DELTA_T:g} to "
+                              f"{MAX_DELTA_T:g} m ({MIN_DELTA_T / METRES_PER_PS:g} to "
+                              f"{MAX_DELTA_T / METRES_PER_PS:g} ps)")
 
     @property
     def is_set(self) -> bool:
