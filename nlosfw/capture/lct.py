@@ -80,6 +80,9 @@ class LctFormat(CaptureFormat):
                             f"{list(found['rect_data'].shape)}; expected [N, N, T]")
         width = scalar(read_mat_array(path, "width"), path, "width",
                        "one number of metres (half the side of the scanned square)")
+        if width <= 0:
+            raise DataError(f"{path}: variable 'width' is {width}; expected a positive number of "
+                            "metres (half the side of the scanned square)")
         if not MIN_WIDTH <= width <= MAX_WIDTH:
             raise DataError(f"{path}: variable 'width' is {width:g}; expected half the side of "
                             f"the scanned square, {MIN_WIDTH:g} to {MAX_WIDTH:g} metres")

@@ -209,8 +209,9 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
                      + markdown_table(header, cells) + "\n")
     else:
         tables = quality_tables(points, layout)
-        markdown += (f"## Quality against {layout.x_label}\n\n![quality against "
-                     f"{layout.x_label}](report.png)\n\n{quality_table(points, layout)}\n")
+        label = markdown_text(layout.x_label)
+        markdown += (f"## Quality against {label}\n\n![quality against "
+                     f"{label}](report.png)\n\n{quality_table(points, layout)}\n")
     markdown += f"## Every run\n\n{to_markdown(rows)}"
     thesis_tables = thesis_comparison(records)
     if thesis_tables:

@@ -342,7 +342,7 @@ def lct_file(path: Path, width: float = 0.5, n: int = 4) -> Path:
         np.uint16), "width": np.array([[width]])})
 
 
-@pytest.mark.parametrize("width", [1e-300, 1e308, -1.0])
+@pytest.mark.parametrize("width", [1e-300, 1e308])
 def test_lct_width_out_of_range_is_blamed_on_width(tmp_path, width):
     path = lct_file(tmp_path / "scene.mat", width=width)
     with pytest.raises(DataError) as caught:
