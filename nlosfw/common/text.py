@@ -53,9 +53,11 @@ def plain_title(text: object) -> str:
 
 
 def href(name: str) -> str:
-    """A relative, URL-quoted link to the file ``name`` beside the document (``./`` first:
-    ``javascript:alert(1)`` becomes a file name, never a scheme)."""
-    return "./" + urllib.parse.quote(name, safe="/")
+    """A relative, URL-quoted link to the file ``name`` relative to the document (``./``
+    first unless it starts with ``./`` or ``../``: ``javascript:alert(1)`` becomes a file
+    name, never a scheme)."""
+    quoted = urllib.parse.quote(name, safe="/")
+    return quoted if quoted.startswith(("./", "../")) else "./" + quoted
 
 
 def html_text(text: object) -> str:
