@@ -26,6 +26,7 @@ from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures, layouts
+from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 
 #: What a hostile file tries to read: its bytes must never reach a capture.
 SECRET = b"root:x:0:0:secret-bytes-of-another-file\n" * 4
@@ -131,6 +132,17 @@ def test_an_external_storage_capture_on_the_command_line(workdir, tools):
         f"error: {path}: dataset 'scene_info' stores its data in 1 external file(s) outside "
         "the capture; refused: copy the data into the capture file")
     assert not (workdir / "outputs").exists() and not (workdir / "cache").exists()
+
+
+def test_nlosfw_own_files_reading_outside_themselves_are_refused(tmp_path):
+    path = write_phasor_field(tmp_path / "f.hdf5", fixtures.point_phasor_field())
+    with h5py.File(path, "a") as f:
+        _external_link(f, "extra", tmp_path)
+    with pytest.raises(DataError, match=r"f\.hdf5: 'extra' is an external link to "):
+        read_phasor_field(path)
+    os.mkfifo(tmp_path / "fifo.hdf5")
+    with pytest.raises(DataError, match=r"fifo\.hdf5: file is a FIFO \(named pipe\)"):
+        read_phasor_field(tmp_path / "fifo.hdf5")
 
 
 def test_a_soft_link_inside_the_file_is_followed(tmp_path):
