@@ -50,6 +50,10 @@ _H_NDIM = {
 _TIME_FORMATS = (HFormat.T_Sx_Sy, HFormat.T_Lx_Ly_Sx_Sy, HFormat.T_Si, HFormat.T_Li_Si)
 
 
+#: The bin widths (metres of optical path) a capture may have: 0.1 micrometre (0.33 fs)
+#: to 1 km (3.3 microseconds); anything outside is a unit mistake or a hostile file.
+MIN_DELTA_T, MAX_DELTA_T = 1e-7, 1e3
+
 @dataclass(frozen=True, eq=False)
 class Capture:
     """A transient measurement H with its full acquisition geometry.
@@ -120,6 +124,9 @@ class Capture:
                             "a capture must be finite")
         if not (np.isfinite(self.delta_t) and self.delta_t > 0):
             raise DataError(f"delta_t: must be a positive number of metres, got {self.delta_t}")
+        if not MIN_DELTA_T <= self.delta_t <= MAX_DELTA_T:
+            raise DataError(f"delta_t: must be a bin width between {MIN_DELTA_T:g} and "
+                            f"{MAX_DELTA_T:g} metres of optical path, got {self.delta_t:g}")
         if self.t_start is None or not np.isfinite(self.t_start):
             raise DataError(f"t_start: must be a finite number of metres, got {self.t_start}")
         object.__setattr__(self, "delta_t", float(self.delta_t))

@@ -60,6 +60,8 @@ HALF_WIDTH = 1.0
 CROP_BINS = 512
 #: The per-pixel delay file beside the measurements, and its variable.
 TOF_FILE, TOF_VARIABLE = "tof.mat", "tofgrid"
+#: The largest per-pixel delay accepted (ps): 1 microsecond, 300 m of light path.
+MAX_DELAY_PS = 1e6
 #: ``meas[i, j, t]``: x grows with j, y decreases with i (see the module docstring).
 LAYOUT = ScanLayout(x_axis=1, x_reversed=False, y_reversed=True)
 _EXPECTED = ("meas, the histograms [N, N, T] (32 ps bins) of a confocal scan of a 2 m x 2 m "
@@ -87,7 +89,10 @@ class FkFormat(CaptureFormat[CaptureFormatConfig]):
         scan = ConfocalScan(histograms=meas, layout=LAYOUT, half_width=HALF_WIDTH,
                             delta_t=BIN_SECONDS * SPEED_OF_LIGHT,
                             scene_info={"original_format": "MAT_FK", "bin_seconds": BIN_SECONDS})
-        return confocal_capture(scan)
+        try:
+            return confocal_capture(scan)
+        except DataError as err:
+            raise DataError(f"{path}: variable 'meas': {err}") from None
 
     def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
         return scan_shape(path, "meas")
@@ -113,4 +118,10 @@ def read_tofgrid(path: Path) -> np.ndarray:
     if delays.ndim != 2:
         raise DataError(f"{path}: variable '{TOF_VARIABLE}' has shape {list(delays.shape)}; "
                         "expected [N, N] (one delay in picoseconds per scan point)")
+    if not np.all(np.isfinite(delays)):
+        raise DataError(f"{path}: variable '{TOF_VARIABLE}' contains NaN or inf")
+    low, high = float(delays.min()), float(delays.max())
+    if low < 0 or high > MAX_DELAY_PS:
+        raise DataError(f"{path}: variable '{TOF_VARIABLE}' holds delays from {low:g} to "
+                        f"{high:g} ps; expected times of flight from 0 to {MAX_DELAY_PS:g} ps")
     return delays

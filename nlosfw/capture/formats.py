@@ -19,7 +19,8 @@ from typing import ClassVar, TypeVar
 from nlosfw.capture.data import Capture
 from nlosfw.capture.preprocess import Preprocessing
 from nlosfw.common.config import Configurable
-from nlosfw.common.errors import ConfigError, DataError, PluginError, one_line
+from nlosfw.common.errors import DataError, PluginError
+from nlosfw.common.inputs import regular_file
 
 
 @dataclass(frozen=True)
@@ -69,8 +70,7 @@ def detect_format(path: Path, formats: Mapping[str, CaptureFormat]) -> str:
     claimants when several do (ConfigError ``capture.path`` for a missing file).
     """
     names = ", ".join(sorted(formats))
-    if not path.is_file():
-        raise ConfigError("capture.path", f"file not found: {path}")
+    regular_file(path, "capture.path")
     claimed = []
     for name, fmt in sorted(formats.items()):
         try:
@@ -89,18 +89,12 @@ def detect_format(path: Path, formats: Mapping[str, CaptureFormat]) -> str:
 
 
 def _refuse_unreadable(path: Path) -> None:
-    """DataError for an HDF5 file (a MATLAB 7.3 file too) that cannot be opened."""
-    from nlosfw.capture.matfile import is_hdf5
+    """DataError for an HDF5 or MATLAB file (7.3 or 5) that cannot be read: damaged
+    (truncated), or holding links or data outside the file; nothing for other files."""
+    from nlosfw.capture.matfile import is_hdf5, mat_variables, mat_version
 
-    if not is_hdf5(path):
-        return
-    import h5py
-
-    try:
-        h5py.File(path, "r").close()
-    except OSError as err:
-        raise DataError(f"{path}: an HDF5 file that cannot be read (truncated or corrupt: "
-                        f"{one_line(err)})") from None
+    if is_hdf5(path) or mat_version(path) == 5:
+        mat_variables(path)
 
 
 def read_with(fmt: CaptureFormat, name: str, path: Path) -> Capture:

@@ -11,6 +11,7 @@ which is how the ``nlosfw`` capture format tells them from other y-tal files.
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterable
 from enum import IntEnum
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,9 @@ from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError, one_line
 from nlosfw.common.hdf5 import new_file, write_header
+from nlosfw.common.hdf5_guard import is_numeric, open_checked, read_dataset
+from nlosfw.common.inputs import describe_input
+from nlosfw.common.text import json_safe
 
 log = logging.getLogger(__name__)
 
@@ -39,6 +43,12 @@ _YTAL_ENUM_MEMBERS = {
     VolumeFormat: ("UNKNOWN", "N_3", "X_Y_Z_3", "X_Y_3"),
 }
 _REQUIRED = ("H", "H_format", "sensor_grid_xyz", "laser_grid_xyz", "delta_t")
+#: The Zaragoza (ZNLOS) layout's datasets (:mod:`nlosfw.capture.znlos_layout`).
+ZNLOS_FIELDS = ("data", "deltaT", "t0", "cameraPosition", "cameraGridPositions",
+                "cameraGridNormals", "laserPosition", "laserGridPositions", "laserGridNormals",
+                "hiddenVolumePosition", "hiddenVolumeRotation", "hiddenVolumeSize")
+#: Every top-level dataset :func:`read_fields` reads by default.
+KNOWN_FIELDS = (*YTAL_FIELDS, *ZNLOS_FIELDS)
 
 
 #: The ``nlosfw_type`` root attribute of nlosfw's capture files.
@@ -78,13 +88,20 @@ def read_capture(path: str | Path) -> Capture:
     return capture_from_fields(raw, path)
 
 
-def read_fields(path: Path) -> dict[str, Any]:
-    """Every top-level dataset of an HDF5 file (None for empty ones and groups)."""
-    if not path.is_file():
-        raise DataError(f"{path}: capture file not found")
+def read_fields(path: Path, names: Iterable[str] | None = None) -> dict[str, Any]:
+    """The top-level datasets ``names`` of an HDF5 file (default: y-tal's and the Zaragoza
+    layout's fields; None for empty ones and groups). Nothing else is read: the file is
+    checked for links and storage outside it first, and each dataset sized before it is
+    read (:mod:`nlosfw.common.hdf5_guard`); other datasets are named in a warning."""
+    describe_input(path, "capture file")
+    wanted = set(KNOWN_FIELDS if names is None else names)
     try:
-        with h5py.File(path, "r") as f:
-            return {key: _read_field(f, key, path) for key in f}
+        with open_checked(path, "capture") as f:
+            ignored = sorted(key for key in f if key not in wanted)
+            if ignored:
+                log.warning("%s: ignoring datasets the capture formats do not define: %s",
+                            path, ", ".join(ignored[:20]))
+            return {key: _read_field(f, key, path) for key in f if key in wanted}
     except DataError:
         raise
     except (OSError, RuntimeError, ValueError, KeyError) as err:
@@ -97,9 +114,6 @@ def capture_from_fields(raw: dict[str, Any], path: Path) -> Capture:
     if missing:
         raise DataError(f"{path}: missing field '{missing[0]}' (a y-tal capture needs "
                         f"{', '.join(_REQUIRED)})")
-    unknown = sorted(set(raw) - set(YTAL_FIELDS))
-    if unknown:
-        log.warning("%s: ignoring fields unknown to y-tal's format: %s", path, ", ".join(unknown))
     kwargs: dict[str, Any] = {}
     for key in YTAL_FIELDS:
         value = raw.get(key)
@@ -160,12 +174,9 @@ def _read_field(f: h5py.File, key: str, path: Path) -> Any:
         return None
     if node.shape is None:  # h5py.Empty: y-tal's None
         return None
-    try:
-        value = node[()]
-    except (OSError, RuntimeError) as err:
-        raise DataError(f"{path}: field '{key}' cannot be read (file truncated or corrupt: "
-                        f"{one_line(err)})") from None
-    return value
+    if key != "scene_info" and key not in _ENUMS and not is_numeric(node):
+        raise DataError(f"{path}: field '{key}' must be numeric, got {node.dtype} data")
+    return read_dataset(node, path, key)
 
 
 def _scalar(value: Any, key: str, path: Path) -> float:
@@ -189,6 +200,7 @@ def _scene_info(value: Any, path: Path) -> dict:
                             ) from None
     if value is None:
         return {}
+    value = json_safe(value)
     if not isinstance(value, dict):
         raise DataError(f"{path}: field 'scene_info' must be a YAML mapping, got "
                         f"{type(value).__name__}")

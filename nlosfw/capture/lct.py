@@ -57,6 +57,8 @@ from nlosfw.common.errors import DataError
 BIN_SECONDS = 4e-12
 #: Leading bins the authors' code zeroes in every scene (the direct reflection).
 DIRECT_REFLECTION_BINS = 600
+#: The half-widths (m) accepted: a millimetre to a kilometre (outside: a unit mistake).
+MIN_WIDTH, MAX_WIDTH = 1e-3, 1e3
 #: ``rect_data[i, j, t]``: x decreases with i, y decreases with j (see the module docstring).
 LAYOUT = ScanLayout(x_axis=0, x_reversed=True, y_reversed=True)
 _EXPECTED = ("rect_data, the histograms [N, N, T] (uint16, 4 ps bins), and width, half the "
@@ -81,6 +83,9 @@ class LctFormat(CaptureFormat[CaptureFormatConfig]):
         if width <= 0:
             raise DataError(f"{path}: variable 'width' is {width}; expected a positive number of "
                             "metres (half the side of the scanned square)")
+        if not MIN_WIDTH <= width <= MAX_WIDTH:
+            raise DataError(f"{path}: variable 'width' is {width:g}; expected half the side of "
+                            f"the scanned square, {MIN_WIDTH:g} to {MAX_WIDTH:g} metres")
         rect_data = read_mat_array(path, "rect_data")
         if rect_data.ndim != 3 or rect_data.shape[0] != rect_data.shape[1]:
             raise DataError(f"{path}: variable 'rect_data' has shape {list(rect_data.shape)}; "

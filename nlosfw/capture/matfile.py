@@ -18,6 +18,15 @@ import numpy as np
 import numpy.typing as npt
 
 from nlosfw.common.errors import DataError, one_line
+from nlosfw.common.files import format_bytes
+from nlosfw.common.hdf5_guard import (
+    check_file,
+    dataset_limit,
+    is_numeric,
+    open_checked,
+    read_dataset,
+)
+from nlosfw.common.inputs import describe_input
 
 #: The text every MATLAB 5 and 7.3 file starts with (7.3 files carry it in the HDF5 user block).
 MAT_HEADER = b"MATLAB"
@@ -62,25 +71,52 @@ def mat_version(path: Path) -> int | None:
 def mat_variables(path: Path) -> dict[str, MatVariable]:
     """The top-level variables of a v5 or v7.3 file (HDF5 without MATLAB's header counts as
     7.3), by name, without reading their data. DataError if it is neither."""
+    describe_input(path)
     if is_hdf5(path):
-        import h5py
-
         try:
-            with h5py.File(path, "r") as f:
+            with open_checked(path) as f:
                 return {name: _hdf5_variable(name, node) for name, node in f.items()
                         if not name.startswith("#")}
-        except OSError as err:
-            raise DataError(f"{path}: not a readable HDF5 file ({one_line(err)})") from None
+        except (OSError, RuntimeError, KeyError) as err:
+            raise DataError(f"{path}: an HDF5 file that cannot be read (truncated or "
+                            f"corrupt: {one_line(err)})") from None
     if mat_version(path) == 5:
         import scipy.io
 
+        if not _mat5_complete(path):
+            raise DataError(f"{path}: not a readable MATLAB file (truncated or corrupt: a "
+                            "variable ends past the end of the file)")
         try:
             found = scipy.io.whosmat(str(path))
         except Exception as err:  # scipy raises several types for damaged files
-            raise DataError(f"{path}: not a readable MATLAB file ({one_line(err)})") from None
+            raise DataError(f"{path}: not a readable MATLAB file (truncated or corrupt: "
+                            f"{one_line(err)})") from None
         return {name: MatVariable(name, tuple(int(n) for n in shape), str(cls))
                 for name, shape, cls in found}
     raise DataError(f"{path}: not a MATLAB .mat file (version 5 or 7.3) nor HDF5")
+
+
+def _mat5_complete(path: Path) -> bool:
+    """Whether every top-level element of a MATLAB 5 file ends inside the file (a truncated
+    file's last one does not; scipy lists the variables before it without complaint)."""
+    import struct
+
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(128)
+        order = "<" if head[126:128] == b"IM" else ">"
+        pos = 128
+        while pos < size:
+            f.seek(pos)
+            tag = f.read(8)
+            if len(tag) < 8:
+                return False
+            kind, nbytes = struct.unpack(order + "II", tag)
+            end = pos + 8 + nbytes
+            if end > size:
+                return False
+            pos = end + (0 if kind == 15 else -nbytes % 8)   # 15: compressed, no padding
+    return True
 
 
 def _hdf5_variable(name: str, node: Any) -> MatVariable:
@@ -112,9 +148,10 @@ def hdf5_keys(path: Path, group: str = "") -> set[str] | None:
 
     try:
         with h5py.File(path, "r") as f:
+            check_file(f, path)
             node = f[group] if group else f
             return set(node.keys()) if isinstance(node, h5py.Group) else None
-    except (OSError, KeyError, RuntimeError, ValueError):
+    except (OSError, KeyError, RuntimeError, ValueError, DataError):
         return None
 
 
@@ -128,11 +165,12 @@ def hdf5_shape(path: Path, name: str) -> tuple[int, ...] | None:
 
     try:
         with h5py.File(path, "r") as f:
+            check_file(f, path)
             node = f.get(name)
             if not isinstance(node, h5py.Dataset) or node.shape is None:
                 return None
             return tuple(int(n) for n in node.shape)
-    except (OSError, KeyError, RuntimeError, ValueError):
+    except (OSError, KeyError, RuntimeError, ValueError, DataError):
         return None
 
 
@@ -160,45 +198,91 @@ def require_variables(path: Path, names: Sequence[str], expected: str) -> dict[s
 
 def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None) -> np.ndarray:
     """Variable ``name`` of a v5 or v7.3 file in MATLAB's axis order (``dtype``: convert
-    while reading, so a large v7.3 array is never held in two types at once)."""
+    while reading, so a large v7.3 array is never held in two types at once).
+
+    Only numeric arrays are read: text, cell arrays, structs and sparse matrices are refused
+    naming the variable and its class, and a complex array is refused where ``dtype`` is
+    real (its imaginary part would be lost). The file is checked for data outside it and the
+    variable sized before it is read (:mod:`nlosfw.common.hdf5_guard`)."""
     if is_hdf5(path):
         import h5py
 
         try:
-            with h5py.File(path, "r") as f:
+            with open_checked(path) as f:
                 node = f.get(name)
                 if not isinstance(node, h5py.Dataset):
                     raise DataError(f"{path}: variable '{name}' is missing or not an array")
-                value = node.astype(dtype)[()] if dtype is not None else node[()]
+                cls = _hdf5_variable(name, node).matlab_class
+                if cls in _NOT_NUMERIC or not is_numeric(node):
+                    raise DataError(_not_numeric(path, name, cls or str(node.dtype)))
+                _check_complex(path, name, node.dtype, dtype)
+                value = read_dataset(node, path, name, dtype)
         except (OSError, RuntimeError) as err:
             raise DataError(f"{path}: variable '{name}' cannot be read (file truncated or "
                             f"corrupt: {one_line(err)})") from None
         return np.asarray(value).T
     import scipy.io
 
+    found = mat_variables(path).get(name)
+    if found is None:
+        raise DataError(f"{path}: no variable '{name}'")
+    if found.matlab_class in _NOT_NUMERIC:
+        raise DataError(_not_numeric(path, name, found.matlab_class))
+    nbytes = int(np.prod(found.shape, dtype=float)) * 16
+    if nbytes > dataset_limit():
+        raise DataError(f"{path}: variable '{name}' declares shape {list(found.shape)} "
+                        f"({format_bytes(nbytes)} at most), more than the "
+                        f"{format_bytes(dataset_limit())} of memory this machine has")
     try:
         value = scipy.io.loadmat(str(path), variable_names=[name])[name]
     except KeyError:
         raise DataError(f"{path}: no variable '{name}'") from None
     except Exception as err:  # scipy raises several types for damaged files
-        raise DataError(f"{path}: variable '{name}' cannot be read ({one_line(err)})") from None
-    value = np.asarray(value)
+        raise DataError(f"{path}: variable '{name}' cannot be read (truncated or corrupt: "
+                        f"{one_line(err)})") from None
+    if not isinstance(value, np.ndarray) or value.dtype.kind not in "biufc":
+        raise DataError(_not_numeric(path, name, found.matlab_class))
+    _check_complex(path, name, value.dtype, dtype)
     return value if dtype is None else value.astype(dtype, copy=False)
 
 
-def read_mat_struct(path: Path, name: str) -> dict[str, np.ndarray]:
-    """The fields of struct ``name`` of a v7.3 file (each in MATLAB's axis order)."""
+#: MATLAB classes that are not numeric arrays.
+_NOT_NUMERIC = ("char", "cell", "struct", "sparse", "function_handle", "object", "string")
+
+
+def _not_numeric(path: Path, name: str, cls: str) -> str:
+    return (f"{path}: variable '{name}' must be numeric, got MATLAB class {cls} (a numeric "
+            "array: double, single or an integer type)")
+
+
+def _check_complex(path: Path, name: str, found: npt.DTypeLike, dtype: npt.DTypeLike) -> None:
+    if np.dtype(found).kind == "c" and dtype is not None and np.dtype(dtype).kind != "c":
+        raise DataError(f"{path}: variable '{name}' must be real, got complex numbers")
+
+
+def read_mat_struct(path: Path, name: str, fields: Sequence[str] | None = None
+                    ) -> dict[str, np.ndarray]:
+    """The numeric ``fields`` of struct ``name`` of a v7.3 file that it has (default: all;
+    each in MATLAB's axis order); no other field is read."""
     import h5py
 
     if not is_hdf5(path):
         raise DataError(f"{path}: struct '{name}' must be in a MATLAB 7.3 (HDF5) file")
     try:
-        with h5py.File(path, "r") as f:
+        with open_checked(path) as f:
             group = f.get(name)
             if not isinstance(group, h5py.Group):
-                raise DataError(f"{path}: no struct '{name}'")
-            return {key: np.asarray(node[()]).T for key, node in group.items()
-                    if isinstance(node, h5py.Dataset)}
+                raise DataError(f"{path}: no struct '{name}' (the file holds: "
+                                f"{', '.join(sorted(f)) or 'nothing'})")
+            found = {}
+            for key in (list(group) if fields is None else fields):
+                node = group.get(key)
+                if not isinstance(node, h5py.Dataset):
+                    continue
+                if not is_numeric(node):
+                    raise DataError(_not_numeric(path, f"{name}.{key}", str(node.dtype)))
+                found[key] = np.asarray(read_dataset(node, path, f"{name}.{key}")).T
+            return found
     except (OSError, RuntimeError) as err:
         raise DataError(f"{path}: struct '{name}' cannot be read (file truncated or corrupt: "
                         f"{one_line(err)})") from None

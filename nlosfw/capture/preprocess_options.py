@@ -7,8 +7,10 @@ import dataclasses
 from dataclasses import dataclass
 from typing import Any
 
+from nlosfw.capture.data import MAX_DELTA_T, MIN_DELTA_T
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.common.config import Choice, require
+from nlosfw.common.errors import ConfigError
 
 #: Metres of optical path per picosecond.
 METRES_PER_PS = SPEED_OF_LIGHT * 1e-12
@@ -89,6 +91,12 @@ class BinWidth:
         for name in ("ps", "metres"):
             value = getattr(self, name)
             require(value is None or value > 0, name, f"must be > 0, got {value}")
+        width = self.in_metres
+        if width is not None and not MIN_DELTA_T <= width <= MAX_DELTA_T:
+            raise ConfigError("ps" if self.ps is not None else "metres",
+                              f"gives a bin width of {width:g} m; valid: {MIN_DELTA_T:g} to "
+                              f"{MAX_DELTA_T:g} m ({MIN_DELTA_T / METRES_PER_PS:g} to "
+                              f"{MAX_DELTA_T / METRES_PER_PS:g} ps)")
 
     @property
     def is_set(self) -> bool:

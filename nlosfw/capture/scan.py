@@ -85,6 +85,9 @@ def confocal_capture(scan: ConfocalScan) -> Capture:
     if hist.ndim != 3 or hist.shape[0] != hist.shape[1] or hist.shape[0] < 1:
         raise DataError(f"the scan must be a square grid [N, N, T], got shape "
                         f"{list(hist.shape)}")
+    if hist.shape[0] < 2 or hist.shape[2] < 2:
+        raise DataError(f"the scan has shape {list(hist.shape)}; at least 2 x 2 points of 2 "
+                        "bins are needed to image anything")
     if not np.issubdtype(hist.dtype, np.number) or np.iscomplexobj(hist):
         raise DataError(f"the histograms must be real numbers, got {hist.dtype}")
     # a view where the file's order allows it: a full f-k scan is 2 GB in float32

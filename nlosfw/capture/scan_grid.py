@@ -13,6 +13,13 @@ from nlosfw.capture.preprocess_options import FlipAxes
 from nlosfw.common.errors import ConfigError
 
 
+def _two_points_left(capture: Capture, k: int, option: str) -> None:
+    nx, ny = capture.grid_shape
+    if k >= min(nx, ny):
+        raise ConfigError(option, f"{k} leaves fewer than 2 x 2 points of the {nx}x{ny} scan "
+                                  f"grid; valid: 1 to {max(min(nx, ny) - 1, 1)}")
+
+
 def _need_grid(capture: Capture, option: str) -> None:
     if capture.H_format is not HFormat.T_Sx_Sy or capture.sensor_grid_format is not \
             GridFormat.X_Y_3:
@@ -103,6 +110,7 @@ def transpose_scan(capture: Capture, option: str = "capture.transpose") -> Captu
 def bin_scan(capture: Capture, k: int, option: str = "capture.bin") -> Capture:
     """Sum each k x k block of scan points into one, at the block's mean position."""
     _need_grid(capture, option)
+    _two_points_left(capture, k, option)
     nx, ny = capture.grid_shape
     if nx % k or ny % k:
         raise ConfigError(option, f"{k} does not divide the scan grid {nx}x{ny}; valid: a "
@@ -120,6 +128,7 @@ def bin_scan(capture: Capture, k: int, option: str = "capture.bin") -> Capture:
 def stride_scan(capture: Capture, k: int, option: str = "capture.stride") -> Capture:
     """Every k-th scan point in x and in y (from the first)."""
     _need_grid(capture, option)
+    _two_points_left(capture, k, option)
     H = capture.H[:, ::k, ::k].copy()
     grid = capture.sensor_grid_xyz[::k, ::k].copy()
     normals = capture.sensor_grid_normals

@@ -20,11 +20,13 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.formats import CaptureFormat, detect_format, read_with
+from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.preprocess import AppliedStep, Extras, Preprocessing, preprocess
 from nlosfw.capture.scan import on_scan_grid
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.common.hashing import cache_key, file_digest
+from nlosfw.common.inputs import regular_file
 
 #: What a cache key of a preprocessed capture covers (JSON-like values).
 KeyMaterial = dict[str, object]
@@ -119,8 +121,7 @@ def file_transient_shape(path: Path, forced: str | None, formats: FormatCatalogu
 def read_capture_file(path: Path, forced: str | None, formats: FormatCatalogue
                       ) -> tuple[str, CaptureFormat, Capture]:
     """The format of ``path`` and the capture it reads there (no preprocessing)."""
-    if not path.is_file():
-        raise ConfigError("capture.path", f"file not found: {path}")
+    regular_file(path, "capture.path")
     name, fmt = formats.choose(path, forced)
     return name, fmt, read_with(fmt, name, path)
 
@@ -151,6 +152,9 @@ def prepare(capture: Capture, options: Preprocessing, from_format: frozenset[str
     background = None
     if options.background:
         bg_path = _existing(options.background, "background")
+        if origin is not None and bg_path.resolve() == origin.resolve():
+            raise ConfigError("capture.background", f"{options.background} is the capture file "
+                                                    "itself; give the background measurement")
         _, _, background = read_capture_file(bg_path, None, formats)
         material["background"] = file_digest(bg_path)
     result, steps = preprocess(capture, options, from_format, Extras(delays, background))
@@ -170,10 +174,7 @@ def check_files(options: Preprocessing, formats: FormatCatalogue) -> None:
 
 
 def _existing(value: str, option: str) -> Path:
-    path = Path(value).expanduser()
-    if not path.is_file():
-        raise ConfigError(f"capture.{option}", f"file not found: {value}")
-    return path
+    return regular_file(value, f"capture.{option}")
 
 
 def _delays(tof: Path, capture: Capture, origin: Path | None) -> np.ndarray:
@@ -185,6 +186,11 @@ def _delays(tof: Path, capture: Capture, origin: Path | None) -> np.ndarray:
     except DataError as err:
         raise ConfigError("capture.tofgrid", str(err)) from None
     delays = on_scan_grid(capture, raw)
+    bin_ps = capture.delta_t / (SPEED_OF_LIGHT * 1e-12)
+    if float(np.max(raw, initial=0.0)) >= capture.n_bins * bin_ps:
+        raise ConfigError("capture.tofgrid", f"{tof}: variable '{TOF_VARIABLE}' holds delays up "
+                                             f"to {float(np.max(raw)):g} ps, beyond the "
+                                             f"capture's {capture.n_bins} bins of {bin_ps:g} ps")
     if delays.shape != capture.grid_shape:
         of = f" of {origin}" if origin is not None else ""
         raise ConfigError("capture.tofgrid", f"{tof}: variable '{TOF_VARIABLE}' has shape "

@@ -103,5 +103,8 @@ def subtract_background(capture: Capture, background: Capture) -> Capture:
         raise ConfigError("capture.background", "its scan points differ from the capture's")
     H = capture.H.astype(np.result_type(capture.H, background.H), copy=True)
     H -= background.H
+    if not np.any(H):
+        raise ConfigError("capture.background", "subtracting it leaves nothing: it equals the "
+                                                "capture (give the background measurement)")
     return capture.replace(H=H)
 

@@ -40,6 +40,7 @@ from nlosfw.capture.matfile import (
     scalar,
 )
 from nlosfw.common.errors import DataError
+from nlosfw.common.hdf5_guard import open_checked
 
 #: The struct's fields that must be present.
 FIELDS = ("t", "data", "laserOrigin", "laserPos", "cameraPos", "deltat", "t0")
@@ -81,12 +82,11 @@ class WisconsinFormat(CaptureFormat[CaptureFormatConfig]):
     def read(self, path: Path) -> Capture:
         if not is_hdf5(path):
             raise DataError(f"{path}: not a MATLAB 7.3 (HDF5) file; expected {_EXPECTED}")
-        import h5py
-
-        with h5py.File(path, "r") as f:
-            if not isinstance(f.get("dataset"), h5py.Group):
-                raise DataError(f"{path}: no struct 'dataset' (expected {_EXPECTED})")
-        ds = read_mat_struct(path, "dataset")
+        if hdf5_keys(path, "dataset") is None:
+            with open_checked(path):   # says why when data lies outside the file, or damage
+                pass
+            raise DataError(f"{path}: no struct 'dataset' (expected {_EXPECTED})")
+        ds = read_mat_struct(path, "dataset", (*FIELDS, "laserNorm", "cameraNormal"))
         missing = [k for k in FIELDS if k not in ds]
         if missing:
             raise DataError(f"{path}: no field 'dataset.{missing[0]}' (expected {_EXPECTED})")

@@ -14,7 +14,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 from rich import get_console
-from rich.console import Console
+from rich.console import Console, ConsoleRenderable
 from rich.logging import RichHandler
 from rich.progress import (
     BarColumn,
@@ -27,6 +27,7 @@ from rich.progress import (
 )
 
 from nlosfw.common.logs import OWN_LOGGERS
+from nlosfw.common.text import controls_visible
 
 
 class ConsoleFilter(logging.Filter):
@@ -39,9 +40,17 @@ class ConsoleFilter(logging.Filter):
         return record.name.startswith(OWN_LOGGERS) and getattr(record, "console", True)
 
 
+class _PlainHandler(RichHandler):
+    """Rich's handler with control characters of messages (a file name holding escape
+    sequences) shown as ``\\xNN`` instead of reaching the terminal."""
+
+    def render_message(self, record: logging.LogRecord, message: str) -> ConsoleRenderable:
+        return super().render_message(record, controls_visible(message))
+
+
 def rich_log_handler() -> logging.Handler:
     """The console handler of the run log (used by conf/hydra/job_logging/nlosfw.yaml)."""
-    handler = RichHandler(console=app_console(), show_path=False, rich_tracebacks=False,
+    handler = _PlainHandler(console=app_console(), show_path=False, rich_tracebacks=False,
                           markup=False, log_time_format="[%X]")
     handler.addFilter(ConsoleFilter())
     return handler

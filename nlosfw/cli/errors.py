@@ -7,9 +7,9 @@ import os
 import traceback
 
 from rich.console import Console
-from rich.markup import escape
 
 from nlosfw.common.errors import RunInterrupted, one_line
+from nlosfw.common.text import console_text as escape
 
 log = logging.getLogger("nlosfw")
 

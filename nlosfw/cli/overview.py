@@ -12,10 +12,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from rich.markup import escape
-
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import NlosfwError
+from nlosfw.common.text import console_text as escape
 from nlosfw.pipeline.settings import SELECTOR_GROUPS, RunSettings
 from nlosfw.plugins import PluginHost
 

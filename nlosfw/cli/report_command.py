@@ -8,10 +8,10 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from rich.console import Console
-from rich.markup import escape
 from rich.table import Table
 
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.text import console_text as escape
 from nlosfw.report import write_report
 
 

@@ -13,13 +13,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from rich.console import Console
-from rich.markup import escape
 from rich.progress import Progress, TaskID
 
 from nlosfw.cli.console import app_console, progress_bar
 from nlosfw.cli.overview import overview_lines
 from nlosfw.cli.summary import summary_table
 from nlosfw.common.files import format_bytes
+from nlosfw.common.text import console_text as escape
 from nlosfw.pipeline import Artefact, RunMetrics, RunSettings
 from nlosfw.plugins import PluginHost, hookimpl
 

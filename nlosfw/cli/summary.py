@@ -5,8 +5,10 @@ from __future__ import annotations
 import dataclasses
 
 from rich.table import Table
+from rich.text import Text
 
 from nlosfw.common.config import Scalar
+from nlosfw.common.text import visible
 from nlosfw.pipeline.metrics import RunMetrics
 
 
@@ -18,6 +20,12 @@ def _fmt(value: Scalar, digits: int = 3) -> str:
     return str(value)
 
 
+def _add(table: Table, *cells: str) -> None:
+    """A row of plain text: file and scene names are shown as they are, never as markup,
+    with control characters made visible."""
+    table.add_row(*(Text(visible(cell)) for cell in cells))
+
+
 def summary_table(metrics: RunMetrics) -> Table:
     """The capture (scene or file, and its preprocessing), field errors per model and split,
     reconstruction scores per source, stage timings."""
@@ -27,20 +35,20 @@ def summary_table(metrics: RunMetrics) -> Table:
     table.add_column("values")
     run = metrics.run
     if run.capture_file is not None:
-        table.add_row("capture", "file", f"{run.capture_file} (format {run.capture_format or '?'})")
+        _add(table, "capture", "file", f"{run.capture_file} (format {run.capture_format or '?'})")
     else:
-        table.add_row("capture", "scene", f"{run.scene} (simulator {run.simulator})")
+        _add(table, "capture", "scene", f"{run.scene} (simulator {run.simulator})")
     for step in () if metrics.capture is None else metrics.capture.preprocessing:
         origin = {"format": " (format default)", "automatic": " (automatic)"}.get(step.source, "")
-        table.add_row("", f"  {step.option}{origin}", step.effect)
+        _add(table, "", f"  {step.option}{origin}", step.effect)
     for source, entry in (metrics.field or {}).items():
-        table.add_row("field model", f"{source} ({entry.plugin})",
+        _add(table, "field model", f"{source} ({entry.plugin})",
                       f"params {entry.n_parameters}, fit {_fmt(entry.fit.seconds)} s,"
                       f" predict {_fmt(entry.predict_seconds)} s")
         if entry.splits is None:
             continue
         for split, values in entry.splits.by_set().items():
-            table.add_row("", f"  {split}",
+            _add(table, "", f"  {split}",
                           f"NMSE {_fmt(values.nmse_db)} dB, "
                           f"rel. L2 {_fmt(values.relative_l2)}, "
                           f"amp. RMSE {_fmt(values.amplitude_rmse)}, "
@@ -49,10 +57,10 @@ def summary_table(metrics: RunMetrics) -> Table:
     for source, scores in sources.items():
         depth = ("" if scores.depth_rmse_m is None
                  else f", depth RMSE {_fmt(scores.depth_rmse_m)} m")
-        table.add_row("reconstruction", f"{source} vs true",
+        _add(table, "reconstruction", f"{source} vs true",
                       f"PSNR {_fmt(scores.psnr)} dB, SSIM {_fmt(scores.ssim)}, "
                       f"RMSE {_fmt(scores.rmse)}; volume PSNR {_fmt(scores.volume_psnr)} dB, "
                       f"SSIM {_fmt(scores.volume_ssim)}{depth}; {_fmt(scores.seconds)} s")
     timings = {k: v for k, v in dataclasses.asdict(metrics.timings).items() if v is not None}
-    table.add_row("timings", "stages (s)", ", ".join(f"{k} {_fmt(v)}" for k, v in timings.items()))
+    _add(table, "timings", "stages (s)", ", ".join(f"{k} {_fmt(v)}" for k, v in timings.items()))
     return table

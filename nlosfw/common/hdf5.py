@@ -19,6 +19,8 @@ import numpy as np
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError
 from nlosfw.common.files import write_bytes
+from nlosfw.common.hdf5_guard import check_file, check_size
+from nlosfw.common.inputs import describe_input
 
 FORMAT_VERSION = 1
 
@@ -63,12 +65,16 @@ class open_typed:
         self.path, self.kind = Path(path), kind
 
     def __enter__(self) -> tuple[h5py.File, Path]:
-        if not self.path.is_file():
-            raise DataError(f"{self.path}: file not found")
+        describe_input(self.path)
         try:
             self.file = h5py.File(self.path, "r")
         except OSError as err:
             raise DataError(f"{self.path}: not a readable HDF5 file ({err})") from None
+        try:
+            check_file(self.file, self.path)
+        except DataError:
+            self.file.close()
+            raise
         found = self.file.attrs.get("nlosfw_type")
         if isinstance(found, bytes):
             found = found.decode()
@@ -86,7 +92,10 @@ def read_dataset(f: h5py.File, key: str, path: Path) -> np.ndarray:
     if key not in f:
         raise DataError(f"{path}: missing field '{key}'")
     try:
-        return f[key][()]
+        node = f[key]
+        if isinstance(node, h5py.Dataset):
+            check_size(node, path, key)
+        return node[()]
     except (OSError, RuntimeError) as err:
         raise DataError(f"{path}: field '{key}' cannot be read ({err})") from None
 

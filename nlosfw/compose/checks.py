@@ -87,8 +87,12 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
                 sweeps.append((key, _values(ov)))
         combos = itertools.product(*[[f"{key}={v}" for v in values] for key, values in sweeps])
         total = math.prod(len(values) for _, values in sweeps)
+        chdir = bool(composed(first, with_hydra=True).hydra.job.get("chdir", False))
         for combo in itertools.islice(combos, _MAX_PREFLIGHT_COMPOSITIONS):
-            validate_config(composed(fixed + list(combo)), host)
+            cfg = composed(fixed + list(combo))
+            if chdir:
+                _refuse_relative_inputs(cfg)
+            validate_config(cfg, host)
         if total > _MAX_PREFLIGHT_COMPOSITIONS:
             log.warning("checked the first %d of %d sweep combinations before starting; "
                         "the others are checked when their run starts",
@@ -124,6 +128,20 @@ def composition_error(err: Exception, host: PluginHost | None = None) -> NlosfwE
             return ConfigError(override.group(1), f"{key}: {what}")
         return ConfigError(key, what)
     return ConfigError("", one_line(err, whole=True))
+
+
+def _refuse_relative_inputs(cfg: Mapping[str, object]) -> None:
+    """With ``hydra.job.chdir=true`` the run starts in its run directory, where a relative
+    input path would name another file: refuse it naming the option."""
+    capture = cfg.get("capture")
+    if not isinstance(capture, Mapping):
+        return
+    for name in ("path", "background", "tofgrid"):
+        value = capture.get(name)
+        if isinstance(value, str) and value and not value.startswith(("/", "~")):
+            raise ConfigError(f"capture.{name}", f"'{value}' is a relative path, but "
+                              "hydra.job.chdir=true runs in the run directory, where it names "
+                              "another file; give an absolute path")
 
 
 def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:

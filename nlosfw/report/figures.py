@@ -19,11 +19,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from nlosfw.common.text import visible
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.scores import amplitude, normalise
 from nlosfw.pipeline.files import RunFiles
 from nlosfw.pipeline.metrics import ImageScores, ReconstructionMetrics, RunInfo
 from nlosfw.pipeline.results import CaptureResult, RunResults
+from nlosfw.report.plain_text import literal_text
 from nlosfw.transform.field import PhasorField
 
 if TYPE_CHECKING:
@@ -45,7 +47,7 @@ def run_title(info: RunInfo, capture: CaptureResult | None = None) -> str:
         source = f"{'capture' if capture.path is not None else 'scene'} {capture.label}"
     else:
         source = f"scene {info.scene} ({info.simulator})"
-    return f"{source} · model {info.model} · imager {info.imager}"
+    return visible(f"{source} · model {info.model} · imager {info.imager}")
 
 
 def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
@@ -89,7 +91,7 @@ def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
 
 def _saver(make: Callable[[], Figure], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        make().savefig(path, dpi=dpi, format="png")
+        literal_text(make()).savefig(path, dpi=dpi, format="png")
 
     return save
 

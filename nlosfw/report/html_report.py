@@ -18,6 +18,7 @@ from pathlib import Path
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import Scalar
+from nlosfw.common.text import href, html_text
 from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.report.quality import QualityTable, parse_overrides
 from nlosfw.report.records import RunRecord
@@ -180,7 +181,7 @@ def _files(run_dir: Path) -> str:
         rel = path.relative_to(run_dir).as_posix()
         if rel.startswith(".") or "/." in rel or rel == "report.html":
             continue
-        rows.append(f"<tr><td><a href=\"{html.escape(rel)}\">{html.escape(rel)}</a></td>"
+        rows.append(f"<tr><td><a href=\"{html.escape(href(rel))}\">{html_text(rel)}</a></td>"
                     f"<td>{path.stat().st_size / 1e6:.2f}</td></tr>")
     return ("<table>\n<thead><tr><th>file</th><th>MB</th></tr></thead>\n<tbody>"
             + "".join(rows) + "</tbody>\n</table>")
@@ -201,9 +202,9 @@ def sweep_report(root: Path, out_dir: Path, records: Sequence[RunRecord],
     linked = []
     for record, row in zip(records, rows, strict=True):
         page_path = root / record.name / "report.html"
-        link = (f"<a href=\"{html.escape(_relative(page_path, out_dir))}\">"
-                f"{html.escape(record.name)}</a>" if page_path.is_file()
-                else html.escape(record.name))
+        link = (f"<a href=\"{html.escape(href(_relative(page_path, out_dir)))}\">"
+                f"{html_text(record.name)}</a>" if page_path.is_file()
+                else html_text(record.name))
         cells = "".join(f"<td>{html.escape(row[c])}</td>" for c in columns[1:])
         linked.append(f"<tr><td>{link}</td>{cells}</tr>")
     head = "".join(f"<th>{html.escape(c)}</th>" for c in columns)

@@ -24,6 +24,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from nlosfw.common.text import markdown
 from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import markdown_table
@@ -301,7 +302,7 @@ def quality_tables(points: Sequence[QualityPoint], layout: SweepLayout,
 def quality_table(points: Sequence[QualityPoint], layout: SweepLayout,
                   metrics: Sequence[QualityMetric] = QUALITY_METRICS) -> str:
     """The figure's numbers as markdown (:func:`quality_tables`)."""
-    return "\n".join(f"#### {t.heading}\n\n" + markdown_table(t.header, t.rows)
+    return "\n".join(f"#### {markdown(t.heading)}\n\n" + markdown_table(t.header, t.rows)
                      for t in quality_tables(points, layout, metrics))
 
 

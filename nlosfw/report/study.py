@@ -275,7 +275,9 @@ def study_figure(rows: Sequence[StudyRow], path: Path, dpi: int = 110) -> None:
     handles, labels = unique_legend(axes)
     fig.legend(handles, labels, loc="upper center", ncol=min(6, max(1, len(labels))),
                fontsize=9, frameon=False)
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.6 / fig.get_figheight()))
+    from nlosfw.report.plain_text import literal_text
+
+    literal_text(fig).tight_layout(rect=(0, 0, 1, 1 - 0.6 / fig.get_figheight()))
     fig.savefig(path, dpi=dpi, format="png")
 
 

@@ -31,6 +31,8 @@ from pathlib import Path
 from nlosfw.common.config import Scalar
 from nlosfw.common.errors import DataError
 from nlosfw.common.files import atomic_path, write_text
+from nlosfw.common.text import csv_cell
+from nlosfw.common.text import markdown as markdown_text
 from nlosfw.pipeline.metrics import (
     ErrorMetrics,
     FieldMetrics,
@@ -153,8 +155,8 @@ def to_csv(rows: list[dict[str, str]]) -> str:
 def csv_text(header: Sequence[str], rows: Sequence[Sequence[Scalar]]) -> str:
     buffer = io.StringIO()
     writer = csv.writer(buffer)
-    writer.writerow(header)
-    writer.writerows(rows)
+    writer.writerow([csv_cell(c) for c in header])
+    writer.writerows([csv_cell(c) for c in row] for row in rows)
     return buffer.getvalue()
 
 
@@ -192,7 +194,7 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
     out.mkdir(parents=True)
     write_text(out / "report.csv", to_csv(rows))
     write_text(out / "study.csv", csv_text(*study_csv_rows(study)))
-    markdown = f"# nlosfw report: {root}\n\n{len(rows)} runs.\n\n"
+    markdown = f"# nlosfw report: {markdown_text(str(root))}\n\n{len(rows)} runs.\n\n"
     if by_sparsity:
         header, cells = study_table(study)
         tables = [QualityTable(heading="reconstruction quality against sparsity, mean ± "
@@ -207,8 +209,9 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
                      + markdown_table(header, cells) + "\n")
     else:
         tables = quality_tables(points, layout)
-        markdown += (f"## Quality against {layout.x_label}\n\n![quality against "
-                     f"{layout.x_label}](report.png)\n\n{quality_table(points, layout)}\n")
+        label = markdown_text(layout.x_label)
+        markdown += (f"## Quality against {label}\n\n![quality against "
+                     f"{label}](report.png)\n\n{quality_table(points, layout)}\n")
     markdown += f"## Every run\n\n{to_markdown(rows)}"
     thesis_tables = thesis_comparison(records)
     if thesis_tables:
@@ -218,7 +221,9 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
         if by_sparsity:
             study_figure(study, tmp)
         else:
-            quality_figure(points, layout).savefig(tmp, dpi=110, format="png")
+            from nlosfw.report.plain_text import literal_text
+
+            literal_text(quality_figure(points, layout)).savefig(tmp, dpi=110, format="png")
     write_text(out / "report.html", sweep_report(root, out, records, rows,
                                                  (out / "report.png").read_bytes(), tables))
     return out, rows

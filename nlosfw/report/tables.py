@@ -6,6 +6,8 @@ from collections.abc import Sequence
 
 from nlosfw.common.config import Scalar
 
+from nlosfw.common.text import markdown
+
 
 def format_cell(value: Scalar) -> str:
     """A table cell: empty for None, 4 significant digits for a float, else ``str``."""
@@ -17,8 +19,8 @@ def format_cell(value: Scalar) -> str:
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A markdown table (cells with '|' escaped)."""
+    """A markdown table (cells escaped: no raw HTML, no links, '|' kept in its cell)."""
     def line(cells: Sequence[str]) -> str:
-        return "| " + " | ".join(str(c).replace("|", "\\|") for c in cells) + " |"
+        return "| " + " | ".join(markdown(c) for c in cells) + " |"
 
     return "\n".join([line(header), "|" + "---|" * len(header), *map(line, rows)]) + "\n"

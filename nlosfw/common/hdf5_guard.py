@@ -1,0 +1,187 @@
+"""Reading untrusted HDF5 files (captures, MATLAB 7.3 files) without leaving them.
+
+HDF5 can make a file's dataset read bytes from elsewhere: raw data stored in external
+files (``/etc/passwd``), virtual datasets mapping other files, external links, and soft
+links through them. A capture is untrusted input, so :func:`open_checked` walks every link
+of a file before anything is read and refuses, in one line naming the file and the
+dataset, any of those; :func:`read_dataset` sizes a dataset (shape × dtype) before
+reading it and refuses one larger than :func:`dataset_limit` (the memory of this machine,
+so a tiny file declaring an 800 GB dataset is refused instead of ending in MemoryError).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import h5py
+import numpy as np
+import numpy.typing as npt
+
+from nlosfw.common.errors import DataError, one_line
+from nlosfw.common.files import format_bytes
+
+#: Soft links followed in a row before a chain is refused (a loop).
+_MAX_SOFT_HOPS = 16
+
+
+def dataset_limit() -> int:
+    """Bytes a dataset of an input file may hold: the physical memory of this machine (a
+    larger one cannot be read; the run's memory estimate refuses smaller excesses)."""
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (OSError, ValueError):  # pragma: no cover - platforms without sysconf
+        return 1 << 40
+
+
+@contextlib.contextmanager
+def open_checked(path: Path, what: str = "file") -> Iterator[h5py.File]:
+    """``path`` open read-only with h5py after :func:`check_file`; h5py's errors opening it
+    become a one-line DataError ("not a readable HDF5 ``what``": truncated or corrupt, or
+    not HDF5 at all)."""
+    try:
+        f = h5py.File(path, "r")
+    except OSError as err:
+        reason = "truncated or corrupt" if _has_signature(path) else "not HDF5"
+        raise DataError(f"{path}: not a readable HDF5 {what} ({reason}: {one_line(err)})"
+                        ) from None
+    try:
+        check_file(f, path)
+        yield f
+    finally:
+        f.close()
+
+
+def _has_signature(path: Path) -> bool:
+    """Whether ``path`` starts with HDF5's signature (at 0 or after a user block)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(2048 + 8)
+    except OSError:
+        return False
+    return any(head[at:at + 8] == b"\x89HDF\r\n\x1a\n" for at in (0, 512, 1024, 2048))
+
+
+def check_file(f: h5py.File, path: Path) -> None:
+    """Refuse (DataError naming ``path`` and the object) an HDF5 file with an external
+    link, a soft link that does not resolve inside the file, a virtual dataset or a
+    dataset whose raw data lives in external files, anywhere in it."""
+    seen: set[object] = set()
+    stack: list[tuple[h5py.Group, str]] = [(f, "")]
+    while stack:
+        group, prefix = stack.pop()
+        for name in list(group.keys()):
+            where = f"{prefix}/{name}" if prefix else name
+            try:
+                link = group.get(name, getlink=True)
+            except (KeyError, OSError, RuntimeError) as err:
+                raise DataError(f"{path}: object '{where}' cannot be read (truncated or "
+                                f"corrupt: {one_line(err)})") from None
+            if isinstance(link, h5py.ExternalLink):
+                raise DataError(f"{path}: '{where}' is an external link to "
+                                f"{link.filename}:{link.path}; links to other files are "
+                                "refused (copy the data into the capture file)")
+            if isinstance(link, h5py.SoftLink):
+                _check_soft_link(f, link.path, group.name, path, where)
+                continue
+            try:
+                node = group[name]
+            except (KeyError, OSError, RuntimeError) as err:
+                raise DataError(f"{path}: object '{where}' cannot be read (truncated or "
+                                f"corrupt: {one_line(err)})") from None
+            if isinstance(node, h5py.Dataset):
+                check_storage(node, path, where)
+            elif isinstance(node, h5py.Group):
+                key = (node.id.fileno, h5py.h5o.get_info(node.id).addr)
+                if key not in seen:
+                    seen.add(key)
+                    stack.append((node, where))
+
+
+def check_storage(node: h5py.Dataset, path: Path, where: str) -> None:
+    """Refuse a virtual dataset or one with external raw storage."""
+    if getattr(node, "is_virtual", False):
+        raise DataError(f"{path}: dataset '{where}' is a virtual dataset (it maps data from "
+                        "other files); refused: copy the data into the capture file")
+    count = node.id.get_create_plist().get_external_count()
+    if count:
+        raise DataError(f"{path}: dataset '{where}' stores its data in {count} external "
+                        "file(s) outside the capture; refused: copy the data into the "
+                        "capture file")
+
+
+def _check_soft_link(f: h5py.File, target: str, base: str, path: Path, where: str) -> None:
+    """A soft link ``where`` to ``target`` must end at an object of this file, through
+    hard links only (no external link on the way, no loop)."""
+    for _ in range(_MAX_SOFT_HOPS):
+        full = target if target.startswith("/") else f"{base.rstrip('/')}/{target}"
+        parts = [p for p in full.split("/") if p and p != "."]
+        node: h5py.Group = f
+        current = "/"
+        for i, part in enumerate(parts):
+            if not isinstance(node, h5py.Group) or part not in node:
+                raise DataError(f"{path}: '{where}' is a soft link to '{target}', which is "
+                                "not an object of this file; refused")
+            link = node.get(part, getlink=True)
+            if isinstance(link, h5py.ExternalLink):
+                raise DataError(f"{path}: '{where}' is a soft link through an external link "
+                                f"to {link.filename}:{link.path}; links to other files are "
+                                "refused")
+            if isinstance(link, h5py.SoftLink):
+                rest = "/".join(parts[i + 1:])
+                target = link.path + (f"/{rest}" if rest else "")
+                base = current
+                break
+            node = node[part]
+            current = node.name
+        else:
+            return
+    raise DataError(f"{path}: '{where}' is a chain of more than {_MAX_SOFT_HOPS} soft links "
+                    "(a loop?); refused")
+
+
+def declared_bytes(node: h5py.Dataset) -> int:
+    """Bytes a dataset holds once read: its shape × its dtype's size (no data read)."""
+    shape = node.shape or ()
+    dtype = np.dtype(node.dtype)
+    return math.prod(int(n) for n in shape) * max(dtype.itemsize, 1)
+
+
+def check_size(node: h5py.Dataset, path: Path, where: str,
+               dtype: npt.DTypeLike | None = None) -> None:
+    """Refuse a dataset that declares more bytes (read as ``dtype`` if given) than
+    :func:`dataset_limit`, before any of it is read."""
+    shape = node.shape or ()
+    itemsize = np.dtype(dtype if dtype is not None else node.dtype).itemsize
+    nbytes = math.prod(int(n) for n in shape) * max(itemsize, 1)
+    limit = dataset_limit()
+    if nbytes > limit:
+        raise DataError(f"{path}: dataset '{where}' declares {format_bytes(nbytes)} (shape "
+                        f"{list(shape)} of {np.dtype(node.dtype)}), more than the "
+                        f"{format_bytes(limit)} of memory this machine has; refused before "
+                        "reading it")
+
+
+def is_numeric(node: h5py.Dataset) -> bool:
+    """Whether a dataset holds real or complex numbers (or booleans), not text or
+    references."""
+    return np.dtype(node.dtype).kind in "biufc"
+
+
+def read_dataset(node: h5py.Dataset, path: Path, where: str,
+                 dtype: npt.DTypeLike | None = None
+                 ) -> np.ndarray | np.generic | bytes | str:
+    """The value of dataset ``node`` (storage and size checked first), converted to
+    ``dtype`` while reading if given; a read error becomes a one-line DataError."""
+    check_storage(node, path, where)
+    check_size(node, path, where, dtype)
+    try:
+        if dtype is not None:
+            return np.asarray(node.astype(dtype)[()])
+        return node[()]
+    except (OSError, RuntimeError) as err:
+        raise DataError(f"{path}: dataset '{where}' cannot be read (file truncated or corrupt: "
+                        f"{one_line(err)})") from None

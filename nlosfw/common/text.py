@@ -1,0 +1,106 @@
+"""Untrusted text (file names, scene names, metadata of capture files) made safe for each
+output it reaches: terminals, rich markup, matplotlib titles, HTML links, CSV cells,
+Markdown, JSON. Pure functions of strings, no third-party imports (rich and matplotlib
+are not loaded by ``import nlosfw``); each output calls its neutraliser on every piece
+of text that came from input.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime
+import html
+import re
+import urllib.parse
+from collections.abc import Mapping
+
+#: C0 and C1 control characters and DEL (ESC sequences start with one), not tab/newline.
+_CONTROL = re.compile(r"[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+#: Text rich would read as a markup tag: ``[`` then a letter, ``#``, ``/`` or ``@`` (the
+#: pattern rich's own ``escape`` uses), and closing tags such as ``[/]``.
+_MARKUP = re.compile(r"(\\*)(\[[a-zA-Z#/@][^\[]*?\]|\[/\])")
+#: First characters that make a spreadsheet evaluate a cell (and tab / CR, which some
+#: spreadsheets skip before one).
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+#: Markdown that could make a link, code, a table cell's end or a backslash escape.
+_MARKDOWN_SPECIAL = re.compile(r"([\\`|\[\]])")
+
+
+def controls_visible(text: str) -> str:
+    """``text`` with control characters other than newline and tab (terminal escape
+    sequences among them) shown as ``\\xNN`` instead of acting on the terminal."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+
+
+def visible(text: str) -> str:
+    """``text`` with control characters (terminal escape sequences among them) shown as
+    ``\\xNN`` instead of acting on the terminal; newlines become spaces."""
+    return controls_visible(text.replace("\r\n", " ").replace("\n", " "))
+
+
+def console_text(text: object) -> str:
+    """``text`` for the rich console: control characters made visible (newlines and tabs
+    kept) and every markup tag escaped, so it prints literally (``[/]`` and ``[red]``
+    included)."""
+    shown = controls_visible(str(text))
+    return _MARKUP.sub(lambda m: f"{m.group(1)}{m.group(1)}\\{m.group(2)}", shown)
+
+
+def plain_title(text: object) -> str:
+    """``text`` for a matplotlib title or label: control characters made visible and
+    dollar signs escaped (``\\$``), so matplotlib never parses it as maths."""
+    return visible(str(text)).replace("$", r"\$")
+
+
+def href(name: str) -> str:
+    """A relative, URL-quoted link to the file ``name`` relative to the document (``./``
+    first unless it starts with ``./`` or ``../``: ``javascript:alert(1)`` becomes a file
+    name, never a scheme)."""
+    quoted = urllib.parse.quote(name, safe="/")
+    return quoted if quoted.startswith(("./", "../")) else "./" + quoted
+
+
+def html_text(text: object) -> str:
+    """``text`` escaped for HTML content and attribute values."""
+    return html.escape(visible(str(text)), quote=True)
+
+
+def csv_cell(value: object) -> object:
+    """A CSV cell: a string starting with ``= + - @`` (or tab / CR) prefixed with ``'`` so
+    that spreadsheets show it as text; numbers and other values unchanged."""
+    if isinstance(value, str) and value.startswith(_FORMULA_START):
+        return "'" + value
+    return value
+
+
+def markdown(text: object) -> str:
+    """``text`` for Markdown: HTML escaped (no raw ``<script>``), on one line, with the
+    characters that make links, code or table cells (``[ ] ` |`` and backslash)
+    backslash-escaped."""
+    escaped = html.escape(visible(str(text)), quote=False)
+    return _MARKDOWN_SPECIAL.sub(r"\\\1", escaped)
+
+
+def json_safe(value: object) -> object:
+    """``value`` (YAML data of a capture file) with the types JSON lacks converted: dates
+    and times to ISO 8601 text, bytes (``!!binary``) to base64 text, sets to lists (sorted
+    by their text), tuples to lists, mapping keys to text; numbers, text, arrays, lists and
+    None kept."""
+    if isinstance(value, Mapping):
+        return {_key(k): json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    if isinstance(value, (set, frozenset)):
+        return sorted((json_safe(v) for v in value), key=repr)
+    if isinstance(value, (datetime.date, datetime.time)):
+        return value.isoformat()
+    if isinstance(value, (bytes, bytearray)):
+        return base64.b64encode(bytes(value)).decode("ascii")
+    return value
+
+
+def _key(key: object) -> object:
+    if key is None or isinstance(key, (str, int, float, bool)):
+        return key
+    converted = json_safe(key)
+    return converted if isinstance(converted, str) else str(converted)

@@ -1,0 +1,16 @@
+"""Figures show their text literally: file names, scene names and labels from runs are
+untrusted, and a ``$...$`` in one would otherwise be parsed by matplotlib's maths parser
+(an error there means no figure and no report)."""
+
+from __future__ import annotations
+
+from matplotlib.figure import Figure
+from matplotlib.text import Text
+
+
+def literal_text(fig: Figure) -> Figure:
+    """``fig`` with maths parsing turned off for every text in it (titles, labels, tick
+    labels, legends); call before anything lays the figure out or saves it."""
+    for text in fig.findobj(Text):
+        text.set_parse_math(False)
+    return fig
