@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
+import msgspec
 from rich.table import Table
 
 from nlosfw.pipeline.metrics import RunMetrics
@@ -53,6 +53,6 @@ def summary_table(metrics: RunMetrics) -> Table:
                       f"PSNR {_fmt(scores.psnr)} dB, SSIM {_fmt(scores.ssim)}, "
                       f"RMSE {_fmt(scores.rmse)}; volume PSNR {_fmt(scores.volume_psnr)} dB, "
                       f"SSIM {_fmt(scores.volume_ssim)}{depth}; {_fmt(scores.seconds)} s")
-    timings = {k: v for k, v in dataclasses.asdict(metrics.timings).items() if v is not None}
+    timings = {k: v for k, v in msgspec.structs.asdict(metrics.timings).items() if v is not None}
     table.add_row("timings", "stages (s)", ", ".join(f"{k} {_fmt(v)}" for k, v in timings.items()))
     return table
