@@ -11,6 +11,7 @@ from __future__ import annotations
 import ast
 import importlib
 import sys
+import types
 from collections.abc import Callable
 from pathlib import Path
 
@@ -39,4 +40,18 @@ def lazy_exports(package: str, init_file: str) -> tuple[Callable[[str], object],
     def __dir__() -> list[str]:
         return sorted({*vars(sys.modules[package]), *origins})
 
+    shadowed = {name for name, (module, _) in origins.items() if module == f"{package}.{name}"}
+    if shadowed:   # a name that is also a submodule's: the name wins, as with eager imports
+        sys.modules[package].__class__ = _keeping(frozenset(shadowed))
     return __getattr__, __dir__
+
+
+def _keeping(names: frozenset[str]) -> type[types.ModuleType]:
+    """A module class that does not let the import system bind submodules over ``names``."""
+
+    class Package(types.ModuleType):
+        def __setattr__(self, name: str, value: object) -> None:
+            if not (name in names and isinstance(value, types.ModuleType)):
+                super().__setattr__(name, value)
+
+    return Package
