@@ -20,53 +20,58 @@ whole run, all importable from here: :func:`load_capture` (any capture format),
 :func:`reconstruct` and :func:`run` (``nlosfw.run(["model=interp"])`` is
 ``python -m nlosfw model=interp``, returning the results instead of printing them).
 
-Importing this package loads the core (numpy, scipy, h5py, pluggy, PyYAML and the data
-types); plugins and their heavy backends (torch, JAX, mitsuba, embreex), Hydra, rich and
-matplotlib load on demand.
+Importing this package loads nothing else: each public name here loads its stage (numpy,
+scipy, h5py, ...) on first use; plugins and their heavy backends (torch, JAX, mitsuba,
+embreex), Hydra, rich and matplotlib load on demand.
 """
 
-from nlosfw.api import (
-    fit_model,
-    load_capture,
-    predict_field,
-    reconstruct,
-    run,
-    simulate_scene,
-    transform_capture,
-)
-from nlosfw.capture import (
-    Capture,
-    CaptureFormat,
-    CaptureFormatConfig,
-    CaptureGeometry,
-    CaptureKind,
-    GridFormat,
-    HFormat,
-    VolumeFormat,
-    read_capture,
-    write_capture,
-)
-from nlosfw.common import (
-    ConfigError,
-    DataError,
-    FitError,
-    NlosfwError,
-    PluginError,
-    __version__,
-    require,
-)
-from nlosfw.image import Imager, ImagerConfig, Reconstruction, depth_span
-from nlosfw.model import (
-    FieldModel,
-    FieldModelConfig,
-    FitReport,
-    TrainingStep,
-    field_metrics,
-    split_field,
-)
-from nlosfw.plugins import Capability, PluginKind, hookimpl
-from nlosfw.simulate import Scene, Simulator, SimulatorConfig
-from nlosfw.transform import PhasorField, PhasorTransform, PhasorTransformConfig
+from typing import TYPE_CHECKING
+
+from nlosfw.common.lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names, for type checkers; at run time they load on first use
+    from nlosfw.api import (
+        fit_model,
+        load_capture,
+        predict_field,
+        reconstruct,
+        run,
+        simulate_scene,
+        transform_capture,
+    )
+    from nlosfw.capture import (
+        Capture,
+        CaptureFormat,
+        CaptureFormatConfig,
+        CaptureGeometry,
+        CaptureKind,
+        GridFormat,
+        HFormat,
+        VolumeFormat,
+        read_capture,
+        write_capture,
+    )
+    from nlosfw.common import (
+        ConfigError,
+        DataError,
+        FitError,
+        NlosfwError,
+        PluginError,
+        __version__,
+        require,
+    )
+    from nlosfw.image import Imager, ImagerConfig, Reconstruction, depth_span
+    from nlosfw.model import (
+        FieldModel,
+        FieldModelConfig,
+        FitReport,
+        TrainingStep,
+        field_metrics,
+        split_field,
+    )
+    from nlosfw.plugins import Capability, PluginKind, hookimpl
+    from nlosfw.simulate import Scene, Simulator, SimulatorConfig
+    from nlosfw.transform import PhasorField, PhasorTransform, PhasorTransformConfig
 
 __all__ = [
     "Capability", "Capture", "CaptureFormat", "CaptureFormatConfig", "CaptureGeometry",
@@ -79,3 +84,4 @@ __all__ = [
     "depth_span", "field_metrics", "fit_model", "load_capture", "predict_field", "read_capture",
     "reconstruct", "run", "simulate_scene", "split_field", "transform_capture", "write_capture",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__)

@@ -5,23 +5,28 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these."""
 
 
-from nlosfw.capture.data import YTAL_FIELDS, Capture
-from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat, VolumeFormat
-from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig, detect_format, read_with
-from nlosfw.capture.geometry import SPEED_OF_LIGHT, CaptureGeometry, device_legs
-from nlosfw.capture.hdf5 import read_capture, write_capture
-from nlosfw.capture.matfile import mat_variables, read_mat_array, read_mat_struct
-from nlosfw.capture.preprocess import (
-    AppliedStep,
-    BinWidth,
-    Extras,
-    FlipAxes,
-    Gate,
-    Preprocessing,
-    TimeCrop,
-    preprocess,
-)
-from nlosfw.capture.scan import ConfocalScan, ScanLayout, confocal_capture, square_scan_grid
+from typing import TYPE_CHECKING
+
+from nlosfw.common.lazy import lazy_exports
+
+if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.capture.data import YTAL_FIELDS, Capture
+    from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat, VolumeFormat
+    from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig, detect_format, read_with
+    from nlosfw.capture.geometry import SPEED_OF_LIGHT, CaptureGeometry, device_legs
+    from nlosfw.capture.hdf5 import read_capture, write_capture
+    from nlosfw.capture.matfile import mat_variables, read_mat_array, read_mat_struct
+    from nlosfw.capture.preprocess import (
+        AppliedStep,
+        BinWidth,
+        Extras,
+        FlipAxes,
+        Gate,
+        Preprocessing,
+        TimeCrop,
+        preprocess,
+    )
+    from nlosfw.capture.scan import ConfocalScan, ScanLayout, confocal_capture, square_scan_grid
 
 __all__ = [
     "AppliedStep",
@@ -55,3 +60,4 @@ __all__ = [
     "write_capture",
     "YTAL_FIELDS",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__)

@@ -21,13 +21,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     if "--debug" in args or os.environ.get("HYDRA_FULL_ERROR") == "1":
         args = [a for a in args if a != "--debug"]
         os.environ["NLOSFW_DEBUG"] = "1"
-    from nlosfw.cli.errors import report_interruption, report_user_error
     from nlosfw.pipeline.interrupts import as_interruption, signals_raise
 
     try:
         with signals_raise():
             return _dispatch(args)
     except NlosfwError as err:
+        from nlosfw.cli.errors import report_user_error  # rich: only when there is an error
+
         report_user_error(err)
         return err.exit_status
     except SystemExit as err:  # a Hydra job's exit status (its error already reported)
@@ -36,6 +37,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         interruption = as_interruption(err)
         if interruption is None:
             raise
+        from nlosfw.cli.errors import report_interruption
+
         report_interruption(interruption)
         return interruption.exit_status
 

@@ -3,25 +3,27 @@
 The listing checks that each plugin's factory and config modules can be found without
 importing them (:meth:`~nlosfw.plugins.PluginSpec.find_problem`), so it stays fast and
 imports no heavy backend; ``--check`` and ``plugins NAME`` import them fully. A plugin
-whose code cannot be found or imported is shown as broken, with the reason.
+whose code cannot be found or imported is shown as broken, with the reason. The listing
+is plain text (rich is imported for ``plugins NAME`` only).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
-from typing import Any, NoReturn
-
-from rich.console import Console
-from rich.markup import escape
-from rich.table import Table
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from nlosfw.common.config_docs import OptionDoc, option_docs
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins import CAPABILITIES, PluginHost, PluginSpec
 from nlosfw.plugins.kinds import RUN_KINDS
+
+if TYPE_CHECKING:
+    from rich.console import Console
+    from rich.table import Table
 
 #: Exit status of ``plugins --check`` and ``plugins NAME`` when a plugin is broken.
 BROKEN_EXIT_STATUS = 1
@@ -40,7 +42,14 @@ class Status:
     state: str
     detail: str = ""
 
+    def text(self) -> str:
+        """The status in words: ``ok``, ``missing: <pip command>``, ``broken: <why>``."""
+        return f"{self.state}: {self.detail}" if self.detail else self.state
+
     def markup(self) -> str:
+        """The status as rich markup."""
+        from rich.markup import escape
+
         if self.state == "ok":
             return "[green]ok[/]"
         colour = "yellow" if self.state == "missing" else "red"
@@ -57,38 +66,39 @@ def plugin_status(spec: PluginSpec, full: bool = False) -> Status:
     return Status("broken", problem) if problem else Status("ok")
 
 
-def plugins_table(host: PluginHost, full: bool = False) -> Table:
-    """Kind, name, distribution, status (ok, missing: the pip command, broken: why)."""
-    table = Table(title="nlosfw plugins", title_justify="left")
-    table.add_column("kind", style="cyan", no_wrap=True)
-    table.add_column("name", style="bold")
-    table.add_column("distribution")
-    table.add_column("status", overflow="fold")
-    table.add_column("description", overflow="fold")
-    for spec in host.registry.specs():
-        table.add_row(spec.kind.value, spec.name, spec.distribution,
-                      plugin_status(spec, full).markup(), escape(spec.description))
+def plugins_table(host: PluginHost, full: bool = False) -> str:
+    """Kind, name, distribution, status (ok, missing: the pip command, broken: why) and
+    description: a plain-text table, one line a plugin."""
+    rows = [["kind", "name", "distribution", "status", "description"]]
+    rows += [[spec.kind.value, spec.name, spec.distribution, plugin_status(spec, full).text(),
+              spec.description] for spec in host.registry.specs()]
     for name, reason in sorted(host.broken.items()):
         dist, _, why = reason.partition(": ")
-        table.add_row("?", name, dist, f"[red]broken: entry point failed to load: "
-                                       f"{escape(why)}[/]", "")
-    return table
+        rows.append(["?", name, dist, f"broken: entry point failed to load: {why}", ""])
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = ["│ " + " │ ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)) + " │"
+             for row in rows]
+    rule = "├" + "┼".join("─" * (w + 2) for w in widths) + "┤"
+    return "\n".join(["nlosfw plugins", lines[0], rule, *lines[1:]]) + "\n"
 
 
 def plugins_command(host: PluginHost, console: Console | None = None,
                     args: Sequence[str] = ()) -> int:
-    """Run ``plugins [NAME | --check | --help]``; returns the exit status."""
-    console = console or Console()
+    """Run ``plugins [NAME | --check | --help]``; returns the exit status. Written to
+    ``console`` (by default the terminal; the listing as plain text to its file)."""
     parsed = _parse(args)
-    if parsed.help:
-        console.print(USAGE, highlight=False, markup=False)
-        return 0
     if parsed.name:
-        return _show_one(host, parsed.name, console)
-    console.print(plugins_table(host, full=parsed.check))
+        from rich.console import Console
+
+        return _show_one(host, parsed.name, console or Console())
+    out = sys.stdout if console is None else console.file
+    if parsed.help:
+        out.write(USAGE + "\n")
+        return 0
+    out.write(plugins_table(host, full=parsed.check))
     if not parsed.check:
-        console.print("Details of one plugin: python -m nlosfw plugins NAME; import every "
-                      "plugin: python -m nlosfw plugins --check", highlight=False)
+        out.write("Details of one plugin: python -m nlosfw plugins NAME; import every "
+                  "plugin: python -m nlosfw plugins --check\n")
         return 0
     broken = [s for s in host.registry.specs() if plugin_status(s, True).state == "broken"]
     return BROKEN_EXIT_STATUS if broken or host.broken else 0
@@ -96,6 +106,8 @@ def plugins_command(host: PluginHost, console: Console | None = None,
 
 def plugin_details(spec: PluginSpec) -> list[Any]:
     """What ``plugins NAME`` prints for ``spec`` (imports the plugin): rich renderables."""
+    from rich.markup import escape
+
     status = plugin_status(spec, full=True)
     out: list[Any] = [
         f"[bold]{spec.qualified_name}[/]  {escape(spec.description)}",
@@ -142,6 +154,8 @@ def example_command(spec: PluginSpec, options: Sequence[OptionDoc]) -> str:
 
 # --------------------------------------------------------------------------- helpers
 def _show_one(host: PluginHost, name: str, console: Console) -> int:
+    from rich.markup import escape
+
     if name in host.broken and not any(s.name == name for s in host.registry.specs()):
         console.print(f"[bold]{escape(name)}[/]: [red]broken: entry point failed to load: "
                       f"{escape(host.broken[name])}[/]")
@@ -153,6 +167,9 @@ def _show_one(host: PluginHost, name: str, console: Console) -> int:
 
 
 def _options_table(spec: PluginSpec, options: Sequence[OptionDoc]) -> Table:
+    from rich.markup import escape
+    from rich.table import Table
+
     table = Table(title=f"options ({spec.kind.value}.<option>=<value>)", title_justify="left",
                   box=None, pad_edge=False, title_style="bold")
     table.add_column("option", style="cyan", no_wrap=True)
@@ -167,6 +184,8 @@ def _options_table(spec: PluginSpec, options: Sequence[OptionDoc]) -> Table:
 
 
 def _capabilities_text(spec: PluginSpec) -> str:
+    from rich.markup import escape
+
     origin = {"registration": "declared", "class": "declared by its class",
               "defaults": "declares none: the kind's defaults"}[spec.capabilities_origin]
     meanings = CAPABILITIES.get(spec.kind.value, {})
@@ -177,6 +196,8 @@ def _capabilities_text(spec: PluginSpec) -> str:
 
 
 def _plan_text(spec: PluginSpec) -> str:
+    from rich.markup import escape
+
     from nlosfw.common.errors import NlosfwError
     from nlosfw.testing import check_plan
 

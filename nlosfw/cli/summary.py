@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import dataclasses
-
+import msgspec
 from rich.table import Table
 from rich.text import Text
 
@@ -61,6 +60,6 @@ def summary_table(metrics: RunMetrics) -> Table:
                       f"PSNR {_fmt(scores.psnr)} dB, SSIM {_fmt(scores.ssim)}, "
                       f"RMSE {_fmt(scores.rmse)}; volume PSNR {_fmt(scores.volume_psnr)} dB, "
                       f"SSIM {_fmt(scores.volume_ssim)}{depth}; {_fmt(scores.seconds)} s")
-    timings = {k: v for k, v in dataclasses.asdict(metrics.timings).items() if v is not None}
+    timings = {k: v for k, v in msgspec.structs.asdict(metrics.timings).items() if v is not None}
     _add(table, "timings", "stages (s)", ", ".join(f"{k} {_fmt(v)}" for k, v in timings.items()))
     return table

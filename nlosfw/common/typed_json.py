@@ -1,236 +1,167 @@
-"""Frozen dataclasses as JSON documents: encode, decode with validation, JSON Schema.
+"""Typed JSON documents on msgspec: encode, decode with one-line errors, JSON Schema, outline.
 
-A document type is a tree of dataclasses whose fields are annotated with ``bool``,
-``int``, ``float``, ``str``, ``Literal[...]``, an ``Enum``, ``X | None``,
-``list[X]``, ``tuple[X, ...]``, ``tuple[X, Y]``, ``dict[str, X]``, another dataclass
-or ``Any`` (free-form JSON). From that one definition come:
+A document type is a :class:`Document` (a frozen msgspec Struct) whose fields are annotated
+with ``bool``, ``int``, ``float``, ``str``, ``Literal[...]``, an ``Enum``, ``X | None``,
+``tuple[X, ...]``, ``tuple[X, Y]``, ``dict[str, X]``, another Document or ``object``
+(free-form JSON); ``Annotated[X, doc("...")]`` describes a field. msgspec encodes and
+decodes them; this module adds:
 
-* :func:`to_json`: the plain JSON value (dataclass fields in declaration order; a
-  non-finite float becomes ``null`` where the type admits ``None``);
-* :func:`from_json`: the dataclass back, checking every key and type; a mistake
-  raises :class:`~nlosfw.common.errors.DataError` naming the key path;
+* :func:`encode` / :func:`to_json`: the JSON, checked against the types (a value the type
+  does not admit, such as NaN for a ``float``, raises ``TypeError``; numpy scalars are
+  numbers, a non-finite float becomes ``null`` where the type admits ``None``);
+* :func:`from_json`: the document from its JSON value; a mistake raises
+  :class:`~nlosfw.common.errors.DataError` naming the key path and what is valid;
 * :func:`json_schema`: the JSON Schema (draft 2020-12) of the document;
 * :func:`outline`: a compact text outline of the document for the docs.
 
-A field made with :func:`optional` may be absent: it defaults to ``None`` and is left
-out of the JSON when it is ``None`` (``null`` is then not a valid value for it).
-Otherwise every field is required, and ``X | None`` means the value may be ``null``.
+A field ``name: Absent[X] = None`` may be absent: it is left out of the JSON when it is
+``None`` and ``null`` is not a valid value for it. Every other field is required in the
+JSON (a default other than ``None`` is a convenience for Python callers, given as a
+``default_factory`` so that it is always written), and ``X | None`` means it may be ``null``.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import enum
-import math
-import numbers
-import types
-from collections.abc import Mapping
-from functools import cache
-from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
+import re
+import typing
+from typing import TYPE_CHECKING, NamedTuple, TypeAlias, TypeVar
+
+import msgspec
+from msgspec import inspect as mi
 
 from nlosfw.common.errors import DataError
 
 T = TypeVar("T")
-
-_NONE = type(None)
-_OPTIONAL = "typed_json.optional"
-_DOC = "typed_json.doc"
-_KEY = "typed_json.key"
+D = TypeVar("D", bound="Document")
 JSON_SCHEMA_DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
+if TYPE_CHECKING:
+    Absent: TypeAlias = T | None
+else:
+    class Absent:
+        """``Absent[X]``: a field that may be absent; ``X`` to msgspec (so ``null`` is
+        refused), ``X | None`` to the type checker (absent is ``None``)."""
 
-def optional(doc: str = "", key: str = "") -> Any:
-    """A dataclass field that may be absent from the document (``None`` when it is); ``key``
-    names the keys of a ``dict`` in :func:`outline`."""
-    return dataclasses.field(default=None, metadata={_OPTIONAL: True, _DOC: doc, _KEY: key})
+        def __class_getitem__(cls, tp: object) -> object:
+            return tp
 
 
-def documented(doc: str, key: str = "", **field_options: Any) -> Any:
-    """A dataclass field with a description (and, for a ``dict``, the name of its keys)."""
-    return dataclasses.field(metadata={_DOC: doc, _KEY: key}, **field_options)
+class Document(msgspec.Struct, frozen=True, kw_only=True, omit_defaults=True,
+               forbid_unknown_fields=True):
+    """Base of the typed JSON documents: a frozen Struct that leaves absent fields out.
+    Declare each document ``class X(Document, frozen=True, kw_only=True)`` (msgspec does
+    not inherit ``kw_only``, and the type checker reads ``frozen`` from the class line)."""
+
+
+def doc(text: str, key: str = "") -> msgspec.Meta:
+    """A field's description (``Annotated[X, doc(...)]``); ``key`` names a dict's keys in
+    :func:`outline`."""
+    return msgspec.Meta(description=text, extra={"key": key} if key else None)
 
 
 # ------------------------------------------------------------------ encode
-def to_json(document: Any) -> Any:
-    """The plain JSON value of a dataclass document (validated against its types)."""
-    return _encode(document, type(document), "")
+def encode(document: Document) -> bytes:
+    """The compact JSON of ``document``, checked against its types."""
+    raw = msgspec.json.encode(document, enc_hook=_plain)
+    try:   # decoding checks the types, and turns an int given for a float into a float
+        checked = msgspec.json.decode(raw, type=type(document))
+    except msgspec.ValidationError as err:
+        raise TypeError(f"{type(document).__name__}: {err}") from None
+    return msgspec.json.encode(checked)
 
 
-def _encode(value: Any, tp: Any, where: str) -> Any:
-    if tp is Any:
-        return _plain(value, where)
-    origin, args = get_origin(tp), get_args(tp)
-    if origin in (Union, types.UnionType):
-        if value is None or (_NONE in args and _is_non_finite(value)):
-            if _NONE not in args:
-                raise _bug(where, "is None but its type does not admit null")
-            return None
-        (inner,) = [a for a in args if a is not _NONE]
-        return _encode(value, inner, where)
-    if _is_dataclass(tp):
-        if not isinstance(value, tp):
-            raise _bug(where, f"expected {tp.__name__}, got {type(value).__name__}")
-        out = {}
-        for f, ftype in _fields(tp):
-            item = getattr(value, f.name)
-            if item is None and f.metadata.get(_OPTIONAL):
-                continue
-            out[f.name] = _encode(item, ftype, _join(where, f.name))
-        return out
-    if origin is dict:
-        return {str(k): _encode(v, args[1], _join(where, str(k))) for k, v in value.items()}
-    if origin in (list, tuple):
-        items = list(value)
-        return [_encode(v, _item_type(tp, i), f"{where}[{i}]") for i, v in enumerate(items)]
-    return _encode_scalar(value, tp, where)
+def to_json(document: Document) -> dict[str, object]:
+    """The plain JSON object of ``document`` (checked as :func:`encode` does)."""
+    data: dict[str, object] = msgspec.json.decode(encode(document))
+    return data
 
 
-def _encode_scalar(value: Any, tp: Any, where: str) -> Any:
-    if get_origin(tp) is Literal:
-        if value not in get_args(tp):
-            raise _bug(where, f"{value!r} is not one of {get_args(tp)}")
-        return value
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        return tp(value).value
-    if tp is bool and isinstance(value, (bool, _numpy_bool())):
-        return bool(value)
-    if tp is int and isinstance(value, numbers.Integral) and not isinstance(value, bool):
-        return int(value)
-    if tp is float and isinstance(value, numbers.Real) and not isinstance(value, bool):
-        if not math.isfinite(value):
-            raise _bug(where, f"is {value}, which JSON cannot hold (declare it float | None)")
-        return float(value)
-    if tp is str and isinstance(value, str):
-        return value
-    raise _bug(where, f"expected {_type_word(tp)}, got {value!r} ({type(value).__name__})")
-
-
-def _plain(value: Any, where: str) -> Any:
-    """Free-form data as JSON: numpy scalars become numbers, non-finite floats null."""
-    if isinstance(value, Mapping):
-        return {str(k): _plain(v, _join(where, str(k))) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v, f"{where}[{i}]") for i, v in enumerate(value)]
-    if hasattr(value, "item") and not isinstance(value, (str, bytes)):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
-    raise _bug(where, f"{type(value).__name__} is not JSON data")
-
-
-def _is_non_finite(value: Any) -> bool:
-    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
-            and not math.isfinite(value))
-
-
-def _numpy_bool() -> type:
-    try:
-        import numpy as np
-    except ImportError:  # pragma: no cover - numpy is a dependency
-        return bool
-    return np.bool_
-
-
-def _bug(where: str, problem: str) -> TypeError:
-    return TypeError(f"{where or 'document'}: {problem}")
+def _plain(value: object) -> object:
+    """numpy scalars (and arrays) as Python numbers (and lists)."""
+    tolist = getattr(value, "tolist", None)
+    if tolist is None:
+        raise NotImplementedError(f"{type(value).__name__} is not JSON data")
+    result: object = tolist()
+    return result
 
 
 # ------------------------------------------------------------------ decode
-def from_json(cls: type[T], data: Any, where: str = "") -> T:
-    """The dataclass ``cls`` from its JSON value, checking every key and type.
+def from_json(cls: type[D], data: object, where: str = "") -> D:
+    """The document ``cls`` from its JSON value, checking every key and type.
 
     Raises :class:`DataError` ``"<where>: <key path>: <problem>"`` on one line (``where``
-    names the document, e.g. its file). Like JSON Schema, an integer may be written
-    ``3.0``.
+    names the document, e.g. its file).
     """
     try:
-        return _decode(data, cls, "")
+        if isinstance(data, dict):
+            for f in msgspec.structs.fields(cls):
+                if f.default is not None and not f.required and f.encode_name not in data:
+                    raise DataError(f"{f.encode_name}: is missing")   # a Python-side default
+        return msgspec.convert(data, cls)
+    except msgspec.ValidationError as err:
+        problem = _explain(str(err), data, cls)
     except DataError as err:
-        raise DataError(f"{where}: {err}" if where else str(err)) from None
+        problem = str(err)
+    raise DataError(f"{where}: {problem}" if where else problem)
 
 
-def _decode(value: Any, tp: Any, where: str) -> Any:
-    if tp is Any:
-        return value
-    origin, args = get_origin(tp), get_args(tp)
-    if origin in (Union, types.UnionType):
-        if value is None:
-            if _NONE in args:
-                return None
-            raise _invalid(where, f"must be {_type_word(tp)}, got null")
-        (inner,) = [a for a in args if a is not _NONE]
-        if _is_dataclass(inner) or get_origin(inner) in (dict, list, tuple):
-            return _decode(value, inner, where)
-        return _decode_scalar(value, inner, where, expected=_type_word(tp))
-    if _is_dataclass(tp):
-        return _decode_dataclass(value, tp, where)
-    if origin is dict:
-        if not isinstance(value, dict):
-            raise _invalid(where, f"must be an object, got {_describe(value)}")
-        return {k: _decode(v, args[1], _join(where, k)) for k, v in value.items()}
-    if origin in (list, tuple):
-        if not isinstance(value, list):
-            raise _invalid(where, f"must be {_type_word(tp)}, got {_describe(value)}")
-        fixed = origin is tuple and args[-1] is not Ellipsis
-        if fixed and len(value) != len(args):
-            raise _invalid(where, f"must be {_type_word(tp)}, got {len(value)} values")
-        items = [_decode(v, _item_type(tp, i), f"{where}[{i}]") for i, v in enumerate(value)]
-        return tuple(items) if origin is tuple else items
-    return _decode_scalar(value, tp, where)
+def _explain(message: str, data: object, cls: type) -> str:
+    """msgspec's error in words: the key path in full (dict keys too) and what is valid."""
+    text, _, at = message.partition(" - at `$")
+    node: mi.Type = mi.type_info(cls)
+    value, where = data, ""
+    for name, index in re.findall(r"\.([^.\[`]+)|\[(\d+|\.\.\.)\]", at):
+        node = _bare(node)
+        if name and isinstance(node, mi.StructType):
+            node = next(_declared(node.cls, f) for f in node.fields if f.encode_name == name)
+            value, where = value[name], _join(where, name)  # type: ignore[index]
+        elif index == "..." and isinstance(node, mi.DictType) and isinstance(value, dict):
+            key = next((k for k, v in value.items() if _fails(v, node.value_type)), "")
+            node, value, where = node.value_type, value.get(key), _join(where, key)
+        elif index.isdigit() and isinstance(value, list):
+            items = getattr(node, "item_types", None)
+            node = items[int(index)] if items else getattr(node, "item_type", node)
+            value, where = value[int(index)], f"{where}[{index}]"
+    node = _bare(node, keep_none=True)
+    field = re.fullmatch(r"Object (missing required|contains unknown) field `(.+)`", text)
+    if field and field.group(1) == "missing required":
+        return f"{_join(where, field.group(2))}: is missing"
+    if field and isinstance(node, mi.StructType):
+        valid = ", ".join(f.encode_name for f in node.fields)
+        return f"{_join(where, field.group(2))}: unknown key; valid keys: {valid}"
+    got = _describe(value)
+    if isinstance(node, mi.TupleType) and isinstance(value, list):
+        got = f"{len(value)} values"
+    return f"{where or '$'}: must be {_words(node)}, got {got}"
 
 
-def _decode_dataclass(value: Any, cls: Any, where: str) -> Any:
-    if not isinstance(value, dict):
-        raise _invalid(where, f"must be an object, got {_describe(value)}")
-    fields = _fields(cls)
-    names = [f.name for f, _ in fields]
-    unknown = sorted(set(value) - set(names))
-    if unknown:
-        raise _invalid(_join(where, unknown[0]), f"unknown key; valid keys: {', '.join(names)}")
-    kwargs = {}
-    for f, ftype in fields:
-        if f.name in value:
-            optional_key = f.metadata.get(_OPTIONAL)  # absent rather than null
-            kwargs[f.name] = _decode(value[f.name], _without_none(ftype) if optional_key
-                                     else ftype, _join(where, f.name))
-        elif not f.metadata.get(_OPTIONAL):
-            raise _invalid(_join(where, f.name), "is missing")
-    return cls(**kwargs)
+def _fails(value: object, node: mi.Type) -> bool:
+    """Whether ``value`` is not a valid ``node`` (for a document; other values: True)."""
+    if not isinstance(node, mi.StructType):
+        return True
+    try:
+        msgspec.convert(value, node.cls)
+    except msgspec.ValidationError:
+        return True
+    return False
 
 
-def _decode_scalar(value: Any, tp: Any, where: str, expected: str = "") -> Any:
-    expected = expected or _type_word(tp)
-    if get_origin(tp) is Literal:
-        for choice in get_args(tp):
-            if value == choice and isinstance(value, bool) == isinstance(choice, bool):
-                return choice
-        raise _invalid(where, f"must be {expected}, got {_describe(value)}")
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        try:
-            return tp(value)
-        except ValueError:
-            raise _invalid(where, f"must be {expected}, got {_describe(value)}") from None
-    number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    ok = {
-        bool: isinstance(value, bool),
-        int: number and (isinstance(value, int) or value.is_integer()),
-        float: number,
-        str: isinstance(value, str),
-    }.get(tp)
-    if ok is None:
-        raise TypeError(f"{where}: unsupported type {tp!r} in a JSON document")
-    if not ok:
-        raise _invalid(where, f"must be {expected}, got {_describe(value)}")
-    return tp(value) if tp in (int, float) else value
+def _words(node: mi.Type) -> str:
+    if isinstance(node, mi.UnionType):
+        return " or ".join(_words(t) for t in node.types)
+    if isinstance(node, mi.LiteralType):
+        return "one of " + ", ".join(repr(v) for v in node.values)
+    if isinstance(node, mi.EnumType):
+        return "one of " + ", ".join(repr(m.value) for m in node.cls)
+    if isinstance(node, mi.TupleType):
+        return f"an array of {len(node.item_types)} values"
+    words = {mi.BoolType: "true or false", mi.IntType: "an integer", mi.FloatType: "a number",
+             mi.StrType: "a string", mi.NoneType: "null", mi.StructType: "an object",
+             mi.DictType: "an object", mi.ListType: "an array", mi.VarTupleType: "an array"}
+    return words.get(type(node), "valid JSON")
 
 
-def _invalid(where: str, problem: str) -> DataError:
-    return DataError(f"{where}: {problem}" if where else problem)
-
-
-def _describe(value: Any) -> str:
+def _describe(value: object) -> str:
     if value is None:
         return "null"
     text = repr(value)
@@ -238,102 +169,80 @@ def _describe(value: Any) -> str:
 
 
 # ------------------------------------------------------------------ schema
-def json_schema(cls: type, title: str = "", schema_id: str = "") -> dict[str, Any]:
-    """The JSON Schema (draft 2020-12) of documents of the dataclass ``cls``.
+def json_schema(cls: type[Document], title: str = "",
+                schema_id: str = "") -> dict[str, object]:
+    """The JSON Schema (draft 2020-12) of documents of ``cls``.
 
-    The root is ``cls`` itself; nested dataclasses are ``$defs`` referenced by name,
-    every object is closed (``additionalProperties: false``).
+    The root is ``cls`` itself; nested documents are ``$defs`` referenced by name, every
+    object is closed (``additionalProperties: false``).
     """
-    builder = _SchemaBuilder()
-    root = builder.dataclass_schema(cls)
-    head: dict[str, Any] = {"$schema": JSON_SCHEMA_DIALECT}
+    defs: dict[str, dict[str, object]] = {}
+    root = _struct_schema(_struct(mi.type_info(cls)), defs)
+    head: dict[str, object] = {"$schema": JSON_SCHEMA_DIALECT}
     if schema_id:
         head["$id"] = schema_id
     if title:
         head["title"] = title
-    defs = {name: schema for name, schema in builder.defs.items() if name != cls.__name__}
+    defs.pop(cls.__name__, None)
     return {**head, **root, "$defs": dict(sorted(defs.items()))}
 
 
-class _SchemaBuilder:
-    """Builds the schemas of one document, collecting its nested dataclasses in ``defs``."""
-
-    def __init__(self) -> None:
-        self.defs: dict[str, Any] = {}
-
-    def schema(self, tp: Any) -> dict[str, Any]:
-        if tp is Any:
-            return {}
-        origin, args = get_origin(tp), get_args(tp)
-        if origin in (Union, types.UnionType):
-            (inner,) = [a for a in args if a is not _NONE]
-            schema = self.schema(inner)
-            if set(schema) == {"type"} and isinstance(schema["type"], str):
-                return {"type": [schema["type"], "null"]}
-            return {"anyOf": [schema, {"type": "null"}]}
-        if _is_dataclass(tp):
-            name = tp.__name__
-            if name not in self.defs:
-                self.defs[name] = {}  # placeholder: recursion and repeated use
-                self.defs[name] = self.dataclass_schema(tp)
-            return {"$ref": f"#/$defs/{name}"}
-        if origin is dict:
-            return {"type": "object", "additionalProperties": self.schema(args[1])}
-        if origin in (list, tuple):
-            if origin is tuple and args[-1] is not Ellipsis:
-                return {"type": "array", "prefixItems": [self.schema(a) for a in args],
-                        "minItems": len(args), "maxItems": len(args)}
-            return {"type": "array", "items": self.schema(args[0])}
-        return _scalar_schema(tp)
-
-    def dataclass_schema(self, cls: Any) -> dict[str, Any]:
-        properties, required = {}, []
-        for f, ftype in _fields(cls):
-            inner = ftype
-            if f.metadata.get(_OPTIONAL):  # absent rather than null
-                inner = _without_none(ftype)
-            else:
-                required.append(f.name)
-            schema = self.schema(inner)
-            if f.metadata.get(_DOC):
-                schema = {"description": f.metadata[_DOC], **schema}
-            properties[f.name] = schema
-        out: dict[str, Any] = {"type": "object"}
-        doc = _summary(cls)
-        if doc:
-            out["description"] = doc
-        return {**out, "properties": properties, "required": required,
-                "additionalProperties": False}
+def _schema(node: mi.Type, defs: dict[str, dict[str, object]]) -> dict[str, object]:
+    if isinstance(node, mi.UnionType):
+        schema = _schema(_bare(node), defs)
+        if set(schema) == {"type"} and isinstance(schema["type"], str):
+            return {"type": [schema["type"], "null"]}
+        return {"anyOf": [schema, {"type": "null"}]}
+    if isinstance(node, mi.StructType):
+        name = node.cls.__name__
+        if name not in defs:
+            defs[name] = {}    # a placeholder while it is built (repeated use)
+            defs[name] = _struct_schema(node, defs)
+        return {"$ref": f"#/$defs/{name}"}
+    if isinstance(node, mi.DictType):
+        return {"type": "object", "additionalProperties": _schema(node.value_type, defs)}
+    if isinstance(node, mi.TupleType):
+        n = len(node.item_types)
+        return {"type": "array", "prefixItems": [_schema(t, defs) for t in node.item_types],
+                "minItems": n, "maxItems": n}
+    if isinstance(node, (mi.ListType, mi.VarTupleType)):
+        return {"type": "array", "items": _schema(node.item_type, defs)}
+    if isinstance(node, mi.LiteralType):
+        values = list(node.values)
+        return {"const": values[0]} if len(values) == 1 else {"enum": values}
+    if isinstance(node, mi.EnumType):
+        return {"enum": [m.value for m in node.cls]}
+    if isinstance(node, mi.AnyType):
+        return {}
+    words = {mi.BoolType: "boolean", mi.IntType: "integer", mi.FloatType: "number",
+             mi.StrType: "string"}
+    if type(node) not in words:
+        raise TypeError(f"unsupported type {node!r} in a JSON document")
+    return {"type": words[type(node)]}
 
 
-def _scalar_schema(tp: Any) -> dict[str, Any]:
-    args = get_args(tp)
-    if get_origin(tp) is Literal:
-        return {"const": args[0]} if len(args) == 1 else {"enum": list(args)}
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        return {"enum": [m.value for m in tp]}
-    words = {bool: "boolean", int: "integer", float: "number", str: "string"}
-    if tp not in words:
-        raise TypeError(f"unsupported type {tp!r} in a JSON document")
-    return {"type": words[tp]}
-
-
-def _summary(cls: Any) -> str:
-    """The first paragraph of a class's own docstring, on one line."""
-    doc = cls.__dict__.get("__doc__") or ""
-    if doc.startswith(f"{cls.__name__}("):  # dataclass's generated signature
-        return ""
-    return " ".join(doc.strip().split("\n\n")[0].split())
+def _struct_schema(node: mi.StructType, defs: dict[str, dict[str, object]]) -> dict[str, object]:
+    properties = {}
+    for f in _fields(node):
+        schema = _schema(f.node, defs)
+        properties[f.name] = {"description": f.doc, **schema} if f.doc else schema
+    out: dict[str, object] = {"type": "object"}
+    summary = " ".join((node.cls.__dict__.get("__doc__") or "").strip().split("\n\n")[0].split())
+    if summary:
+        out["description"] = summary
+    return {**out, "properties": properties,
+            "required": [f.name for f in _fields(node) if not f.optional],
+            "additionalProperties": False}
 
 
 # ------------------------------------------------------------------ outline
-def outline(cls: type, width: int = 90) -> str:
+def outline(cls: type[Document], width: int = 90) -> str:
     """A compact outline of ``cls``'s documents: ``key?`` may be absent, ``a | b`` are the
     allowed values, ``{...}`` an object, ``<name>`` a key chosen by the data."""
-    return "\n".join(_block(cls, "", width)) + "\n"
+    return "\n".join(_block(_struct(mi.type_info(cls)), "", width)) + "\n"
 
 
-def _block(cls: Any, indent: str, width: int) -> list[str]:
+def _block(node: mi.StructType, indent: str, width: int) -> list[str]:
     lines: list[str] = []
     plain: list[str] = []
 
@@ -342,7 +251,7 @@ def _block(cls: Any, indent: str, width: int) -> list[str]:
             lines.extend(_wrap(plain, indent, width))
             plain.clear()
 
-    for labels, tp, key in _groups(cls):
+    for labels, tp, key in _groups(node):
         label = " | ".join(labels)
         if not _is_structured(tp):
             plain.append(label + _suffix(tp))
@@ -360,68 +269,67 @@ def _block(cls: Any, indent: str, width: int) -> list[str]:
     return lines
 
 
-def _groups(cls: Any) -> list[tuple[list[str], Any, str | None]]:
-    """``cls``'s fields as (labels, type, key name), consecutive fields of one dataclass
-    type merged (``a | b: {...}``)."""
-    groups: list[tuple[list[str], Any, str | None]] = []
-    for f, ftype in _fields(cls):
-        label = f.name + ("?" if f.metadata.get(_OPTIONAL) else "")
-        tp, key = _without_none(ftype), f.metadata.get(_KEY) or None
-        if groups and _is_dataclass(tp) and groups[-1][1] is tp:
+def _groups(node: mi.StructType) -> list[tuple[list[str], mi.Type, str]]:
+    """The fields as (labels, type, key name), consecutive fields of one document type
+    merged (``a | b: {...}``)."""
+    groups: list[tuple[list[str], mi.Type, str]] = []
+    for f in _fields(node):
+        label, tp = f.name + ("?" if f.optional else ""), _bare(f.node)
+        last = groups[-1][1] if groups else None
+        if (isinstance(tp, mi.StructType) and isinstance(last, mi.StructType)
+                and last.cls is tp.cls):
             groups[-1][0].append(label)
         else:
-            groups.append(([label], tp, key))
+            groups.append(([label], tp, f.key))
     return groups
 
 
-def _nested(tp: Any, key: str | None, indent: str, width: int) -> list[str]:
+def _nested(tp: mi.Type, key: str, indent: str, width: int) -> list[str]:
     """Block lines of a structured value that does not fit on one line."""
-    if _is_dataclass(tp):
+    if isinstance(tp, mi.StructType):
         return _block(tp, indent, width)
-    value = _without_none(get_args(tp)[1])
-    line = f"{indent}<{key or 'key'}>: {_inline(value, None)}"
-    if len(line) <= width or not _is_dataclass(value):
+    value = _bare(getattr(tp, "value_type", tp))
+    line = f"{indent}<{key or 'key'}>: {_inline(value, '')}"
+    if len(line) <= width or not isinstance(value, mi.StructType):
         return [line]
     return [f"{indent}<{key or 'key'}>:", *_block(value, indent + "  ", width)]
 
 
-def _inline(tp: Any, key: str | None) -> str:
-    if _is_dataclass(tp):
+def _inline(tp: mi.Type, key: str) -> str:
+    if isinstance(tp, mi.StructType):
         parts = []
-        for f, ftype in _fields(tp):
-            label = f.name + ("?" if f.metadata.get(_OPTIONAL) else "")
-            inner = _without_none(ftype)
-            if _is_structured(inner):
-                parts.append(f"{label}: {_inline(inner, f.metadata.get(_KEY))}")
-            else:
-                parts.append(label + _suffix(inner))
+        for f in _fields(tp):
+            label, inner = f.name + ("?" if f.optional else ""), _bare(f.node)
+            parts.append(f"{label}: {_inline(inner, f.key)}" if _is_structured(inner)
+                         else label + _suffix(inner))
         return "{" + ", ".join(parts) + "}"
-    if get_origin(tp) is dict:
-        value = _inline(_without_none(get_args(tp)[1]), None)
+    if isinstance(tp, mi.DictType):
+        value = _inline(_bare(tp.value_type), "")
         return f"{{<{key or 'key'}>: {value}}}" if value else "{...}"
     return _suffix(tp).removeprefix(": ")
 
 
-def _suffix(tp: Any) -> str:
+def _suffix(tp: mi.Type) -> str:
     """``: a | b`` for choices, ``: [n numbers]`` for arrays, nothing for plain scalars."""
-    origin, args = get_origin(tp), get_args(tp)
-    if origin is Literal:
-        return ": " + " | ".join(str(a) for a in args)
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        return ": " + " | ".join(str(m.value) for m in tp)
-    if origin in (list, tuple):
-        if origin is tuple and args[-1] is not Ellipsis:
-            return f": [{len(args)} {_plural(args[0])}]"
-        return f": [{_plural(_without_none(args[0]))}]"
+    if isinstance(tp, mi.LiteralType):
+        return ": " + " | ".join(str(a) for a in tp.values)
+    if isinstance(tp, mi.EnumType):
+        return ": " + " | ".join(str(m.value) for m in tp.cls)
+    if isinstance(tp, mi.TupleType):
+        return f": [{len(tp.item_types)} {_plural(tp.item_types[0])}]"
+    if isinstance(tp, (mi.ListType, mi.VarTupleType)):
+        return f": [{_plural(_bare(tp.item_type))}]"
     return ""
 
 
-def _plural(tp: Any) -> str:
-    return {bool: "booleans", int: "integers", float: "numbers", str: "strings"}.get(tp, "values")
+def _plural(tp: mi.Type) -> str:
+    words = {mi.BoolType: "booleans", mi.IntType: "integers", mi.FloatType: "numbers",
+             mi.StrType: "strings"}
+    return words.get(type(tp), "values")
 
 
-def _is_structured(tp: Any) -> bool:
-    return _is_dataclass(tp) or get_origin(tp) is dict
+def _is_structured(tp: mi.Type) -> bool:
+    return isinstance(tp, (mi.StructType, mi.DictType))
 
 
 def _wrap(labels: list[str], indent: str, width: int) -> list[str]:
@@ -437,51 +345,67 @@ def _wrap(labels: list[str], indent: str, width: int) -> list[str]:
 
 
 # ------------------------------------------------------------------ shared helpers
-@cache
-def _fields(cls: Any) -> tuple[tuple[dataclasses.Field, Any], ...]:
-    hints = get_type_hints(cls)
-    return tuple((f, hints[f.name]) for f in dataclasses.fields(cls))
+class _Field(NamedTuple):
+    name: str
+    node: mi.Type
+    optional: bool   # may be absent (default None)
+    doc: str
+    key: str         # the name of a dict's keys in the outline
 
 
-def _is_dataclass(tp: Any) -> bool:
-    """Whether ``tp`` is a dataclass type (not an instance)."""
-    return isinstance(tp, type) and dataclasses.is_dataclass(tp)
+def _fields(node: mi.StructType) -> list[_Field]:
+    out = []
+    for f in node.fields:
+        tp, text, key = _declared(node.cls, f), "", ""
+        if isinstance(tp, mi.Metadata):
+            text = str((tp.extra_json_schema or {}).get("description", ""))
+            key = str((tp.extra or {}).get("key", ""))
+            tp = tp.type
+        out.append(_Field(f.encode_name, tp, f.default is None, text, key))
+    return out
 
 
-def _without_none(tp: Any) -> Any:
-    if get_origin(tp) in (Union, types.UnionType):
-        rest = [a for a in get_args(tp) if a is not _NONE]
+def _declared(cls: type, field: mi.Field) -> mi.Type:
+    """A field's type, with the values of a ``Literal`` (that msgspec sorts) in the order
+    the class declares them."""
+    bare = _bare(field.type)
+    if not isinstance(bare, mi.LiteralType):
+        return field.type
+    hint = typing.get_type_hints(cls)[field.name]
+    values = next(typing.get_args(a) for a in (hint, *typing.get_args(hint))
+                  if typing.get_origin(a) is typing.Literal)
+    return _rebuild(field.type, mi.LiteralType(values=values))
+
+
+def _rebuild(node: mi.Type, literal: mi.LiteralType) -> mi.Type:
+    if isinstance(node, mi.Metadata):
+        return mi.Metadata(type=_rebuild(node.type, literal),
+                           extra_json_schema=node.extra_json_schema, extra=node.extra)
+    if isinstance(node, mi.UnionType):
+        return mi.UnionType(types=tuple(_rebuild(t, literal) for t in node.types))
+    return literal if isinstance(node, mi.LiteralType) else node
+
+
+def _struct(node: mi.Type) -> mi.StructType:
+    if not isinstance(node, mi.StructType):
+        raise TypeError(f"{node!r} is not a Document")
+    return node
+
+
+def _bare(node: mi.Type, keep_none: bool = False) -> mi.Type:
+    """``node`` without its metadata and, unless ``keep_none``, without ``| None``."""
+    if isinstance(node, mi.Metadata):
+        return _bare(node.type, keep_none)
+    if isinstance(node, mi.UnionType) and not keep_none:
+        rest = [t for t in node.types if not isinstance(t, mi.NoneType)]
         if len(rest) == 1:
             return rest[0]
-    return tp
-
-
-def _item_type(tp: Any, index: int) -> Any:
-    args = get_args(tp)
-    if not args:
-        return Any
-    if get_origin(tp) is tuple and args[-1] is not Ellipsis:
-        return args[index] if index < len(args) else Any
-    return args[0]
-
-
-def _type_word(tp: Any) -> str:
-    origin, args = get_origin(tp), get_args(tp)
-    if origin in (Union, types.UnionType):
-        return " or ".join(_type_word(a) for a in args)
-    if origin is Literal:
-        return "one of " + ", ".join(repr(a) for a in args)
-    if origin in (list, tuple):
-        if origin is tuple and args and args[-1] is not Ellipsis:
-            return f"an array of {len(args)} values"
-        return "an array"
-    if isinstance(tp, type) and issubclass(tp, enum.Enum):
-        return "one of " + ", ".join(repr(m.value) for m in tp)
-    if _is_dataclass(tp) or origin is dict:
-        return "an object"
-    return {bool: "true or false", int: "an integer", float: "a number", str: "a string",
-            _NONE: "null"}.get(tp, str(tp))
+    return node
 
 
 def _join(prefix: str, name: str) -> str:
     return f"{prefix}.{name}" if prefix else name
+
+
+__all__ = ["JSON_SCHEMA_DIALECT", "Absent", "Document", "doc", "encode", "from_json",
+           "json_schema", "outline", "to_json"]

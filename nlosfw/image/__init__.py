@@ -5,41 +5,46 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these."""
 
 
-from nlosfw.common.progress import ProgressCallback
-from nlosfw.image.depths import automatic_depths, depth_span
-from nlosfw.image.fft import FFTImager, FFTImagerConfig
-from nlosfw.image.fk import FKImager
-from nlosfw.image.interface import Imager, ImagerConfig
-from nlosfw.image.lct import FBPImager, LCTImager, LCTImagerConfig, LightConeConfig
-from nlosfw.image.propagation import PropagationConfig, PropagationImager
-from nlosfw.image.reconstruction import (
-    Reconstruction,
-    plane_voxels,
-    volume_voxels,
-    wall_voxels,
-)
-from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
-from nlosfw.image.rsd import RSDImager, RSDImagerConfig
-from nlosfw.image.rsd_kernel import (
-    laser_phase,
-    path_multiplier,
-    phasor_steps,
-    wall_field,
-)
-from nlosfw.image.scores import (
-    amplitude,
-    depth_rmse,
-    image_metrics,
-    normalise,
-    psnr,
-    reconstruction_scores,
-    rmse,
-    ssim,
-)
-from nlosfw.image.transient import (
-    TransientImager,
-    TransientImagerConfig,
-)
+from typing import TYPE_CHECKING
+
+from nlosfw.common.lazy import lazy_exports
+
+if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.common.progress import ProgressCallback
+    from nlosfw.image.depths import automatic_depths, depth_span
+    from nlosfw.image.fft import FFTImager, FFTImagerConfig
+    from nlosfw.image.fk import FKImager
+    from nlosfw.image.interface import Imager, ImagerConfig
+    from nlosfw.image.lct import FBPImager, LCTImager, LCTImagerConfig, LightConeConfig
+    from nlosfw.image.propagation import PropagationConfig, PropagationImager
+    from nlosfw.image.reconstruction import (
+        Reconstruction,
+        plane_voxels,
+        volume_voxels,
+        wall_voxels,
+    )
+    from nlosfw.image.reconstruction_io import read_reconstruction, write_reconstruction
+    from nlosfw.image.rsd import RSDImager, RSDImagerConfig
+    from nlosfw.image.rsd_kernel import (
+        laser_phase,
+        path_multiplier,
+        phasor_steps,
+        wall_field,
+    )
+    from nlosfw.image.scores import (
+        amplitude,
+        depth_rmse,
+        image_metrics,
+        normalise,
+        psnr,
+        reconstruction_scores,
+        rmse,
+        ssim,
+    )
+    from nlosfw.image.transient import (
+        TransientImager,
+        TransientImagerConfig,
+    )
 
 __all__ = [
     "amplitude",
@@ -79,3 +84,4 @@ __all__ = [
     "wall_voxels",
     "write_reconstruction",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__)

@@ -11,55 +11,60 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these."""
 
 
-from nlosfw.model.engine import Engine, NetworkBuild, SmoothnessBatch
-from nlosfw.model.inr_networks import (
-    HASH_PRIMES,
-    FinerFieldConfig,
-    FourierFieldConfig,
-    HashGridFieldConfig,
-    HashGridLayout,
-    WireFieldConfig,
-    field_network_state,
-    hash_grid_layout,
-    wire_widths,
-)
-from nlosfw.model.interface import (
-    FieldModel,
-    FieldModelConfig,
-    FitReport,
-    TrainingStep,
-    check_query,
-    check_training_field,
-)
-from nlosfw.model.interp import InterpConfig, InterpFieldModel
-from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.neural_config import (
-    FieldMode,
-    FieldShape,
-    LRSchedule,
-    NeuralFieldConfig,
-    Preset,
-)
-from nlosfw.model.normalisation import FieldNormalisation
-from nlosfw.model.protocol import (
-    FieldSplit,
-    SpatialSampling,
-    field_metrics,
-    parameter_data_ratio,
-    split_field,
-)
-from nlosfw.model.thesis_networks import (
-    Architecture,
-    ThesisNetwork,
-    forward_numpy,
-    init_parameters,
-    network_inputs,
-    preset_config,
-    reference_state,
-    resolve_architecture,
-    thesis_architecture,
-)
-from nlosfw.model.trainer import NeuralFieldModel
+from typing import TYPE_CHECKING
+
+from nlosfw.common.lazy import lazy_exports
+
+if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.model.engine import Engine, NetworkBuild, SmoothnessBatch
+    from nlosfw.model.inr_networks import (
+        HASH_PRIMES,
+        FinerFieldConfig,
+        FourierFieldConfig,
+        HashGridFieldConfig,
+        HashGridLayout,
+        WireFieldConfig,
+        field_network_state,
+        hash_grid_layout,
+        wire_widths,
+    )
+    from nlosfw.model.interface import (
+        FieldModel,
+        FieldModelConfig,
+        FitReport,
+        TrainingStep,
+        check_query,
+        check_training_field,
+    )
+    from nlosfw.model.interp import InterpConfig, InterpFieldModel
+    from nlosfw.model.model_files import read_model_file, write_model_file
+    from nlosfw.model.neural_config import (
+        FieldMode,
+        FieldShape,
+        LRSchedule,
+        NeuralFieldConfig,
+        Preset,
+    )
+    from nlosfw.model.normalisation import FieldNormalisation
+    from nlosfw.model.protocol import (
+        FieldSplit,
+        SpatialSampling,
+        field_metrics,
+        parameter_data_ratio,
+        split_field,
+    )
+    from nlosfw.model.thesis_networks import (
+        Architecture,
+        ThesisNetwork,
+        forward_numpy,
+        init_parameters,
+        network_inputs,
+        preset_config,
+        reference_state,
+        resolve_architecture,
+        thesis_architecture,
+    )
+    from nlosfw.model.trainer import NeuralFieldModel
 
 __all__ = [
     "FieldNormalisation",
@@ -106,3 +111,4 @@ __all__ = [
     "WireFieldConfig",
     "write_model_file",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__)

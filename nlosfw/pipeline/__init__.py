@@ -10,35 +10,40 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these.
 """
 
-from nlosfw.pipeline.engine import STAGES, Pipeline, objective
-from nlosfw.pipeline.events import RunEvents
-from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
-from nlosfw.pipeline.metrics import (
-    SCHEMA_VERSION,
-    TIMING_FIELDS,
-    FieldMetrics,
-    ImageScores,
-    ReconstructionMetrics,
-    RunInfo,
-    RunMetrics,
-    metrics_outline,
-    metrics_schema,
-    without_timings,
-)
-from nlosfw.pipeline.plan import PlainConfig, Planned, PlannedModel, RunPlan, make_plan
-from nlosfw.pipeline.results import (
-    CaptureResult,
-    FitResult,
-    FittedModel,
-    ImagedFields,
-    Reconstructions,
-    RunOutput,
-    RunResults,
-    SingleFrequencyImages,
-    StageResults,
-    TransformResult,
-)
-from nlosfw.pipeline.settings import Artefact, RunSettings, run_settings
+from typing import TYPE_CHECKING
+
+from nlosfw.common.lazy import lazy_exports
+
+if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.pipeline.engine import STAGES, Pipeline, objective
+    from nlosfw.pipeline.events import RunEvents
+    from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
+    from nlosfw.pipeline.metrics import (
+        SCHEMA_VERSION,
+        TIMING_FIELDS,
+        FieldMetrics,
+        ImageScores,
+        ReconstructionMetrics,
+        RunInfo,
+        RunMetrics,
+        metrics_outline,
+        metrics_schema,
+        without_timings,
+    )
+    from nlosfw.pipeline.plan import PlainConfig, Planned, PlannedModel, RunPlan, make_plan
+    from nlosfw.pipeline.results import (
+        CaptureResult,
+        FitResult,
+        FittedModel,
+        ImagedFields,
+        Reconstructions,
+        RunOutput,
+        RunResults,
+        SingleFrequencyImages,
+        StageResults,
+        TransformResult,
+    )
+    from nlosfw.pipeline.settings import Artefact, RunSettings, run_settings
 
 __all__ = [
     "Artefact",
@@ -76,3 +81,4 @@ __all__ = [
     "run_settings",
     "without_timings",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__)

@@ -13,18 +13,25 @@ for the fields listed in :data:`TIMING_FIELDS` (wall-clock times and the start t
 other artefact of a run is byte-identical (``tests/hostile/test_determinism.py``).
 """
 
-from __future__ import annotations
-
-import dataclasses
 import json
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Final, Literal
+from typing import Annotated, Any, Final, Literal
+
+import msgspec
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import DataError
-from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
+from nlosfw.common.typed_json import (
+    Absent,
+    Document,
+    doc,
+    encode,
+    from_json,
+    json_schema,
+    outline,
+    to_json,
+)
 from nlosfw.model.interface import FitReport
 
 SchemaVersion = Literal[5]
@@ -47,106 +54,102 @@ TIMING_FIELDS: Final = (
 )
 
 
-@dataclass(frozen=True, kw_only=True)
-class RunInfo:
+class RunInfo(Document, frozen=True, kw_only=True):
     """What ran: the run directory, the nlosfw version, the start, the capture (a scene and
     its simulator, or a file and its format) and the plugins selected."""
 
     dir: str
     nlosfw_version: str
-    started: str = documented("local start time, ISO 8601 (%Y-%m-%dT%H:%M:%S%z); a timing")
-    config_hash: str = documented("SHA-256 of the configuration without the run-control "
-                                  "options (cache, limits, output.overwrite): a resumed "
-                                  "sweep skips a finished run only when it matches")
-    scene: str | None = documented("the simulated scene (null for a run from a file)")
-    simulator: str | None = documented("its simulator (null for a run from a file)")
-    capture_file: str | None = optional("the capture file read (capture.path)")
-    capture_format: str | None = optional("the capture format that read it")
+    started: Annotated[str, doc("local start time, ISO 8601 (%Y-%m-%dT%H:%M:%S%z); a timing")]
+    config_hash: Annotated[str, doc("SHA-256 of the configuration without the run-control "
+                                    "options (cache, limits, output.overwrite): a resumed "
+                                    "sweep skips a finished run only when it matches")]
+    scene: Annotated[str | None, doc("the simulated scene (null for a run from a file)")]
+    simulator: Annotated[str | None, doc("its simulator (null for a run from a file)")]
+    capture_file: Annotated[Absent[str], doc("the capture file read (capture.path)")] = None
+    capture_format: Annotated[Absent[str], doc("the capture format that read it")] = None
     transform: str | None
     model: str | None
     imager: str | None
-    stopped_after: str | None = optional("the last stage that ran, when stop_after ended the "
-                                         "run early")
+    stopped_after: Annotated[Absent[str], doc("the last stage that ran, when stop_after ended the "
+                                              "run early")] = None
 
 
-@dataclass(frozen=True, kw_only=True)
-class PreprocessingStep:
+class PreprocessingStep(Document, frozen=True, kw_only=True):
     """One preprocessing step, as applied (enough to repeat it: ``capture.<option>=<value>``)."""
 
-    option: str = documented("the option (capture.<option>); grid: a list of wall points "
-                             "arranged as the regular grid it forms")
-    value: Any = documented("its value as the config spells it")
-    source: Literal["option", "format", "automatic"] = documented(
-        "the run's options, the capture format's default, or automatic (grid)")
-    effect: str = documented("what it did, in words")
+    option: Annotated[str, doc("the option (capture.<option>); grid: a list of wall points "
+                               "arranged as the regular grid it forms")]
+    value: Annotated[Any, doc("its value as the config spells it")]
+    source: Annotated[Literal["option", "format", "automatic"], doc(
+        "the run's options, the capture format's default, or automatic (grid)")]
+    effect: Annotated[str, doc("what it did, in words")]
 
 
-@dataclass(frozen=True, kw_only=True)
-class CaptureMetrics:
+class CaptureMetrics(Document, frozen=True, kw_only=True):
     """The capture: where it came from, how it was preprocessed, its shape, timing and
     total signal (after preprocessing)."""
 
     source: Literal["simulated", "file"]
-    path: str | None = optional("the file read (source: file)")
-    format: str | None = optional("the capture format that read it (source: file)")
-    preprocessing: tuple[PreprocessingStep, ...] = documented(
-        "every step applied, in order (empty: none)")
-    simulator: str | None = optional("the simulator plugin (source: simulated)")
-    cache_hit: bool | None = optional("whether the simulated capture came from the cache")
-    shape: tuple[int, ...] = documented("shape of the transient H (time first)")
+    path: Annotated[Absent[str], doc("the file read (source: file)")] = None
+    format: Annotated[Absent[str], doc("the capture format that read it (source: file)")] = None
+    preprocessing: Annotated[tuple[PreprocessingStep, ...], doc(
+        "every step applied, in order (empty: none)")]
+    simulator: Annotated[Absent[str], doc("the simulator plugin (source: simulated)")] = None
+    cache_hit: Annotated[Absent[bool], doc(
+        "whether the simulated capture came from the cache")] = None
+    shape: Annotated[tuple[int, ...], doc("shape of the transient H (time first)")]
     kind: CaptureKind
-    delta_t: float = documented("bin width (m of optical path)")
-    t_start: float = documented("path length of the first bin (m)")
-    total: float = documented("sum of H")
-    noise: Any = optional("the noise the capture carries, as its scene_info records it")
+    delta_t: Annotated[float, doc("bin width (m of optical path)")]
+    t_start: Annotated[float, doc("path length of the first bin (m)")]
+    total: Annotated[float, doc("sum of H")]
+    noise: Annotated[Absent[Any], doc(
+        "the noise the capture carries, as its scene_info records it")] = None
 
 
-@dataclass(frozen=True, kw_only=True)
-class TransformMetrics:
+class TransformMetrics(Document, frozen=True, kw_only=True):
     """The phasor field of the capture."""
 
     name: str
     cache_hit: bool
     n_frequencies: int
-    frequency_band: tuple[float, float] = documented("lowest and highest frequency (cycles/m)")
-    grid: tuple[int, int] = documented("wall grid (ny, nx)")
+    frequency_band: Annotated[tuple[float, float], doc("lowest and highest frequency (cycles/m)")]
+    grid: Annotated[tuple[int, int], doc("wall grid (ny, nx)")]
 
 
-@dataclass(frozen=True, kw_only=True)
-class SplitMetrics:
+class SplitMetrics(Document, frozen=True, kw_only=True):
     """Which samples the field models trained on (the run's ``split``)."""
 
     pattern: Literal["grid", "random"]
-    spatial_step: int = documented("grid: every k-th wall sample in x and y")
-    spatial_fraction: float | None = optional("random: the fraction of wall samples kept")
-    seed: int | None = optional("random: the seed that drew the samples")
-    wall_samples: int = documented("wall samples of the full capture")
-    train_samples: int = documented("wall samples the models trained on (and raw images)")
-    undersampling: float = documented("wall_samples / train_samples (4, 16, 64 for steps "
-                                      "2, 4, 8)")
+    spatial_step: Annotated[int, doc("grid: every k-th wall sample in x and y")]
+    spatial_fraction: Annotated[Absent[float], doc(
+        "random: the fraction of wall samples kept")] = None
+    seed: Annotated[Absent[int], doc("random: the seed that drew the samples")] = None
+    wall_samples: Annotated[int, doc("wall samples of the full capture")]
+    train_samples: Annotated[int, doc("wall samples the models trained on (and raw images)")]
+    undersampling: Annotated[float, doc("wall_samples / train_samples (4, 16, 64 for steps "
+                                        "2, 4, 8)")]
     train_frequencies: int
     heldout_frequencies: int
 
 
-@dataclass(frozen=True, kw_only=True)
-class FitMetrics:
+class FitMetrics(Document, frozen=True, kw_only=True):
     """How a field model's fit went."""
 
     steps: int
-    seconds: float = documented("wall-clock time of the fit; a timing")
+    seconds: Annotated[float, doc("wall-clock time of the fit; a timing")]
     final_loss: float | None
     best_val_loss: float | None
     stopped_early: bool
 
     @classmethod
-    def of(cls, report: FitReport) -> FitMetrics:
+    def of(cls, report: FitReport) -> "FitMetrics":
         return cls(steps=int(report.steps), seconds=round(report.seconds, 3),
                    final_loss=report.final_loss, best_val_loss=report.best_val_loss,
                    stopped_early=bool(report.stopped_early))
 
 
-@dataclass(frozen=True, kw_only=True)
-class ErrorMetrics:
+class ErrorMetrics(Document, frozen=True, kw_only=True):
     """Complex errors of a predicted field on one set of samples (null when the set is
     empty): relative_l2 = |P^ - P| / |P|, nmse_db = 20 log10 of it, phase_error is
     magnitude-weighted (radians)."""
@@ -159,143 +162,137 @@ class ErrorMetrics:
     n_samples: int
 
 
-@dataclass(frozen=True, kw_only=True)
-class SplitErrors:
+class SplitErrors(Document, frozen=True, kw_only=True):
     """A prediction's errors on the sets of the thesis's protocol."""
 
-    heldout_pixels: ErrorMetrics = documented("wall samples never trained on, at training "
-                                              "frequencies")
-    heldout_frequencies: ErrorMetrics = documented("every wall sample at held-out frequencies")
-    all: ErrorMetrics = documented("every sample")
-    heldout_pixels_inside: ErrorMetrics = documented("held-out pixels inside the training "
-                                                     "grid's bounding box")
+    heldout_pixels: Annotated[ErrorMetrics, doc("wall samples never trained on, at training "
+                                                "frequencies")]
+    heldout_frequencies: Annotated[ErrorMetrics, doc("every wall sample at held-out frequencies")]
+    all: Annotated[ErrorMetrics, doc("every sample")]
+    heldout_pixels_inside: Annotated[ErrorMetrics, doc("held-out pixels inside the training "
+                                                       "grid's bounding box")]
 
     @classmethod
-    def of(cls, errors: Mapping[str, Mapping[str, Any]]) -> SplitErrors:
+    def of(cls, errors: Mapping[str, Mapping[str, Any]]) -> "SplitErrors":
         """From :func:`nlosfw.model.field_metrics`'s result."""
         return cls(**{name: ErrorMetrics(**values) for name, values in errors.items()})
 
     def by_set(self) -> dict[str, ErrorMetrics]:
         """The errors by set name, in declaration order."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {name: getattr(self, name) for name in self.__struct_fields__}
 
 
-@dataclass(frozen=True, kw_only=True)
-class DenoisingMetrics:
+class DenoisingMetrics(Document, frozen=True, kw_only=True):
     """Errors against the noise-free field (scenes with noise)."""
 
-    noisy_relative_l2: float | None = documented("of the noisy full field")
-    relative_l2: float | None = documented("of the prediction")
-    gain_db: float | None = documented("20 log10(noisy_relative_l2 / relative_l2)")
+    noisy_relative_l2: Annotated[float | None, doc("of the noisy full field")]
+    relative_l2: Annotated[float | None, doc("of the prediction")]
+    gain_db: Annotated[float | None, doc("20 log10(noisy_relative_l2 / relative_l2)")]
 
 
-@dataclass(frozen=True, kw_only=True)
-class FieldMetrics:
+class FieldMetrics(Document, frozen=True, kw_only=True):
     """One field model of the run (``model``, ``interp`` or a ``compare`` label)."""
 
     plugin: str
-    seed: int | None = optional("the model's seed option (neural models: initialisation and "
-                                "batches)")
+    seed: Annotated[Absent[int], doc("the model's seed option (neural models: initialisation and "
+                                     "batches)")] = None
     n_parameters: int
-    training_values: int = documented("real values trained on (2 per complex sample)")
+    training_values: Annotated[int, doc("real values trained on (2 per complex sample)")]
     parameters_per_value: float
-    predict_seconds: float | None = optional("wall-clock time of the prediction; a timing")
+    predict_seconds: Annotated[Absent[float], doc(
+        "wall-clock time of the prediction; a timing")] = None
     fit: FitMetrics
-    splits: SplitErrors | None = optional()
-    denoising: DenoisingMetrics | None = optional()
+    splits: Absent[SplitErrors] = None
+    denoising: Absent[DenoisingMetrics] = None
 
 
-@dataclass(frozen=True, kw_only=True)
-class ImageScores:
+class ImageScores(Document, frozen=True, kw_only=True):
     """A reconstruction against the full capture's (source ``true``), on amplitudes (the
     square root of the intensity) each normalised to its maximum, with scikit-image's
     PSNR and SSIM at their defaults (null where undefined: PSNR of identical images,
     SSIM of images under 7 pixels a side)."""
 
-    rmse: float | None = documented("of the front view: the maximum over depth")
-    psnr: float | None = documented("dB, of the front view")
-    ssim: float | None = documented("of the front view")
-    volume_psnr: float | None = documented("dB, of the whole (z, y, x) volume")
-    volume_ssim: float | None = documented("of the whole (z, y, x) volume")
-    depth_rmse_m: float | None = optional(
+    rmse: Annotated[float | None, doc("of the front view: the maximum over depth")]
+    psnr: Annotated[float | None, doc("dB, of the front view")]
+    ssim: Annotated[float | None, doc("of the front view")]
+    volume_psnr: Annotated[float | None, doc("dB, of the whole (z, y, x) volume")]
+    volume_ssim: Annotated[float | None, doc("of the whole (z, y, x) volume")]
+    depth_rmse_m: Annotated[Absent[float], doc(
         "RMS error (m) of the depth of each column's brightest voxel against the scene's "
-        "true depth, over the pixels with a surface (scenes with ground truth)")
-    seconds: float | None = optional("time to reconstruct; a timing")
+        "true depth, over the pixels with a surface (scenes with ground truth)")] = None
+    seconds: Annotated[Absent[float], doc("time to reconstruct; a timing")] = None
 
 
-@dataclass(frozen=True, kw_only=True)
-class SingleFrequencyMetrics:
+class SingleFrequencyMetrics(Document, frozen=True, kw_only=True):
     """Reconstructions from one frequency alone (as in the thesis's figures)."""
 
-    frequency: float = documented("cycles/m")
+    frequency: Annotated[float, doc("cycles/m")]
     split: Literal["training", "held-out"]
-    sources: dict[str, ImageScores] = documented("scores by source", key="source")
+    sources: Annotated[dict[str, ImageScores], doc("scores by source", key="source")]
 
 
-@dataclass(frozen=True, kw_only=True)
-class ReconstructionMetrics:
+class ReconstructionMetrics(Document, frozen=True, kw_only=True):
     """Every field imaged on the same voxels, scored against the true field's image."""
 
     imager: str
     reference: Literal["true"]
-    depths: tuple[float, ...] = documented("depth planes (m)")
-    depth_planes: int = documented("number of depth planes")
-    depth_spacing: float | None = documented(
-        "distance between neighbouring planes (m; null for one plane or uneven planes)")
-    sources: dict[str, ImageScores] = documented("true, raw, interp, model and every "
-                                                 "compare label", key="source")
-    single_frequency: dict[str, SingleFrequencyMetrics] = documented(
-        "by frequency index", key="index")
+    depths: Annotated[tuple[float, ...], doc("depth planes (m)")]
+    depth_planes: Annotated[int, doc("number of depth planes")]
+    depth_spacing: Annotated[float | None, doc(
+        "distance between neighbouring planes (m; null for one plane or uneven planes)")]
+    sources: Annotated[dict[str, ImageScores], doc("true, raw, interp, model and every "
+                                                   "compare label", key="source")]
+    single_frequency: Annotated[dict[str, SingleFrequencyMetrics], doc(
+        "by frequency index", key="index")]
 
 
-@dataclass(frozen=True, kw_only=True)
-class RunError:
+class RunError(Document, frozen=True, kw_only=True):
     """Why a run did not finish: the stage it was in and the one-line reason."""
 
-    stage: str | None = documented("the stage that was running (null: before the first)")
-    message: str = documented("the one-line error, or the signal that interrupted the run")
-    signal: str | None = optional("SIGINT or SIGTERM, for an interrupted run")
+    stage: Annotated[str | None, doc("the stage that was running (null: before the first)")]
+    message: Annotated[str, doc("the one-line error, or the signal that interrupted the run")]
+    signal: Annotated[Absent[str], doc("SIGINT or SIGTERM, for an interrupted run")] = None
 
 
-@dataclass(frozen=True, kw_only=True)
-class Timings:
+class Timings(Document, frozen=True, kw_only=True):
     """Seconds per stage that ran, and in total (all timings)."""
 
-    capture: float | None = optional()
-    transform: float | None = optional()
-    fit: float | None = optional()
-    predict: float | None = optional()
-    reconstruct: float | None = optional()
-    report: float | None = optional()
-    total: float | None = optional()
+    capture: Absent[float] = None
+    transform: Absent[float] = None
+    fit: Absent[float] = None
+    predict: Absent[float] = None
+    reconstruct: Absent[float] = None
+    report: Absent[float] = None
+    total: Absent[float] = None
 
 
-@dataclass(frozen=True, kw_only=True)
-class RunMetrics:
+class RunMetrics(Document, frozen=True, kw_only=True):
     """The metrics of one run (``metrics.json``), nested by stage."""
 
-    schema_version: SchemaVersion = SCHEMA_VERSION
-    status: Status = "running"
+    # defaults as factories: msgspec then writes them although they are the defaults
+    schema_version: SchemaVersion = msgspec.field(default_factory=lambda: SCHEMA_VERSION)
+    status: Status = msgspec.field(default_factory=lambda: "running")
     run: RunInfo
-    capture: CaptureMetrics | None = optional()
-    transform: TransformMetrics | None = optional()
-    split: SplitMetrics | None = optional()
-    field: dict[str, FieldMetrics] | None = optional(
-        "by source: model, interp and every compare label", key="source")
-    reconstruction: ReconstructionMetrics | None = optional()
-    error: RunError | None = optional("where and why a failed or interrupted run ended")
-    timings: Timings = dataclasses.field(default_factory=Timings)
+    capture: Absent[CaptureMetrics] = None
+    transform: Absent[TransformMetrics] = None
+    split: Absent[SplitMetrics] = None
+    field: Annotated[Absent[dict[str, FieldMetrics]], doc(
+        "by source: model, interp and every compare label", key="source")] = None
+    reconstruction: Absent[ReconstructionMetrics] = None
+    error: Annotated[Absent[RunError], doc(
+        "where and why a failed or interrupted run ended")] = None
+    timings: Timings = msgspec.field(default_factory=Timings)
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         """The JSON object of metrics.json."""
         return to_json(self)
 
     def dumps(self) -> str:
-        """The text of metrics.json."""
-        return json.dumps(self.to_json(), indent=2) + "\n"
+        """The text of metrics.json (json's layout: indented, ASCII, floats as repr)."""
+        return json.dumps(json.loads(encode(self)), indent=2) + "\n"
 
     @classmethod
-    def from_json(cls, data: Any, where: str = "") -> RunMetrics:
+    def from_json(cls, data: object, where: str = "") -> "RunMetrics":
         """Metrics from the JSON object of a metrics.json of this :data:`SCHEMA_VERSION`."""
         version = data.get("schema_version") if isinstance(data, dict) else None
         if isinstance(data, dict) and version != SCHEMA_VERSION:
@@ -305,7 +302,7 @@ class RunMetrics:
         return from_json(cls, data, where)
 
     @classmethod
-    def read(cls, path: Path) -> RunMetrics:
+    def read(cls, path: Path) -> "RunMetrics":
         """Read a metrics.json; a one-line :class:`DataError` names the file and the problem."""
         try:
             data = json.loads(Path(path).read_text(encoding="utf-8"))

@@ -8,8 +8,7 @@ stage's time (``on_stage_end``) into ``timings``; the engine only says how the r
 
 from __future__ import annotations
 
-import dataclasses
-from dataclasses import replace
+from msgspec.structs import replace
 
 from nlosfw.model.protocol import FieldSplit, field_metrics
 from nlosfw.pipeline.measure import (
@@ -94,5 +93,5 @@ class MetricsRecorder:
         self.metrics = replace(self.metrics, field=entries)
 
     def _record_time(self, name: str, seconds: float) -> None:
-        timings = dataclasses.replace(self.metrics.timings, **{name: round(seconds, 4)})
+        timings = replace(self.metrics.timings, **{name: round(seconds, 4)})
         self.metrics = replace(self.metrics, timings=timings)

@@ -9,11 +9,16 @@ The names in ``__all__`` are the public API of this stage: plugins, examples and
 import only these.
 """
 
-from nlosfw.report.records import RunRecord, find_runs, read_run
-from nlosfw.report.study import Stat, StudyRow, study_figure, study_rows
-from nlosfw.report.sweep import write_report
-from nlosfw.report.tables import format_cell, markdown_table
-from nlosfw.report.thesis import thesis_comparison
+from typing import TYPE_CHECKING
+
+from nlosfw.common.lazy import lazy_exports
+
+if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.report.records import RunRecord, find_runs, read_run
+    from nlosfw.report.study import Stat, StudyRow, study_figure, study_rows
+    from nlosfw.report.sweep import write_report
+    from nlosfw.report.tables import format_cell, markdown_table
+    from nlosfw.report.thesis import thesis_comparison
 
 __all__ = [
     "RunRecord",
@@ -28,3 +33,4 @@ __all__ = [
     "thesis_comparison",
     "write_report",
 ]
+__getattr__, __dir__ = lazy_exports(__name__, __file__)

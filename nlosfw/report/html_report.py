@@ -10,11 +10,12 @@ link to the run's own page, the timings and the configuration the runs share.
 from __future__ import annotations
 
 import base64
-import dataclasses
 import html
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+
+import msgspec
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import Scalar
@@ -78,7 +79,7 @@ def _section(title: str, *parts: str) -> str:
 
 
 def _timings(metrics: RunMetrics) -> dict[str, float]:
-    return {k: v for k, v in dataclasses.asdict(metrics.timings).items() if v is not None}
+    return {k: v for k, v in msgspec.structs.asdict(metrics.timings).items() if v is not None}
 
 
 #: Figures of a run in the order its page shows them, with their captions.

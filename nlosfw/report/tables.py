@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from nlosfw.common.config import Scalar
-
 from nlosfw.common.text import markdown
 
 
