@@ -255,7 +255,8 @@ def _not_numeric(path: Path, name: str, cls: str) -> str:
             "array: double, single or an integer type)")
 
 
-def _check_complex(path: Path, name: str, found: npt.DTypeLike, dtype: npt.DTypeLike | None) -> None:
+def _check_complex(path: Path, name: str, found: npt.DTypeLike,
+                   dtype: npt.DTypeLike | None) -> None:
     if np.dtype(found).kind == "c" and dtype is not None and np.dtype(dtype).kind != "c":
         raise DataError(f"{path}: variable '{name}' must be real, got complex numbers")
 
