@@ -12,12 +12,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from nlosfw.common.errors import DataError, one_line
+
+if TYPE_CHECKING:
+    import h5py
 
 #: The text every MATLAB 5 and 7.3 file starts with (7.3 files carry it in the HDF5 user block).
 MAT_HEADER = b"MATLAB"
@@ -83,7 +86,7 @@ def mat_variables(path: Path) -> dict[str, MatVariable]:
     raise DataError(f"{path}: not a MATLAB .mat file (version 5 or 7.3) nor HDF5")
 
 
-def _hdf5_variable(name: str, node: Any) -> MatVariable:
+def _hdf5_variable(name: str, node: h5py.Dataset | h5py.Group) -> MatVariable:
     import h5py
 
     cls = node.attrs.get("MATLAB_class", b"")
