@@ -21,6 +21,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+from nlosfw.common.config import Scalar
 from nlosfw.plugins.capabilities import Capability, format_capabilities
 from nlosfw.plugins.registry import PluginSpec
 
@@ -35,10 +36,10 @@ class Variant:
 
     name: str
     needs: frozenset[Capability] = frozenset()
-    options: Mapping[str, Any] = field(default_factory=dict)
+    options: Mapping[str, Scalar] = field(default_factory=dict)
 
 
-def variant(name: str, needs: Iterable[Capability] = (), **options: Any) -> Variant:
+def variant(name: str, needs: Iterable[Capability] = (), **options: Scalar) -> Variant:
     """A :class:`Variant` named ``name`` needing ``needs`` and passing ``options``."""
     return Variant(name, frozenset(needs), dict(options))
 
@@ -50,7 +51,7 @@ def combine(*axes: Sequence[Variant]) -> tuple[Variant, ...]:
     for parts in itertools.product(*axes):
         name = "+".join(p.name for p in parts if p.name)
         needs = frozenset().union(*(p.needs for p in parts))
-        options: dict[str, Any] = {}
+        options: dict[str, Scalar] = {}
         for p in parts:
             options.update(p.options)
         out.append(Variant(name, needs, options))
