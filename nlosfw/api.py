@@ -59,7 +59,7 @@ def load_capture(path: str | Path, format: str | None = None,
                  **preprocessing: Any) -> Capture:
     """The capture in file ``path``, as a run with ``capture.path=PATH`` reads it.
 
-    Any installed capture format reads it (``lct``, ``fk``, ``znlos``, ``ytal``,
+    Every installed capture format reads it (``lct``, ``fk``, ``znlos``, ``ytal``,
     ``wisconsin``, nlosfw's own HDF5, ...), detected from the file's content or forced with
     ``format``; the format's default preprocessing applies, and ``preprocessing`` overrides
     it with the options of ``capture.*`` (``gate=600``, ``bin=2``, ``tofgrid="tof.mat"``).

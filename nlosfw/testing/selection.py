@@ -19,7 +19,7 @@ import itertools
 import unittest
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from nlosfw.common.config import Scalar
 from nlosfw.plugins.capabilities import Capability, format_capabilities
@@ -97,7 +97,7 @@ def requires(*capabilities: Capability, each: VariantTable = (),
     return mark
 
 
-def requirements_of(check: Callable[..., Any]) -> Requirements:
+def requirements_of(check: Callable[..., None]) -> Requirements:
     """The :class:`Requirements` declared with :func:`requires` (none: always applies)."""
     found = getattr(check, "__requirements__", None)
     return found if isinstance(found, Requirements) else Requirements()
