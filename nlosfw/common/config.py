@@ -13,7 +13,7 @@ import dataclasses
 import enum
 import math
 from collections.abc import Collection, Mapping
-from typing import TYPE_CHECKING, Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, SupportsFloat, TypeVar
 
 from nlosfw.common.errors import ConfigError
 
@@ -69,6 +69,14 @@ def config_to_dict(config: DataclassInstance) -> dict[str, Any]:
     if not dataclasses.is_dataclass(config) or isinstance(config, type):
         raise TypeError(f"expected a dataclass instance, got {type(config).__name__}")
     return {f.name: _plain(getattr(config, f.name)) for f in dataclasses.fields(config)}
+
+
+def number(value: object) -> float:
+    """A plain value (of a config, of metadata) as a float; TypeError unless it is a real
+    number or a numeric string."""
+    if not isinstance(value, (str, SupportsFloat)):
+        raise TypeError(f"not a number: {value!r}")
+    return float(value)
 
 
 def require(condition: bool, option: str, problem: str) -> None:
