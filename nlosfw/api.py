@@ -43,7 +43,7 @@ if TYPE_CHECKING:
 
 
 def simulate_scene(scene: Scene | str | Mapping[str, object], simulator: str = "analytic",
-                   **options: Any) -> Capture:
+                   **options: object) -> Capture:
     """The transient capture of ``scene`` rendered by simulator plugin ``simulator``.
 
     ``scene`` is a :class:`~nlosfw.simulate.Scene`, the name of a built-in scene
@@ -59,7 +59,7 @@ def load_capture(path: str | Path, format: str | None = None,
                  **preprocessing: Any) -> Capture:
     """The capture in file ``path``, as a run with ``capture.path=PATH`` reads it.
 
-    Any installed capture format reads it (``lct``, ``fk``, ``znlos``, ``ytal``,
+    Every installed capture format reads it (``lct``, ``fk``, ``znlos``, ``ytal``,
     ``wisconsin``, nlosfw's own HDF5, ...), detected from the file's content or forced with
     ``format``; the format's default preprocessing applies, and ``preprocessing`` overrides
     it with the options of ``capture.*`` (``gate=600``, ``bin=2``, ``tofgrid="tof.mat"``).
@@ -78,14 +78,14 @@ def load_capture(path: str | Path, format: str | None = None,
     return load_file_capture(source, _host().capture_formats()).prepared.capture
 
 
-def transform_capture(capture: Capture, transform: str = "fft", **options: Any) -> PhasorField:
+def transform_capture(capture: Capture, transform: str = "fft", **options: object) -> PhasorField:
     """The phasor field of ``capture`` (values ``[frequency, y, x]``) by transform plugin
     ``transform`` (``fft``, ``wavelet``) with its ``options`` (``n_frequencies=51``)."""
     plugin = _host().registry.create(PluginKind.PHASOR_TRANSFORM, transform, options)
     return plugin.transform(capture)
 
 
-def fit_model(field: PhasorField, model: str = "interp", **options: Any) -> FieldModel:
+def fit_model(field: PhasorField, model: str = "interp", **options: object) -> FieldModel:
     """Field model plugin ``model`` with ``options`` (``steps=500``), fitted to ``field``.
 
     Fit it to the training part of a split (:func:`nlosfw.model.split_field`) to score it
@@ -105,7 +105,7 @@ def predict_field(model: FieldModel, like: PhasorField) -> PhasorField:
 
 def reconstruct(field: PhasorField, depths: Sequence[float] | np.ndarray,
                 imager: str = "fft", *, grid: PhasorField | None = None,
-                **options: Any) -> Reconstruction:
+                **options: object) -> Reconstruction:
     """Image ``field`` with imager plugin ``imager`` (and its ``options``) on planes at
     ``depths`` (m) facing the wall samples of ``grid`` (default: the field's own), as a
     run does (see :func:`nlosfw.image.wall_voxels`).

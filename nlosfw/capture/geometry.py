@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -23,6 +24,16 @@ def device_legs(laser_points: ArrayLike, sensor_points: ArrayLike,
     leg_l = np.linalg.norm(laser - np.asarray(laser_xyz, dtype=float), axis=-1)
     leg_s = np.linalg.norm(sensors - np.asarray(sensor_xyz, dtype=float), axis=-1)
     return leg_l + leg_s
+
+
+class GeometryDict(TypedDict):
+    """A :class:`CaptureGeometry` as plain values (YAML, HDF5 attributes)."""
+
+    kind: str
+    laser_point: list[float] | None
+    laser_xyz: list[float] | None
+    sensor_xyz: list[float] | None
+    t_accounts_first_and_last_bounces: bool
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +87,7 @@ class CaptureGeometry:
             laser_points = self.laser_point
         return out + device_legs(laser_points, wall_points, self.laser_xyz, self.sensor_xyz)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> GeometryDict:
         """Plain values for YAML or HDF5 attributes."""
         def plain(a: np.ndarray | None) -> list[float] | None:
             return None if a is None else [float(v) for v in np.asarray(a).reshape(3)]
@@ -90,10 +101,15 @@ class CaptureGeometry:
         }
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> CaptureGeometry:
-        """Inverse of :meth:`to_dict`."""
-        def arr(v: Any) -> np.ndarray | None:
-            return None if v is None else np.asarray(v, dtype=float).reshape(3)
+    def from_dict(cls, data: Mapping[str, object]) -> CaptureGeometry:
+        """Inverse of :meth:`to_dict` (of a :class:`GeometryDict` as read from a file: a
+        one-line DataError for anything else)."""
+        def arr(v: object) -> np.ndarray | None:
+            if v is None:
+                return None
+            if not isinstance(v, (Sequence, np.ndarray)):
+                raise TypeError(f"a point must be 3 numbers, got {v!r}")
+            return np.asarray(v, dtype=float).reshape(3)
 
         try:
             return cls(

@@ -18,6 +18,7 @@ from typing import Any
 
 import h5py
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.capture.data import YTAL_FIELDS, Capture
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
@@ -179,7 +180,7 @@ def _read_field(f: h5py.File, key: str, path: Path) -> Any:
     return read_dataset(node, path, key)
 
 
-def _scalar(value: Any, key: str, path: Path) -> float:
+def _scalar(value: npt.ArrayLike, key: str, path: Path) -> float:
     arr = np.asarray(value)
     if arr.size != 1 or not np.issubdtype(arr.dtype, np.number):
         raise DataError(f"{path}: field '{key}' must be one number of metres, "

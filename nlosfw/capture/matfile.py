@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -27,6 +27,9 @@ from nlosfw.common.hdf5_guard import (
     read_dataset,
 )
 from nlosfw.common.inputs import describe_input
+
+if TYPE_CHECKING:
+    import h5py
 
 #: The text every MATLAB 5 and 7.3 file starts with (7.3 files carry it in the HDF5 user block).
 MAT_HEADER = b"MATLAB"
@@ -119,7 +122,7 @@ def _mat5_complete(path: Path) -> bool:
     return True
 
 
-def _hdf5_variable(name: str, node: Any) -> MatVariable:
+def _hdf5_variable(name: str, node: h5py.Dataset | h5py.Group) -> MatVariable:
     import h5py
 
     cls = node.attrs.get("MATLAB_class", b"")

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 
@@ -25,6 +25,7 @@ from nlosfw.capture.preprocess_options import (
     BinWidth,
     FlipAxes,
     Gate,
+    OptionValue,
     Preprocessing,
     TimeCrop,
     _is_set,
@@ -52,6 +53,8 @@ __all__ = ["METRES_PER_PS", "AppliedStep", "BinWidth", "Extras", "FlipAxes", "Ga
            "subtract_background", "transpose_scan", "zero_before"]
 
 StepSource = Literal["option", "format", "automatic"]
+#: An option's value as the config spells it (of a gate, crop or bin width: its set fields).
+StepValue = bool | int | float | str | None | dict[str, int | float | list[int] | list[float]]
 
 
 @dataclass(frozen=True)
@@ -62,11 +65,11 @@ class AppliedStep:
     grid) and what it did."""
 
     option: str
-    value: Any
+    value: StepValue
     source: StepSource
     effect: str
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return dataclasses.asdict(self)
 
 
@@ -122,7 +125,7 @@ def preprocess(capture: Capture, options: Preprocessing, from_format: frozenset[
     return c, tuple(steps)
 
 
-def _plain(value: Any) -> Any:
+def _plain(value: OptionValue) -> StepValue:
     """An option's value as the config spells it (of a gate, crop or bin width: its set
     fields)."""
     if isinstance(value, (Gate, TimeCrop, BinWidth)):

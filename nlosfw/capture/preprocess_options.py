@@ -107,6 +107,10 @@ class BinWidth:
         return self.metres if self.ps is None else self.ps * METRES_PER_PS
 
 
+#: The value of one preprocessing option (a field of :class:`Preprocessing`).
+OptionValue = Gate | TimeCrop | BinWidth | FlipAxes | bool | int | str | None
+
+
 @dataclass(frozen=True)
 class Preprocessing:
     """The preprocessing options (``capture.*`` of a run). ``None`` (or an unset gate, crop
@@ -154,5 +158,5 @@ class Preprocessing:
         return Preprocessing(**chosen), frozenset(from_defaults)
 
 
-def _is_set(value: Any) -> bool:
+def _is_set(value: OptionValue) -> bool:
     return value.is_set if isinstance(value, (Gate, TimeCrop, BinWidth)) else value is not None

@@ -11,13 +11,21 @@ A capture read this way keeps its layout in ``scene_info["scan_layout"]``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypedDict
 
 import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import GridFormat, HFormat
 from nlosfw.common.errors import DataError
+
+
+class ScanLayoutDict(TypedDict):
+    """A :class:`ScanLayout` as plain values."""
+
+    x_axis: int
+    x_reversed: bool
+    y_reversed: bool
 
 
 @dataclass(frozen=True)
@@ -41,7 +49,8 @@ class ScanLayout:
             xy = xy[:, ::-1]
         return xy
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> ScanLayoutDict:
+        """Plain values for ``scene_info["scan_layout"]``."""
         return {"x_axis": self.x_axis, "x_reversed": self.x_reversed,
                 "y_reversed": self.y_reversed}
 

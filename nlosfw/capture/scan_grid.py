@@ -3,7 +3,7 @@ of wall points recognised as a grid; pure functions, each returning a new captur
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
 
 import numpy as np
 
@@ -11,6 +11,9 @@ from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat
 from nlosfw.capture.preprocess_options import FlipAxes
 from nlosfw.common.errors import ConfigError
+
+#: A map of wall points or directions (..., 3) to new ones.
+PointMap = Callable[[np.ndarray], np.ndarray]
 
 
 def _two_points_left(capture: Capture, k: int, option: str) -> None:
@@ -39,10 +42,10 @@ def _regular_centre(capture: Capture, option: str) -> np.ndarray:
     return np.array([(xs.min() + xs.max()) / 2, (ys.min() + ys.max()) / 2, 0.0])
 
 
-def _map_points(capture: Capture, fn: Any, fn_dir: Any) -> dict[str, Any]:
+def _map_points(capture: Capture, fn: PointMap, fn_dir: PointMap) -> dict[str, np.ndarray | None]:
     """The laser point, devices and normals of ``capture`` with a point map ``fn`` and a
     direction map ``fn_dir`` applied (the sensor grid is handled by the caller)."""
-    changes: dict[str, Any] = {}
+    changes: dict[str, np.ndarray | None] = {}
     for name in ("sensor_xyz", "laser_xyz"):
         value = getattr(capture, name)
         if value is not None:
@@ -55,7 +58,7 @@ def _map_points(capture: Capture, fn: Any, fn_dir: Any) -> dict[str, Any]:
 
 
 def _with_grid(capture: Capture, H: np.ndarray, grid: np.ndarray, normals: np.ndarray | None,
-               changes: dict[str, Any]) -> Capture:
+               changes: dict[str, np.ndarray | None]) -> Capture:
     if capture.kind is CaptureKind.CONFOCAL:
         changes["laser_grid_xyz"] = grid
         changes["laser_grid_normals"] = normals
@@ -179,7 +182,7 @@ def as_scan_grid(capture: Capture, rtol: float = 0.05) -> Capture | None:
     grid = pts[order].reshape(*shape, 3)
     normals = capture.sensor_grid_normals
     normals = None if normals is None else normals.reshape(-1, 3)[order].reshape(*shape, 3)
-    changes: dict[str, Any] = {}
+    changes: dict[str, np.ndarray | GridFormat | None] = {}
     if capture.kind is CaptureKind.CONFOCAL:
         changes = {"laser_grid_xyz": grid, "laser_grid_normals": normals,
                    "laser_grid_format": GridFormat.X_Y_3}

@@ -24,9 +24,9 @@ is the one y-tal reads (``tal/io/format.py``, ``__convert_dict_pfmat_to_tal``, f
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
@@ -48,7 +48,7 @@ _EXPECTED = ("a struct 'dataset' with t, data [nl, 1, nt], laserOrigin, laserPos
              "cameraPos, cameraNormal, deltat, t0, as in the Wisconsin phasor-field captures")
 
 
-def points(value: Any, path: Path, name: str, count: int | None = None) -> np.ndarray:
+def points(value: npt.ArrayLike, path: Path, name: str, count: int | None = None) -> np.ndarray:
     """``value`` (MATLAB n x 3 or 3 x n) as (n, 3); one point repeated ``count`` times."""
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim == 1 and arr.size == 3:

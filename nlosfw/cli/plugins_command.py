@@ -11,18 +11,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from importlib.metadata import PackageNotFoundError, version
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from nlosfw.common.config_docs import OptionDoc, option_docs
 from nlosfw.common.errors import ConfigError
-from nlosfw.plugins import CAPABILITIES, PluginHost, PluginSpec
+from nlosfw.plugins import CAPABILITIES, LazyFactory, PluginHost, PluginSpec
 from nlosfw.plugins.kinds import RUN_KINDS
 
 if TYPE_CHECKING:
-    from rich.console import Console
+    from rich.console import Console, RenderableType
     from rich.table import Table
 
 #: Exit status of ``plugins --check`` and ``plugins NAME`` when a plugin is broken.
@@ -104,12 +104,12 @@ def plugins_command(host: PluginHost, console: Console | None = None,
     return BROKEN_EXIT_STATUS if broken or host.broken else 0
 
 
-def plugin_details(spec: PluginSpec) -> list[Any]:
+def plugin_details(spec: PluginSpec) -> list[RenderableType]:
     """What ``plugins NAME`` prints for ``spec`` (imports the plugin): rich renderables."""
     from rich.markup import escape
 
     status = plugin_status(spec, full=True)
-    out: list[Any] = [
+    out: list[RenderableType] = [
         f"[bold]{spec.qualified_name}[/]  {escape(spec.description)}",
         f"  kind          {spec.kind.value} ({_how_selected(spec)})",
         f"  distribution  {spec.distribution} {_version(spec.distribution)}",
@@ -219,7 +219,7 @@ def _version(distribution: str) -> str:
         return "(version unknown: not an installed distribution)"
 
 
-def _describe(factory: Any) -> str:
+def _describe(factory: str | Callable[..., Any] | LazyFactory) -> str:
     if isinstance(factory, str):
         return factory
     paths = getattr(factory, "import_paths", lambda: ())()

@@ -13,15 +13,18 @@ import dataclasses
 import enum
 import math
 from collections.abc import Collection, Mapping
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, SupportsFloat, TypeVar
 
 from nlosfw.common.errors import ConfigError
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 T = TypeVar("T")
 
 #: A plain scalar value: of a config option, a metric, a table cell.
 Scalar = str | int | float | bool | None
-C = TypeVar("C")
+C = TypeVar("C", bound="DataclassInstance")
 
 
 class Choice(str, enum.Enum):
@@ -61,11 +64,19 @@ def config_from_mapping(cls: type[T], mapping: T | Mapping[str, object] | None,
     return build(cls, node, where)
 
 
-def config_to_dict(config: Any) -> dict[str, Any]:
+def config_to_dict(config: DataclassInstance) -> dict[str, Any]:
     """A plain, YAML-safe dict of a config dataclass (enums become their values)."""
     if not dataclasses.is_dataclass(config) or isinstance(config, type):
         raise TypeError(f"expected a dataclass instance, got {type(config).__name__}")
     return {f.name: _plain(getattr(config, f.name)) for f in dataclasses.fields(config)}
+
+
+def number(value: object) -> float:
+    """A plain value (of a config, of metadata) as a float; TypeError unless it is a real
+    number or a numeric string."""
+    if not isinstance(value, (str, SupportsFloat)):
+        raise TypeError(f"not a number: {value!r}")
+    return float(value)
 
 
 def require(condition: bool, option: str, problem: str) -> None:
@@ -77,7 +88,7 @@ def require(condition: bool, option: str, problem: str) -> None:
         raise ConfigError(option, problem)
 
 
-def require_finite(config: Any) -> None:
+def require_finite(config: DataclassInstance) -> None:
     """Raise :class:`ConfigError` for the first number of ``config`` (a dataclass instance;
     its own fields and tuples of numbers, not nested configs) that is NaN or infinite.
 

@@ -16,18 +16,22 @@ import logging
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.pipeline.files import PLANNED_NAMES
 from nlosfw.pipeline.lifecycle import HYDRA_FILES, inspect_run_dir, verdict
+
+if TYPE_CHECKING:  # hydra and omegaconf are imported when a check runs
+    from hydra.core.override_parser.types import Override
+    from omegaconf import DictConfig
 
 log = logging.getLogger(__name__)
 
 #: ``hydra.sweep.subdir`` as Hydra sets it by default: one directory per job number.
 _DEFAULT_SUBDIR = "${hydra.job.num}"
 
-Compose = Callable[[list[str], bool], Any]
+Compose = Callable[[list[str], bool], "DictConfig"]
 """Composes the overrides (with Hydra's own config when the flag is true)."""
 
 
@@ -83,7 +87,7 @@ def _check_writable(path: Path, option: str) -> None:
                                   "output directory")
 
 
-def sweep_jobs(overrides: Sequence[Any]) -> list[list[str]]:
+def sweep_jobs(overrides: Sequence[Override]) -> list[list[str]]:
     """The overrides of every job of a sweep, numbered as Hydra's basic sweeper numbers its
     job directories: a later override of a key replaces an earlier one (a command-line
     value replaces a preset's axis), and the jobs are the product of the keys' values in

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, ClassVar, TypeVar
+from typing import ClassVar, TypeVar
 
 import numpy as np
 import scipy.fft
@@ -130,7 +130,7 @@ class LightConeImager(TransientImager[LightConeConfigT]):
     def _kernel_spectrum(self, grid: WallGrid, cone: _Cone) -> np.ndarray:
         """FFT of the light cone K on the padded grid (unit energy), cached per geometry."""
         key = (cone.m, cone.dv, cone.shape, grid.shape, grid.spacing)
-        cache: dict[Any, np.ndarray] = self.__dict__.setdefault("_kernel_cache", {})
+        cache: dict[tuple[object, ...], np.ndarray] = self.__dict__.setdefault("_kernel_cache", {})
         if key not in cache:
             cache.clear()                                  # one geometry at a time
             cache[key] = _light_cone_spectrum(grid, cone, self.config.workers)

@@ -25,7 +25,7 @@ from nlosfw.common.progress import ProgressCallback
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.rsd_kernel import check_geometry
-from nlosfw.transform.field import PhasorField
+from nlosfw.transform.field import Index, PhasorField
 from nlosfw.transform.temporal_dft import unit_phasor
 
 
@@ -91,7 +91,7 @@ class FrequencySum:
         dtype = np.complex128 if self.coherent else np.float64
         self.acc = np.zeros((coeffs.shape[0],) + tuple(shape), dtype=dtype)
 
-    def add(self, fields: np.ndarray, index: Any = slice(None)) -> None:
+    def add(self, fields: np.ndarray, index: Index = slice(None)) -> None:
         """Add U_f for the frequencies ``index`` (fields: (n_f, *shape))."""
         c = self.coeffs[:, index]
         # einsum, not a BLAS product: these are matrix-vector sized (one row per time).

@@ -4,13 +4,25 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 import numpy.typing as npt
 
 from nlosfw.common.errors import DataError
 from nlosfw.transform.field import PhasorField
+
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
+
+
+class ReconstructionChanges(TypedDict, total=False):
+    """The attributes :meth:`Reconstruction.replace` may replace."""
+
+    intensity: np.ndarray
+    voxels: np.ndarray
+    metadata: dict[str, object]
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,7 +93,8 @@ class Reconstruction:
         """(depth map, max-intensity image), both (Y, X): the usual 2-D summary of a volume."""
         return self.depth_map(threshold, refine), self.max_intensity_image()
 
-    def replace(self, **changes: Any) -> Reconstruction:
+    def replace(self, **changes: Unpack[ReconstructionChanges]) -> Reconstruction:
+        """A new reconstruction with some attributes replaced (validated again)."""
         return dataclasses.replace(self, **changes)
 
 

@@ -21,9 +21,8 @@ counts are counts of real numbers and Adam sees the same values in both engines.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
@@ -270,7 +269,7 @@ def hashgrid_state(config: HashGridFieldConfig, shape: FieldShape, rng: np.rando
     return {**state, **relu_mlp_state(rng, lead, dims, "mlp.")}
 
 
-_STATES: dict[type, Any] = {
+_STATES: dict[type, Callable[..., dict[str, np.ndarray]]] = {
     FourierFieldConfig: fourier_state,
     WireFieldConfig: wire_state,
     FinerFieldConfig: finer_state,
@@ -299,7 +298,7 @@ class FieldNetwork:
 
     config: type[NeuralFieldConfig]
     description: str
-    test_config: Mapping[str, Any]
+    test_config: Mapping[str, object]
     """Small, fast options for the conformance kit."""
 
 

@@ -33,10 +33,9 @@ Outside the training hull (``extrapolation``):
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from scipy.interpolate import CloughTocher2DInterpolator, CubicSpline
@@ -156,7 +155,7 @@ class InterpFieldModel(FieldModel[InterpConfig]):
         return self._samples
 
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
-            on_step: Any = None) -> FitReport:
+            on_step: Callable[[TrainingStep], None] | None = None) -> FitReport:
         """Store the field on its (sorted) rectilinear grid, or its scattered samples;
         ``validation`` is unused."""
         check_training_field(field, "interp")

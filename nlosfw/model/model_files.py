@@ -9,12 +9,15 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import DataError
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 #: Format tag written in every field-model file.
 FILE_FORMAT = "nlosfw-field-model"
@@ -23,8 +26,9 @@ FILE_VERSION = 2
 READABLE_VERSIONS = (1, 2)
 
 
-def write_model_file(path: str | Path, model: str, config: Any, arrays: Mapping[str, np.ndarray],
-                     extra: Mapping[str, Any] | None = None) -> None:
+def write_model_file(path: str | Path, model: str, config: DataclassInstance,
+                     arrays: Mapping[str, np.ndarray],
+                     extra: Mapping[str, object] | None = None) -> None:
     """Write a portable ``.npz``: a JSON header (format, model name, config, extra) + arrays.
 
     ``path`` is used as given (no ``.npz`` suffix is appended).

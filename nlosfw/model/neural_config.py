@@ -12,7 +12,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any
+from typing import Any, TypedDict
 
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import ConfigError
@@ -132,6 +132,14 @@ class NeuralFieldConfig(FieldModelConfig):
                 f"must be >= 1, got {self.smoothness_points}")
 
 
+class FieldShapeDict(TypedDict):
+    """A :class:`FieldShape` as plain values."""
+
+    mode: str
+    grid_shape: list[int] | None
+    n_frequencies: int | None
+
+
 @dataclass(frozen=True)
 class FieldShape:
     """What a network factory is told about the data it will fit.
@@ -170,13 +178,15 @@ class FieldShape:
             return cls(mode, (side, side), field.n_frequencies)
         return cls(mode, (ny, nx), field.n_frequencies)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> FieldShapeDict:
+        """Plain values for a model file's header."""
         return {"mode": FieldMode(self.mode).value,
                 "grid_shape": list(self.grid_shape) if self.grid_shape else None,
                 "n_frequencies": self.n_frequencies}
 
     @classmethod
-    def from_dict(cls, data: Any) -> FieldShape:
+    def from_dict(cls, data: FieldShapeDict) -> FieldShape:
+        """Inverse of :meth:`to_dict`."""
         grid = data.get("grid_shape")
         n_f = data.get("n_frequencies")
         return cls(mode=FieldMode(data["mode"]),

@@ -9,9 +9,8 @@ the interpolation baseline uses as well.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TypedDict
 
 import numpy as np
 
@@ -51,6 +50,18 @@ def estimate_delay(values: np.ndarray, frequencies: np.ndarray) -> float:
     # global phase of the demodulated field (f * period is an integer plus a constant).
     turn = np.sum(energy[keep] * np.exp(2j * np.pi * taus[keep] / period))
     return float(period / (2 * np.pi) * np.angle(turn))
+
+
+class NormalisationDict(TypedDict):
+    """A :class:`FieldNormalisation` as plain values."""
+
+    xy_center: list[float]
+    xy_half: float
+    f_center: float
+    f_half: float
+    value_scale: float
+    margin: float
+    delay: float
 
 
 @dataclass(frozen=True)
@@ -117,13 +128,15 @@ class FieldNormalisation:
         v = (out[..., 0] + 1j * out[..., 1]) * self.value_scale
         return (v / self._carrier(frequencies, v.ndim)).astype(np.complex64)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> NormalisationDict:
+        """Plain values for a model file's header."""
         return {"xy_center": list(self.xy_center), "xy_half": self.xy_half,
                 "f_center": self.f_center, "f_half": self.f_half,
                 "value_scale": self.value_scale, "margin": self.margin, "delay": self.delay}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> FieldNormalisation:
+    def from_dict(cls, data: NormalisationDict) -> FieldNormalisation:
+        """Inverse of :meth:`to_dict`."""
         return cls(xy_center=tuple(float(v) for v in data["xy_center"]),  # type: ignore[arg-type]
                    xy_half=float(data["xy_half"]), f_center=float(data["f_center"]),
                    f_half=float(data["f_half"]), value_scale=float(data["value_scale"]),

@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.config import require
+from nlosfw.common.config import number, require
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout, to_canonical
@@ -430,19 +430,12 @@ def _enough_frequencies(frequencies: np.ndarray, count: int, depth_span: float) 
     return max(count, needed)
 
 
-def _number(value: object) -> float:
-    """``value`` as a float; TypeError unless it is a real number (or a numeric string)."""
-    if not isinstance(value, (int, float, str, np.number)):
-        raise TypeError(f"not a number: {value!r}")
-    return float(value)
-
-
 def _deepest(field: PhasorField) -> float:
     """Half the longest path the field can hold: the capture's time span (from the
     transform's metadata) or the unambiguous range 1/df of the frequency spacing."""
     meta = field.metadata
     try:
-        t_start, n_bins, delta_t = (_number(meta[k]) for k in ("t_start", "n_bins", "delta_t"))
+        t_start, n_bins, delta_t = (number(meta[k]) for k in ("t_start", "n_bins", "delta_t"))
         end = t_start + int(n_bins) * delta_t
         if end > 0:
             return end / 2

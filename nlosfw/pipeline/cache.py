@@ -27,7 +27,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TypeVar
 
 from nlosfw.common.errors import DataError
 from nlosfw.common.files import TEMPORARY_NAME, atomic_path, open_locked, write_text
@@ -118,7 +118,7 @@ class Cache:
         self._checked = False
 
     def get_or_compute(self, kind: str, key: str, compute: Callable[[], T],
-                       write: Callable[[Path, T], Any],
+                       write: Callable[[Path, T], Path | None],
                        read: Callable[[Path], T]) -> tuple[T, bool]:
         """The cached value for ``key`` or ``compute()`` (then stored). Returns (value, hit)."""
         if not self._usable():
@@ -157,7 +157,7 @@ class Cache:
         return self.enabled
 
     @staticmethod
-    def _store(entry: Path, value: Any, write: Callable[[Path, Any], Any]) -> bool:
+    def _store(entry: Path, value: T, write: Callable[[Path, T], Path | None]) -> bool:
         """Store ``value``; False (with a warning, nothing partial left) when it cannot be."""
         check = entry.with_suffix(".sha256")
         try:

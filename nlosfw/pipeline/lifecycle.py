@@ -34,7 +34,7 @@ import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, TypedDict
+from typing import IO, TypedDict
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
@@ -95,7 +95,7 @@ def config_hash(config: Mapping[str, object]) -> str:
 
 
 def first_difference(old: Mapping[str, object], new: Mapping[str, object]
-                     ) -> tuple[str, Any, Any] | None:
+                     ) -> tuple[str, object, object] | None:
     """(dotted option, old value, new value) of the first option that differs, or None."""
     a, b = _flatten(_result_options(old)), _flatten(_result_options(new))
     missing = object()
@@ -105,7 +105,7 @@ def first_difference(old: Mapping[str, object], new: Mapping[str, object]
     return None
 
 
-def _flatten(value: Any, prefix: str = "") -> dict[str, object]:
+def _flatten(value: object, prefix: str = "") -> dict[str, object]:
     if isinstance(value, dict) and value:
         out: dict[str, object] = {}
         for key, item in value.items():

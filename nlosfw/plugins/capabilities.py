@@ -1,8 +1,9 @@
 """What a plugin can do: the capability vocabulary of each plugin kind.
 
-A plugin declares its capabilities when it registers
-(``register(..., capabilities=["confocal", "occlusion"])``, strings or
-:class:`Capability` members). The conformance kit (:mod:`nlosfw.testing`)
+A plugin declares its capabilities on its class (``capabilities = ("confocal",
+"occlusion")``, a class attribute of :class:`~nlosfw.common.config.Configurable`) or when
+it registers (``register(..., capabilities=[...])``, which takes their place), as strings
+or :class:`Capability` members. The conformance kit (:mod:`nlosfw.testing`)
 chooses its checks from these declarations: a check that needs a capability the
 plugin does not declare is skipped and says why, and a declared capability is
 verified by the checks that need it.

@@ -9,7 +9,6 @@ from dataclasses import dataclass, field
 from functools import partial
 from importlib.metadata import entry_points
 from types import ModuleType
-from typing import Any
 
 import pluggy
 
@@ -78,7 +77,7 @@ class PluginHost:
     """Entry points that failed to load: name -> one-line reason."""
 
     @property
-    def hook(self) -> Any:
+    def hook(self) -> pluggy.HookRelay:
         """Call lifecycle hooks: ``host.hook.on_run_start(run_dir=..., config=...)``."""
         return self.manager.hook
 

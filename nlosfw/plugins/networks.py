@@ -42,7 +42,7 @@ class NetworkEngine(str, Enum):
     """The engines a network can run on (the backend plugin that provides each)."""
 
     torch = "torch"
-    """Any ``torch.nn.Module``; ``factory(config, shape)``; plugin ``nlosfw-torch``."""
+    """A ``torch.nn.Module`` (any); ``factory(config, shape)``; plugin ``nlosfw-torch``."""
     jax = "jax"
     """An equinox module trained with optax; ``factory(config, shape, key)``; ``nlosfw-jax``."""
 

@@ -231,7 +231,7 @@ class PluginSpec:
                                   f"{self.config} cannot be imported: {_reason(err)}") from err
         return self.config
 
-    def make_config(self, options: Mapping[str, Any] | None = None) -> Any:
+    def make_config(self, options: Mapping[str, object] | None = None) -> Any:
         """A validated config instance; errors name ``<kind>.<option>``."""
         return config_from_mapping(self.config_class(), options, self.kind.value)
 

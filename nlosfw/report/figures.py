@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Mapping
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -38,6 +38,14 @@ _SOURCE_TITLES = {"true": "true field", "raw": "raw (training samples)",
 #: The viewpoint of every reconstruction image, stated on the figures.
 VIEWPOINT = ("view along depth z from the relay wall into the hidden scene; "
              "x, y in the wall's coordinates (m)")
+
+
+class DepthScale(TypedDict):
+    """The colour scale of the depth row (``imshow`` keywords)."""
+
+    cmap: str
+    vmin: float
+    vmax: float
 
 
 def run_title(info: RunInfo, capture: CaptureResult | None = None) -> str:
@@ -186,7 +194,7 @@ def reconstruction_figure(recons: Mapping[str, Reconstruction],
     vox = recons["true"].voxels
     ext = [vox[0, 0, 0, 0], vox[0, 0, -1, 0], vox[0, 0, 0, 1], vox[0, -1, 0, 1]]
     depths = recons["true"].depths
-    depth_scale = {"cmap": "viridis", "vmin": float(depths.min()), "vmax": float(depths.max())}
+    depth_scale = DepthScale(cmap="viridis", vmin=float(depths.min()), vmax=float(depths.max()))
     mappable = {}
     for col, source in enumerate(sources):
         mappable["intensity"] = axes[0, col].imshow(images[source], origin="lower", extent=ext,
@@ -228,7 +236,7 @@ def _score_label(scores: ImageScores | None, source: str) -> str:
     return f"{shown} vs true" if shown else ""
 
 
-def _truth_panel(ax: Axes, truth_depth: np.ndarray | None, depth_scale: Mapping[str, Any],
+def _truth_panel(ax: Axes, truth_depth: np.ndarray | None, depth_scale: DepthScale,
                  extent: list[float]) -> None:
     """The scene's ground-truth depth as seen from the wall (when the capture carries one),
     on the depth row's colour scale.

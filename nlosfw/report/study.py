@@ -26,7 +26,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from nlosfw.common.config import Scalar
 from nlosfw.pipeline.metrics import ImageScores, RunMetrics
@@ -98,7 +98,7 @@ class StudyRow:
         pattern = ", random" if self.pattern == "random" else ""
         return f"{self.undersampling:.3g}x ({self.train_samples} samples{pattern})"
 
-    def to_json(self) -> dict[str, Any]:
+    def to_json(self) -> dict[str, object]:
         return {"condition": self.condition, "pattern": self.pattern,
                 "undersampling": self.undersampling, "train_samples": self.train_samples,
                 "series": self.series, "kind": self.kind, "runs": self.runs,

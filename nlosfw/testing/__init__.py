@@ -14,8 +14,10 @@ Use it like scikit-learn's ``parametrize_with_checks``::
 
 or from a shell: ``python -m nlosfw.testing my_model`` (``--plan`` only prints the plan).
 
-Plugins declare capabilities at registration (``register(..., capabilities=[...])``,
-vocabulary in :mod:`nlosfw.plugins.capabilities`); each check declares what it
+Plugins declare capabilities on their class (``capabilities = ("confocal", ...)``) or at
+registration (``register(..., capabilities=[...])``, vocabulary in
+:mod:`nlosfw.plugins.capabilities`); ``parametrize_with_checks(plugins=[instance])`` checks
+plugin instances (:func:`spec_of`); each check declares what it
 needs with :func:`requires`, and runs once per applicable variant (for example
 once per capture geometry the plugin declares). Each planned (plugin, check)
 pair becomes one test with id ``<kind>:<name>-<check>[<variant>]``; checks that

@@ -17,9 +17,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
-from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
@@ -82,7 +82,7 @@ def _assert_same_capture(spec: PluginSpec, got: Capture, known: Capture) -> None
         f"{name}: the time origin (t_start minus the device legs) moved"))
 
 
-def _assert_peak_at_closed_form(spec: PluginSpec, got: Capture, target: Any) -> None:
+def _assert_peak_at_closed_form(spec: PluginSpec, got: Capture, target: npt.ArrayLike) -> None:
     """The brightest bin of the wall point nearest the hidden patch lies within two bins of
     the closed-form path laser spot -> patch -> wall point (device legs added)."""
     points = got.sensor_points

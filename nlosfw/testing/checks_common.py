@@ -16,8 +16,7 @@ import os
 import subprocess
 import sys
 import typing
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Mapping
 
 import numpy as np
 import yaml
@@ -52,7 +51,7 @@ EXERCISE_VARIANTS = {
 }
 
 
-def exercise(spec: PluginSpec, options: dict[str, Any] | None = None, *,
+def exercise(spec: PluginSpec, options: Mapping[str, object] | None = None, *,
              confocal: bool = False, single: bool = False, plane: bool = True) -> np.ndarray:
     """Run the plugin once on the tiny fixture of its kind and return its main output array.
 

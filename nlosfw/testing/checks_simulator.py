@@ -13,9 +13,9 @@ Each check runs once per capture geometry the simulator declares (``single_spot`
 from __future__ import annotations
 
 import tempfile
+from collections.abc import Mapping
 from functools import partial
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -243,6 +243,6 @@ SIMULATOR_CHECKS = (
 )
 
 
-def _simulate_config(simulator: Simulator, config: dict[str, Any]) -> Capture:
+def _simulate_config(simulator: Simulator, config: Mapping[str, object]) -> Capture:
     """Simulate the scene of a plain config mapping (validated on the way)."""
     return simulator.simulate(scene_from_config(config))

@@ -19,8 +19,9 @@ import itertools
 import unittest
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from typing import TypeVar
 
+from nlosfw.common.config import Scalar
 from nlosfw.plugins.capabilities import Capability, format_capabilities
 from nlosfw.plugins.registry import PluginSpec
 
@@ -35,10 +36,10 @@ class Variant:
 
     name: str
     needs: frozenset[Capability] = frozenset()
-    options: Mapping[str, Any] = field(default_factory=dict)
+    options: Mapping[str, Scalar] = field(default_factory=dict)
 
 
-def variant(name: str, needs: Iterable[Capability] = (), **options: Any) -> Variant:
+def variant(name: str, needs: Iterable[Capability] = (), **options: Scalar) -> Variant:
     """A :class:`Variant` named ``name`` needing ``needs`` and passing ``options``."""
     return Variant(name, frozenset(needs), dict(options))
 
@@ -50,7 +51,7 @@ def combine(*axes: Sequence[Variant]) -> tuple[Variant, ...]:
     for parts in itertools.product(*axes):
         name = "+".join(p.name for p in parts if p.name)
         needs = frozenset().union(*(p.needs for p in parts))
-        options: dict[str, Any] = {}
+        options: dict[str, Scalar] = {}
         for p in parts:
             options.update(p.options)
         out.append(Variant(name, needs, options))
@@ -96,7 +97,7 @@ def requires(*capabilities: Capability, each: VariantTable = (),
     return mark
 
 
-def requirements_of(check: Callable[..., Any]) -> Requirements:
+def requirements_of(check: Callable[..., None]) -> Requirements:
     """The :class:`Requirements` declared with :func:`requires` (none: always applies)."""
     found = getattr(check, "__requirements__", None)
     return found if isinstance(found, Requirements) else Requirements()

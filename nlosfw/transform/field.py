@@ -5,15 +5,30 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import DataError
 
+if TYPE_CHECKING:
+    from typing_extensions import Unpack
+
 #: What :meth:`PhasorField.select` takes per axis: an index, a slice, or indices.
 Index = int | slice | Sequence[int] | np.ndarray
+
+
+class FieldChanges(TypedDict, total=False):
+    """The attributes :meth:`PhasorField.replace` may replace."""
+
+    values: np.ndarray
+    frequencies: np.ndarray
+    wall_xyz: np.ndarray
+    geometry: CaptureGeometry
+    weights: np.ndarray | None
+    metadata: dict[str, object]
+
 
 @dataclass(frozen=True, eq=False)
 class PhasorField:
@@ -103,7 +118,7 @@ class PhasorField:
             weights=None if self.weights is None else self.weights[fi],
         )
 
-    def replace(self, **changes: Any) -> PhasorField:
+    def replace(self, **changes: Unpack[FieldChanges]) -> PhasorField:
         """A new field with some attributes replaced (validated again)."""
         return dataclasses.replace(self, **changes)
 
