@@ -132,7 +132,8 @@ def _explain(message: str, data: object, cls: type) -> str:
     got = _describe(value)
     if isinstance(node, mi.TupleType) and isinstance(value, list):
         got = f"{len(value)} values"
-    return f"{where or '$'}: must be {_words(node)}, got {got}"
+    problem = f"must be {_words(node)}, got {got}"
+    return f"{where}: {problem}" if where else problem
 
 
 def _fails(value: object, node: mi.Type) -> bool:

@@ -305,8 +305,8 @@ class RunMetrics(Document, frozen=True, kw_only=True):
     def read(cls, path: Path) -> "RunMetrics":
         """Read a metrics.json; a one-line :class:`DataError` names the file and the problem."""
         try:
-            data = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, ValueError) as err:
+            data = msgspec.json.decode(Path(path).read_bytes())
+        except (OSError, msgspec.DecodeError) as err:
             raise DataError(f"{path}: unreadable ({err})") from None
         return cls.from_json(data, where=str(path))
 
