@@ -22,6 +22,7 @@ from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.report.quality import QualityTable, parse_overrides
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import format_cell
+from nlosfw.report.titles import run_title
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1400px;
@@ -35,6 +36,9 @@ figure { margin: 1em 0 2em; } figure img { max-width: 100%; height: auto;
   border: 1px solid #ddd; } figcaption { color: #555; font-size: 0.9em; }
 pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
 .meta { color: #555; } .muted { color: #888; } .scroll { overflow-x: auto; }
+.views { display: flex; flex-wrap: wrap; gap: 0.8em; align-items: flex-start; }
+.views figure { margin: 0.4em 0; flex: 1 1 22em; max-width: 32em; }
+.views figure.wide { flex: 2 1 40em; max-width: none; }
 """
 
 
@@ -57,11 +61,12 @@ def table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
             "</tbody>\n</table></div>")
 
 
-def png_figure(data: bytes, caption: str) -> str:
-    """A PNG embedded as a data URI, with its caption."""
+def png_figure(data: bytes, caption: str, wide: bool = False) -> str:
+    """A PNG embedded as a data URI, with its caption (``wide``: twice a view's width)."""
     encoded = base64.b64encode(data).decode("ascii")
     text = html.escape(caption)
-    return (f"<figure><img src=\"data:image/png;base64,{encoded}\" alt=\"{text}\">"
+    kind = ' class="wide"' if wide else ""
+    return (f"<figure{kind}><img src=\"data:image/png;base64,{encoded}\" alt=\"{text}\">"
             f"<figcaption>{text}</figcaption></figure>")
 
 
@@ -93,17 +98,15 @@ def run_report(run_dir: Path, metrics: RunMetrics, config: Mapping[str, Any],
                overrides: Sequence[str] = ()) -> str:
     """The HTML of a run's ``report.html`` (figures read from ``run_dir/figures``)."""
     info = metrics.run
-    title = f"nlosfw run: {info.scene} · model {info.model} · imager {info.imager}"
-    capture = metrics.capture
-    if capture is not None and capture.path is not None:
-        title = f"nlosfw run: {Path(capture.path).name} · model {info.model} · imager {info.imager}"
+    title = f"nlosfw run: {run_title(info)}"
     meta = (f"<p class=\"meta\">status <b>{html.escape(metrics.status)}</b>"
             f"{' after ' + html.escape(info.stopped_after) if info.stopped_after else ''}"
             f" · started {html.escape(info.started)} · nlosfw {html.escape(info.nlosfw_version)}"
             f" · {html.escape(info.dir)}</p>")
     if overrides:
         meta += f"<p class=\"meta\">overrides: <code>{html.escape(' '.join(overrides))}</code></p>"
-    sections = [meta, *_run_metrics(metrics), _run_figures(run_dir),
+    sections = [meta, _run_views(run_dir, metrics), *_run_metrics(metrics),
+                _run_figures(run_dir),
                 _section("Timings (s)", table(["stage", "seconds"], list(_timings(metrics)
                                                                          .items()))),
                 _run_inputs(metrics),
@@ -144,6 +147,32 @@ def _run_metrics(metrics: RunMetrics) -> list[str]:
                    "held-out pixels", "held-out frequencies", "all samples",
                    "noise removed (dB)"], rows)))
     return out
+
+
+def _run_views(run_dir: Path, metrics: RunMetrics) -> str:
+    """The views of every imaged source side by side (front view, depth map, depth slices),
+    then the capture's time profile with the depth range marked; nothing without them."""
+    folder = run_dir / "figures"
+    imager = metrics.run.imager or "?"
+    sources = list(metrics.reconstruction.sources) if metrics.reconstruction else []
+    rows = []
+    for source in sources:
+        shown = [(folder / f"{view}_{source}.png", caption) for view, caption in (
+            ("front", "front view over the planes' depths"),
+            ("depth", "depth map (grey: no signal)"),
+            ("slices", "depth slices"))]
+        figures = [png_figure(path.read_bytes(), f"{path.name}: {caption}",
+                              wide=path.name.startswith("slices_"))
+                   for path, caption in shown if path.is_file()]
+        if figures:
+            rows.append(f"<h3>{html.escape(source)} · imager {html.escape(imager)}</h3>"
+                        f"<div class=\"views\">{''.join(figures)}</div>")
+    profile = folder / "time_profile.png"
+    if profile.is_file():
+        rows.append(png_figure(profile.read_bytes(), "time_profile.png: the capture's "
+                               "histograms summed over the wall, the planes' depth range "
+                               "shaded"))
+    return _section("Views", *rows) if rows else ""
 
 
 def _run_figures(run_dir: Path) -> str:
