@@ -120,6 +120,13 @@ def _run_metrics(metrics: RunMetrics) -> list[str]:
     out = []
     if metrics.reconstruction is not None:
         rec = metrics.reconstruction
+        if list(rec.sources) == ["true"]:  # model=none: the capture alone, nothing to score
+            seconds = rec.sources["true"].seconds
+            return [_section("Reconstruction", (
+                f"<p>The capture imaged with <code>{html.escape(rec.imager)}</code> on "
+                f"{len(rec.depths)} depth planes from {min(rec.depths):.3g} to "
+                f"{max(rec.depths):.3g} m" + ("" if seconds is None else f" in {seconds:.3g} s")
+                + "; no field model (model=none), so no scores.</p>"))]
         rows = [[s, v.ssim, v.psnr, v.rmse, v.seconds] for s, v in rec.sources.items()]
         parts = [f"<p>Max-intensity image of each field against the true field's, imager "
                  f"<code>{html.escape(rec.imager)}</code>, {len(rec.depths)} depth planes "
@@ -165,7 +172,8 @@ def _run_views(run_dir: Path, metrics: RunMetrics) -> str:
                               wide=path.name.startswith("slices_"))
                    for path, caption in shown if path.is_file()]
         if figures:
-            rows.append(f"<h3>{html.escape(source)} · imager {html.escape(imager)}</h3>"
+            name = "the capture" if sources == ["true"] else source
+            rows.append(f"<h3>{html.escape(name)} · imager {html.escape(imager)}</h3>"
                         f"<div class=\"views\">{''.join(figures)}</div>")
     profile = folder / "time_profile.png"
     if profile.is_file():
@@ -181,9 +189,11 @@ def _run_figures(run_dir: Path) -> str:
     for pattern, caption in _FIGURES:
         for path in sorted(folder.glob(pattern)) if folder.is_dir() else []:
             parts.append(png_figure(path.read_bytes(), f"{path.name}: {caption}"))
+    if not parts and folder.is_dir() and any(folder.glob("*.png")):
+        return ""  # the views are all there is (model=none)
     if not parts:
         parts = ["<p class=\"muted\">No figures (figures.enabled=false, or the run stopped "
-                 "before its report).</p>"]
+                 "before it imaged).</p>"]
     return _section("Figures", *parts)
 
 
@@ -192,7 +202,9 @@ def _run_inputs(metrics: RunMetrics) -> str:
     if metrics.capture is not None:
         c = metrics.capture
         rows += [["capture", c.source if c.path is None else f"file {c.path}"],
-                 ["simulator", c.simulator], ["shape (t, x, y)", " × ".join(map(str, c.shape))],
+                 *([["simulator", c.simulator]] if c.path is None else
+                   [["format", c.format]]),
+                 ["shape (t, x, y)", " × ".join(map(str, c.shape))],
                  ["kind", c.kind.value], ["bin width (m)", c.delta_t],
                  ["noise", None if c.noise is None else str(c.noise)]]
     if metrics.transform is not None:

@@ -74,6 +74,20 @@ def round_trip_path(capture: Capture, depths: np.ndarray) -> np.ndarray:
     return 2.0 * np.asarray(depths, dtype=np.float64) + legs
 
 
+def depth_scale(depth: np.ndarray, planes: np.ndarray,
+                least: float = 0.05) -> tuple[float, float]:
+    """The colour scale of a depth map: the 1st to 99th percentile of the depths that hold
+    signal (so a surface's relief shows), at least ``least`` metres wide, within the planes;
+    all the planes when nothing holds signal."""
+    lo_plane, hi_plane = float(np.min(planes)), float(np.max(planes))
+    shown = depth[np.isfinite(depth)]
+    if shown.size == 0:
+        return lo_plane, hi_plane
+    lo, hi = (float(v) for v in np.percentile(shown, [1, 99]))
+    pad = max(0.0, least - (hi - lo)) / 2
+    return max(lo_plane, lo - pad), min(hi_plane, hi + pad)
+
+
 def slice_indices(n_planes: int, count: int = MAX_SLICES) -> np.ndarray:
     """Up to ``count`` plane indices evenly spread from the first plane to the last."""
     if n_planes <= count:
@@ -144,15 +158,15 @@ def depth_figure(recon: Reconstruction, name: str, title: str,
     fig = Figure(figsize=(5.4, 5.0), layout="constrained")
     ax = fig.subplots()
     cmap = colormaps["viridis"].with_extremes(bad="0.85")
-    depths = recon.depths
-    image = ax.imshow(masked_depth_map(recon, fraction), origin="lower",
-                      extent=_extent(recon), cmap=cmap, vmin=float(depths.min()),
-                      vmax=float(depths.max()))
+    depth = masked_depth_map(recon, fraction)
+    low, high = depth_scale(depth, recon.depths)
+    image = ax.imshow(depth, origin="lower", extent=_extent(recon), cmap=cmap, vmin=low,
+                      vmax=high)
     ax.set_title(f"{name}: depth of the brightest voxel\n(grey: below {fraction:.0%} of the "
                  "brightest intensity, no signal)", fontsize=9)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    fig.colorbar(image, ax=ax, shrink=0.85, label="depth z (m)")
+    fig.colorbar(image, ax=ax, shrink=0.85, label="depth z (m), scaled to the depths with signal")
     fig.suptitle(f"{title}\n{_VIEW}", fontsize=8)
     return fig
 
