@@ -133,8 +133,9 @@ def test_what_model_none_cannot_do_is_one_line_exit_2_nothing_written(
         workdir, point_capture, capsys, args, message):
     path, _ = point_capture
     given = [a.replace("{capture}", str(path)) for a in args]
-    if given[:1] != ["image"]:
-        given = [f"capture.path='{path}'", *given]
+    if given[:1] != ["image"]:  # Hydra's flags (-m) first, then the overrides
+        flags = [a for a in given if a.startswith("-")]
+        given = [*flags, f"capture.path='{path}'", *(a for a in given if a not in flags)]
     status = main(given)
     err = capsys.readouterr().err
     assert status == 2
