@@ -44,8 +44,8 @@ SELECTOR_DOCS = {
     "scene": "the hidden scene, wall and time axis (scene.<option>=... changes one)",
     "simulator": "renders the scene into a transient capture",
     "transform": "turns the capture into a phasor field",
-    "model": "the field model fitted to the sparse field (interp: the baseline; none: no model, "
-             "the capture imaged alone)",
+    "model": "the field model fitted to the sparse field (interp is the baseline; none fits "
+             "none, the capture is imaged alone)",
     "imager": "reconstructs the hidden volume from a phasor field",
     "capture_format": "reads capture.path, detected from the file's content "
                       "(capture.format=NAME forces one)",
