@@ -1,6 +1,7 @@
 """A run's figures say what ran and how they are seen, share one colour scale per row, and
 have colorbars and axes in metres."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +36,7 @@ def _images(ax):
 def test_reconstruction_figure_names_the_run_and_the_viewpoint(tiny_run):
     results = tiny_run.results
     title = run_title(tiny_run.metrics.run, results.capture)
-    assert title == "scene tiny (analytic) · model interp · imager fft"
+    assert title == "scene tiny (simulator analytic) · model interp · imager fft"
     fig = reconstruction_figure(results.reconstructions.by_source,
                                 tiny_run.metrics.reconstruction.sources,
                                 results.capture.truth_depth, title, source_labels(results))
@@ -96,12 +97,18 @@ def test_run_title_names_a_capture_file():
     capture = CaptureResult(capture=None, key="k", source="file",  # type: ignore[arg-type]
                             label="bike.hdf5 (ytal)", path=Path("/data/bike.hdf5"),
                             format="ytal")
-    assert run_title(info, capture) == ("capture bike.hdf5 (ytal) · model siren_torch · "
+    assert run_title(info, capture) == ("capture bike.hdf5 (format ytal) · model siren_torch · "
                                         "imager rsd")
+    # model=none: the capture and the imager, the format not mistaken for the imager
+    alone = dataclasses.replace(info, model="none", imager="fft")
+    assert run_title(alone, capture) == "capture bike.hdf5 (format ytal) · imager fft"
 
 
 def test_run_writes_every_figure(tiny_run):
     names = sorted(p.name for p in (tiny_run.dir / "figures").iterdir())
     singles = [s.index for s in tiny_run.results.reconstructions.single_frequency]
+    views = [f"{view}_{source}.png" for source in tiny_run.results.reconstructions.by_source
+             for view in ("front", "depth", "slices")]
     assert names == sorted(["reconstructions.png", *(f"fields_f{i}.png" for i in singles),
-                            *(f"reconstructions_f{i}.png" for i in singles)])
+                            *(f"reconstructions_f{i}.png" for i in singles), *views,
+                            "time_profile.png"])

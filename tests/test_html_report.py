@@ -46,7 +46,12 @@ def test_run_page_holds_figures_metrics_timings_and_configuration(reports):
     run_dir = reports["run"].parent
     metrics = RunMetrics.read(run_dir / "metrics.json")
     figures = sorted((run_dir / "figures").glob("*.png"))
-    assert len(figures) == 5 and text.count("<img src=\"data:image/png;base64,") == len(figures)
+    views = {f"{view}_{source}.png" for source in metrics.reconstruction.sources
+             for view in ("front", "depth", "slices")}
+    assert views | {"time_profile.png", "reconstructions.png"} <= {f.name for f in figures}
+    assert len(figures) == 5 + len(views) + 1
+    assert text.count("<img src=\"data:image/png;base64,") == len(figures)
+    assert "<h2>Views</h2>" in text
     assert f"<td>{metrics.reconstruction.sources['nn'].ssim:.4g}</td>" in text
     nmse = metrics.field["interp"].splits.heldout_pixels.nmse_db
     assert f"<td>{nmse:.4g}</td>" in text

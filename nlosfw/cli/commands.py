@@ -1,5 +1,5 @@
 """Command line: ``python -m nlosfw [--help | plugins [NAME] | report DIR | cache info|clean |
---debug | Hydra overrides...]``.
+image FILE [overrides...] | --debug | Hydra overrides...]``.
 
 Errors end with one line on stderr: exit status 2 for a mistake in the input or the
 configuration, 1 for a storage failure (a full disk); SIGINT and SIGTERM stop a run
@@ -13,6 +13,11 @@ import sys
 from collections.abc import Sequence
 
 from nlosfw.common.errors import NlosfwError
+
+IMAGE_HELP = ("Reads, preprocesses and images one capture file (capture.path=FILE model=none): "
+              "writes the volume (reconstructions/true.hdf5), figures/front_true.png, "
+              "depth_true.png, slices_true.png, time_profile.png and report.html. OVERRIDEs "
+              "as for a run: imager=lct, reconstruction.depth_range=[0.3,0.8], ...")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -44,7 +49,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _dispatch(args: list[str]) -> int:
-    if args[:1] not in (["plugins"], ["report"], ["cache"]) and ("--help" in args or "-h" in args):
+    if args[:1] not in (["plugins"], ["report"], ["cache"], ["image"]) and (
+            "--help" in args or "-h" in args):
         from nlosfw.cli.help import help_text
         from nlosfw.common.resources import config_dir
         from nlosfw.plugins import load_plugins
@@ -60,6 +66,13 @@ def _dispatch(args: list[str]) -> int:
         from nlosfw.cli.report_command import report_command
 
         return report_command(args[1:])
+    if args[:1] == ["image"]:
+        from nlosfw.cli.image_command import USAGE, image_command
+
+        if "--help" in args or "-h" in args:
+            sys.stdout.write(f"usage: {USAGE}\n{IMAGE_HELP}\n")
+            return 0
+        return image_command(args[1:])
     if args[:1] == ["cache"]:
         from nlosfw.cli.cache_command import cache_command
 

@@ -15,7 +15,7 @@ from typing import get_type_hints
 
 from nlosfw.common.config_docs import attribute_docstrings, first_sentence, option_docs
 from nlosfw.common.version import __version__
-from nlosfw.pipeline.settings import RunSettings
+from nlosfw.pipeline.settings import NO_MODEL, RunSettings
 from nlosfw.plugins import PluginHost
 
 SUBCOMMANDS = (
@@ -23,6 +23,8 @@ SUBCOMMANDS = (
                                         "report"),
     ("python -m nlosfw -m OVERRIDE ...", "a sweep: every combination of comma-separated "
                                          "values"),
+    ("python -m nlosfw image FILE ...", "reconstruct one capture (no field model): volume, "
+                                        "views, report.html"),
     ("python -m nlosfw plugins [NAME]", "installed plugins; NAME: its options, capabilities, "
                                         "checks"),
     ("python -m nlosfw plugins --check", "import every plugin; broken ones say why"),
@@ -42,7 +44,8 @@ SELECTOR_DOCS = {
     "scene": "the hidden scene, wall and time axis (scene.<option>=... changes one)",
     "simulator": "renders the scene into a transient capture",
     "transform": "turns the capture into a phasor field",
-    "model": "the field model fitted to the sparse field (interp is the baseline)",
+    "model": "the field model fitted to the sparse field (interp is the baseline; none fits "
+             "none, the capture is imaged alone)",
     "imager": "reconstructs the hidden volume from a phasor field",
     "capture_format": "reads capture.path, detected from the file's content "
                       "(capture.format=NAME forces one)",
@@ -94,6 +97,8 @@ def help_text(host: PluginHost, conf: Path) -> str:
             names = scenes
         else:
             names = host.registry.names(group)
+        if group == "model":
+            names = [*names, NO_MODEL]
         default = defaults.get(group)
         shown = [f"{n} (default)" if n == default else n for n in names]
         groups.append((group, f"{what}: {', '.join(shown) or '(none installed)'}"))

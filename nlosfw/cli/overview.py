@@ -15,7 +15,7 @@ from typing import Any
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import NlosfwError
 from nlosfw.common.text import console_text as escape
-from nlosfw.pipeline.settings import SELECTOR_GROUPS, RunSettings
+from nlosfw.pipeline.settings import NO_MODEL, SELECTOR_GROUPS, RunSettings
 from nlosfw.plugins import PluginHost
 
 #: The plugin groups in a run's config, in pipeline order.
@@ -84,6 +84,8 @@ def overview_lines(config: Mapping[str, Any], host: PluginHost,
 def field_sources(model: str, settings: RunSettings) -> dict[str, str]:
     """The field models a run fits, by source: ``model`` (unless it is ``interp``),
     ``interp`` and the ``compare`` labels, each with its plugin."""
+    if model == NO_MODEL:
+        return {}
     sources = {"model": model} if model != "interp" else {}
     sources["interp"] = "interp"
     for label, options in settings.compare.items():
@@ -107,12 +109,15 @@ def run_plan(picked: Mapping[str, str], settings: RunSettings) -> list[str]:
     if settings.runs("transform"):
         parts.append(f"phasor field ({picked['transform']})")
     sources = field_sources(picked["model"], settings)
-    if settings.runs("fit"):
+    if settings.runs("fit") and sources:
         parts.append("fit " + ", ".join(dict.fromkeys(sources.values())))
-    if settings.runs("predict"):
+    if settings.runs("predict") and sources:
         parts.append("predict")
     if not settings.runs("reconstruct"):
         return [" → ".join(parts) + f" (stop after {settings.last_stage})"]
+    if not sources:  # model=none: the capture imaged alone
+        parts.append(f"1 reconstruction ({picked['imager']})")
+        return [" → ".join(parts), "= the capture's field [no field model: model=none]"]
     fields = {"true": "the reference", "raw": "the training samples"}
     for label, plugin in sources.items():
         fields[label] = "the baseline" if label == "interp" else plugin

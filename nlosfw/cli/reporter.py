@@ -79,9 +79,12 @@ class ConsoleReporter:
         self._stop()
         if status not in ("completed", "stopped"):
             return  # the command line prints the error in one line
-        self.console.print(summary_table(RunMetrics.from_json(metrics)))
+        run = RunMetrics.from_json(metrics)
+        self.console.print(summary_table(run))
         size = sum(p.stat().st_size for p in Path(run_dir).rglob("*") if p.is_file())
-        self.console.print(f"[bold green]done[/] ({status}): {escape(run_dir)}, "
+        if status == "stopped" and run.run.stopped_after:
+            status = f"stopped after {run.run.stopped_after}"
+        self.console.print(f"[bold green]done[/] ({escape(status)}): {escape(run_dir)}, "
                            f"{format_bytes(size)} {escape(self._kept_text())}",
                            highlight=False)
 

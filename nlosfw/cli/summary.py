@@ -52,10 +52,16 @@ def summary_table(metrics: RunMetrics) -> Table:
                           f"rel. L2 {_fmt(values.relative_l2)}, "
                           f"amp. RMSE {_fmt(values.amplitude_rmse)}, "
                           f"phase err. {_fmt(values.phase_error)} rad")
-    sources = {} if metrics.reconstruction is None else metrics.reconstruction.sources
+    rec = metrics.reconstruction
+    sources = {} if rec is None else rec.sources
     for source, scores in sources.items():
         depth = ("" if scores.depth_rmse_m is None
                  else f", depth RMSE {_fmt(scores.depth_rmse_m)} m")
+        if rec is not None and list(sources) == ["true"]:  # model=none: nothing to compare
+            _add(table, "reconstruction", f"capture ({rec.imager})",
+                          f"{rec.depth_planes} planes, z = {_fmt(min(rec.depths))}-"
+                          f"{_fmt(max(rec.depths))} m{depth}; {_fmt(scores.seconds)} s")
+            continue
         _add(table, "reconstruction", f"{source} vs true",
                       f"PSNR {_fmt(scores.psnr)} dB, SSIM {_fmt(scores.ssim)}, "
                       f"RMSE {_fmt(scores.rmse)}; volume PSNR {_fmt(scores.volume_psnr)} dB, "

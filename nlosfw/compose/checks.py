@@ -22,7 +22,8 @@ from nlosfw.common.schema import is_schema_node, problem
 from nlosfw.compose.output_dirs import check_output_dirs
 from nlosfw.compose.store import hydra_session
 from nlosfw.pipeline.budget import check_memory
-from nlosfw.pipeline.settings import OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
+from nlosfw.pipeline.plan import check_model_choice
+from nlosfw.pipeline.settings import NO_MODEL, OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
 from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
 from nlosfw.simulate.geometry import validate_scene
 from nlosfw.simulate.scene import scene_from_config
@@ -148,10 +149,13 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     """Check a composed config: plugin names, installed dependencies, options, scene,
     settings, the memory it needs, and its capture file or the files it names."""
     settings = run_settings(cfg)
+    check_model_choice(cfg, settings)
     for group in _PLUGIN_GROUPS:
         node = cfg.get(group)
         if not isinstance(node, Mapping) or not node:
             raise ConfigError(group, "no plugin selected")
+        if group == PluginKind.FIELD_MODEL.value and node.get("name") == NO_MODEL:
+            continue  # model=none: no field model to check
         spec = host.registry.get(group, str(node.get("name")))
         _check_plugin(spec, f"{group} plugin")
         spec.make_config(_plugin_options(node, spec.config_class()))

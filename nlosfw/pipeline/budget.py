@@ -30,6 +30,7 @@ from typing import Any
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.files import format_bytes
+from nlosfw.pipeline.settings import NO_MODEL
 
 #: Sizes a capture file from its header: (time bins, sensor points, laser points), or None.
 FileShape = Callable[[Path], tuple[int, int, int] | None]
@@ -123,9 +124,12 @@ def estimate_memory(config: Mapping[str, object], file_shape: FileShape | None =
                                                                            "capture.path")
     freqs = _n_frequencies(config, bins)
     compare = _get(config, "compare", {}) or {}
-    models = 2 + len(compare) if _get(config, "model.name") != "interp" else 1 + len(compare)
+    name = str(_get(config, "model.name"))
+    # true, raw, interp, the model and each compare label; model=none: the capture's alone
+    fields = 1 if name == NO_MODEL else 3 + (name != "interp") + len(compare)
     depths = _n_depths(config, bins)
-    singles = int(_get(config, "reconstruction.single_frequency_images", 2))
+    singles = (0 if name == NO_MODEL
+               else int(_get(config, "reconstruction.single_frequency_images", 2)))
     history = _history(_get(config, "model")) + sum(_history(o) for o in compare.values())
     per_field = 16.0 * freqs * sensors * lasers
     return [
@@ -133,9 +137,9 @@ def estimate_memory(config: Mapping[str, object], file_shape: FileShape | None =
         MemoryPart("the phasor transform", f"{why}, {freqs} frequencies",
                    8 * samples + per_field * (2 if noisy else 1)),
         MemoryPart("the fields imaged", f"{freqs} frequencies × {sensors * lasers} samples × "
-                   f"{2 + models} fields", 16.0 * freqs * sensors * (2 + models)),
+                   f"{fields} fields", 16.0 * freqs * sensors * fields),
         MemoryPart("the voxels and images", f"{depths} depth planes × {sensors} voxels each",
-                   8.0 * depths * sensors * (3 + (2 + models) * (1 + singles))),
+                   8.0 * depths * sensors * (3 + fields * (1 + singles))),
         MemoryPart("the training history", "model.steps / model.eval_every", history),
     ]
 

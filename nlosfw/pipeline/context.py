@@ -1,4 +1,4 @@
-"""What every stage of a run works with, and the table of stages the engine runs."""
+"""What every stage of a run works with, and the rows of the table of stages the engine runs."""
 
 from __future__ import annotations
 
@@ -25,6 +25,16 @@ class StageContext:
     """The run's metrics so far (the report stage draws from them)."""
 
 
+def always(plan: RunPlan) -> bool:
+    """A stage every run performs (up to ``stop_after``)."""
+    return True
+
+
+def fits_models(plan: RunPlan) -> bool:
+    """A stage of the runs that fit field models (not ``model=none``)."""
+    return not plan.images_only
+
+
 #: A stage: it reads the results so far and returns its own (None: nothing to keep).
 StageFunction = Callable[[StageContext, StageResults], object]
 
@@ -36,3 +46,5 @@ class Stage:
 
     name: str
     run: StageFunction
+    applies: Callable[[RunPlan], bool] = always
+    """Whether the plan performs this stage at all (``model=none`` skips fit and predict)."""

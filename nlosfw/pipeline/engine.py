@@ -6,7 +6,9 @@ or scattered points), the ``interp`` baseline's prediction, and the prediction o
 field model of the run (``model`` and each ``compare`` label); every reconstruction is
 scored against the one from the true field.
 
-:class:`Pipeline` runs the table :data:`STAGES` up to ``stop_after``. It draws and prints
+:class:`Pipeline` runs the table :data:`STAGES` up to ``stop_after`` (the stages that
+apply to the plan: ``model=none`` images the capture alone, without fit and predict; a
+run stopped after ``reconstruct`` still draws its figures). It draws and prints
 nothing: every step is a hook call (:class:`~nlosfw.pipeline.events.RunEvents`), the
 metrics are recorded by a subscriber to those hooks
 (:class:`~nlosfw.pipeline.recorder.MetricsRecorder`), the report files by the report
@@ -29,7 +31,7 @@ from nlosfw.pipeline import lifecycle
 from nlosfw.pipeline.budget import check_memory, memory_summary
 from nlosfw.pipeline.cache import Cache
 from nlosfw.pipeline.capture_stage import capture_stage
-from nlosfw.pipeline.context import Stage, StageContext
+from nlosfw.pipeline.context import Stage, StageContext, fits_models
 from nlosfw.pipeline.events import RunEvents
 from nlosfw.pipeline.field_stages import fit_stage, predict_stage, transform_stage
 from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
@@ -48,8 +50,8 @@ log = logging.getLogger(__name__)
 STAGES: tuple[Stage, ...] = (
     Stage("capture", capture_stage),
     Stage("transform", transform_stage),
-    Stage("fit", fit_stage),
-    Stage("predict", predict_stage),
+    Stage("fit", fit_stage, fits_models),
+    Stage("predict", predict_stage, fits_models),
     Stage("reconstruct", reconstruct_stage),
     Stage("report", report_stage),
 )
@@ -135,8 +137,8 @@ class Pipeline:
             cache=Cache(self.plan.settings.cache.dir, self.plan.settings.cache.enabled,
                         max_gb=self.plan.settings.cache.max_gb))
         for stage in STAGES:
-            if not self.plan.settings.runs(stage.name):
-                return
+            if not self._performs(stage):
+                continue
             self.stage_reached = stage.name
             start = time.perf_counter()
             self.events.stage_start(stage.name)
@@ -149,6 +151,15 @@ class Pipeline:
             seconds = time.perf_counter() - start
             log.info("stage %s: %.2f s", stage.name, seconds, extra=FILE_ONLY)
             self.events.stage_end(stage.name, seconds)
+
+    def _performs(self, stage: Stage) -> bool:
+        """Whether the run performs ``stage``: the plan has it and ``stop_after`` reaches it;
+        a run stopped after ``reconstruct`` still draws the figures of what it computed."""
+        if not stage.applies(self.plan):
+            return False
+        if self.plan.settings.runs(stage.name):
+            return True
+        return stage.name == "report" and self.stage_results.reconstructions is not None
 
     def _record_end(self, err: BaseException, seconds: float) -> None:
         """metrics.json with status failed or interrupted, the stage and the one-line reason,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Mapping
 from functools import partial
 
 import numpy as np
@@ -19,7 +20,6 @@ from nlosfw.model.protocol import FieldSplit
 from nlosfw.pipeline.context import StageContext
 from nlosfw.pipeline.results import (
     FrequencySplit,
-    ImagedFields,
     Reconstructions,
     SingleFrequencyImages,
     StageResults,
@@ -34,26 +34,30 @@ log = logging.getLogger(__name__)
 def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
     """Image every field on the same voxels, then each from single frequencies alone."""
     capture = required(done.capture, "capture").capture
-    split = required(done.fit, "fit").split
-    fields = required(done.fields, "predict")
     imager = run.plan.imager
-    voxels = run_voxels(run.plan.settings.reconstruction, capture, fields.true)
-    # as in the thesis figures: images from one frequency at a time, too
-    chosen = chosen_frequencies(split,
-                                run.plan.settings.reconstruction.single_frequency_images)
-    sources = fields.by_source()
+    sources: Mapping[str, PhasorField]
+    chosen: dict[FrequencySplit, int] = {}
+    if done.fields is None:  # model=none: the capture's own field, imaged alone
+        sources = {"true": required(done.transform, "transform").field}
+    else:
+        sources = done.fields.by_source()
+        # as in the thesis figures: images from one frequency at a time, too
+        chosen = chosen_frequencies(required(done.fit, "fit").split,
+                                    run.plan.settings.reconstruction.single_frequency_images)
+    true = sources["true"]
+    voxels = run_voxels(run.plan.settings.reconstruction, capture, true)
     log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
              len(sources) * (1 + len(chosen)), imager.name, len(sources), ", ".join(sources),
-             fields.true.n_frequencies,
-             "".join(f" and from f = {fields.true.frequencies[i]:.4g} /m ({label})"
+             true.n_frequencies,
+             "".join(f" and from f = {true.frequencies[i]:.4g} /m ({label})"
                      for label, i in chosen.items()))
     by_source: dict[str, Reconstruction] = {}
     seconds: dict[str, float] = {}
-    for source, field in fields.items():
+    for source, field in sources.items():
         start = time.perf_counter()
         by_source[source] = _image(run, imager.plugin, field, voxels, f"image {source}")
         seconds[source] = round(time.perf_counter() - start, 4)
-    singles = _single_frequency_images(run, imager.plugin, fields, voxels, chosen)
+    singles = _single_frequency_images(run, imager.plugin, sources, voxels, chosen)
     for source, recon in by_source.items():
         run.files.write(f"reconstructions/{source}.hdf5",
                         partial(write_reconstruction, recon=recon),
@@ -109,13 +113,12 @@ def _image(run: StageContext, imager: Imager, field: PhasorField, voxels: np.nda
     return recon
 
 
-def _single_frequency_images(run: StageContext, imager: Imager, fields: ImagedFields,
-                             voxels: np.ndarray, chosen: dict[FrequencySplit, int]
-                             ) -> list[SingleFrequencyImages]:
-    """Every field imaged from each chosen frequency alone."""
+def _single_frequency_images(run: StageContext, imager: Imager,
+                             sources: Mapping[str, PhasorField], voxels: np.ndarray,
+                             chosen: dict[FrequencySplit, int]) -> list[SingleFrequencyImages]:
+    """Every field (by source, ``true`` first) imaged from each chosen frequency alone."""
     if not chosen:
         return []
-    sources = fields.by_source()
     task, total, count = "single-frequency images", len(chosen) * len(sources), 0
     singles = []
     for label, index in chosen.items():
@@ -126,7 +129,7 @@ def _single_frequency_images(run: StageContext, imager: Imager, fields: ImagedFi
                                                 voxels)
             count += 1
         singles.append(SingleFrequencyImages(
-            index=index, frequency=float(fields.true.frequencies[index]), split=label,
+            index=index, frequency=float(sources["true"].frequencies[index]), split=label,
             by_source=images))
     run.events.progress(task, total, total, ", ".join(f"f = {s.frequency:.4g} /m ({s.split})"
                                                       for s in singles))

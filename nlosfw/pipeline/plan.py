@@ -17,7 +17,7 @@ from nlosfw.capture.source import FormatCatalogue
 from nlosfw.common.errors import ConfigError
 from nlosfw.image.interface import Imager
 from nlosfw.model.interface import FieldModel
-from nlosfw.pipeline.settings import RunSettings, run_settings
+from nlosfw.pipeline.settings import NO_MODEL, RunSettings, SplitSettings, StopAfter, run_settings
 from nlosfw.plugins import PluginHost, PluginKind
 from nlosfw.simulate.interface import Simulator
 from nlosfw.simulate.scene import Scene, scene_from_config
@@ -75,6 +75,11 @@ class RunPlan:
         name = node.get("name") if isinstance(node, Mapping) else None
         return None if name is None else str(name)
 
+    @property
+    def images_only(self) -> bool:
+        """``model=none``: the run images the capture alone (no split, no field model)."""
+        return self.selected("model") == NO_MODEL
+
     def used_config(self) -> PlainConfig:
         """The configuration without what the run does not use: a run from a file has no
         scene and no simulator (their defaults would mislabel it)."""
@@ -105,6 +110,7 @@ def plugin_version(host: PluginHost, kind: PluginKind, name: str) -> str:
 def make_plan(config: PlainConfig, host: PluginHost) -> RunPlan:
     """The plan of the run ``config`` describes, its plugins built from ``host``."""
     settings = run_settings(config)
+    check_model_choice(config, settings)
     registry = host.registry
 
     def chosen(kind: PluginKind) -> tuple[str, dict[str, object], str]:
@@ -134,11 +140,32 @@ def make_plan(config: PlainConfig, host: PluginHost) -> RunPlan:
         format_versions=formats)
 
 
+def check_model_choice(config: PlainConfig, settings: RunSettings) -> None:
+    """A one-line ConfigError for options that ``model=none`` (no field model: the capture
+    is imaged alone) cannot honour: a split, ``compare`` models, stopping after fit or
+    predict."""
+    node = config.get("model")
+    if not isinstance(node, Mapping) or node.get("name") != NO_MODEL:
+        return
+    if settings.compare:
+        raise ConfigError("compare", "model=none fits no field model, so there is nothing to "
+                          "compare; select a model (model=interp) or leave compare empty")
+    if settings.split != SplitSettings():
+        raise ConfigError("split", "model=none images the whole capture and splits nothing; "
+                          "leave the split options at their defaults or select a model "
+                          "(model=interp)")
+    if settings.stop_after in (StopAfter.fit, StopAfter.predict):
+        raise ConfigError("stop_after", f"model=none fits and predicts nothing; stop after "
+                          f"capture, transform or reconstruct, not {settings.stop_after}")
+
+
 def field_models(config: PlainConfig, settings: RunSettings
                  ) -> dict[str, tuple[str, dict[str, object]]]:
     """(plugin, options) by source: the selected model, the interp baseline (unless it is
-    the model) and each ``compare`` label."""
+    the model) and each ``compare`` label; none for ``model=none``."""
     name, options = plugin_options(config, "model")
+    if name == NO_MODEL:
+        return {}
     models = {"model": (name, options)} if name != "interp" else {}
     models["interp"] = (name, options) if name == "interp" else ("interp", {})
     for label, extra in settings.compare.items():

@@ -188,8 +188,10 @@ class RunResults:
 
     capture: CaptureResult
     transform: TransformResult
-    fit: FitResult
-    fields: ImagedFields
+    fit: FitResult | None
+    """None for ``model=none`` (the capture imaged alone: no split, no field model)."""
+    fields: ImagedFields | None
+    """None for ``model=none``: the only field imaged is the capture's (``true``)."""
     reconstructions: Reconstructions
 
 
@@ -219,9 +221,10 @@ class StageResults:
         raise TypeError(f"not a stage result: {type(result).__name__}")
 
     def complete(self) -> RunResults | None:
-        """All of them as :class:`RunResults`, or None when a stage did not run."""
-        if (self.capture is None or self.transform is None or self.fit is None
-                or self.fields is None or self.reconstructions is None):
+        """All of them as :class:`RunResults`, or None when a stage did not run (fit and
+        predict run in every plan but ``model=none``'s, which images the capture alone)."""
+        if (self.capture is None or self.transform is None or self.reconstructions is None
+                or (self.fit is None) != (self.fields is None)):
             return None
         return RunResults(capture=self.capture, transform=self.transform, fit=self.fit,
                           fields=self.fields, reconstructions=self.reconstructions)

@@ -26,6 +26,10 @@ SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experi
 #: The selector groups whose choice may be null (nothing selected).
 OPTIONAL_GROUPS = ("experiment", "acquisition")
 
+#: The ``model`` choice that fits no field model: the run images the capture alone (no
+#: split, no fit, no prediction, no field scores); ``python -m nlosfw image FILE`` selects it.
+NO_MODEL = "none"
+
 #: Pipeline stages in order; ``stop_after`` accepts any of them (``simulate`` = ``capture``).
 STAGES = ("capture", "transform", "fit", "predict", "reconstruct", "report")
 

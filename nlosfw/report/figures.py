@@ -7,6 +7,9 @@
                      against the reconstruction of the true field
 ``reconstructions_f<k>.png``  the same from frequency k alone (thesis figs. 5.1-5.5)
 ``loss.png``         training (and validation) loss of each field model
+
+and the views of every source and the capture's time profile (:mod:`nlosfw.report.views`);
+a ``model=none`` run (the capture imaged alone) has only those.
 """
 
 from __future__ import annotations
@@ -19,13 +22,14 @@ from typing import TYPE_CHECKING, TypedDict
 import numpy as np
 from matplotlib.figure import Figure
 
-from nlosfw.common.text import visible
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.scores import amplitude, normalise
 from nlosfw.pipeline.files import RunFiles
 from nlosfw.pipeline.metrics import ImageScores, ReconstructionMetrics, RunInfo
-from nlosfw.pipeline.results import CaptureResult, RunResults
+from nlosfw.pipeline.results import RunResults
 from nlosfw.report.plain_text import literal_text
+from nlosfw.report.titles import run_title
+from nlosfw.report.views import write_views
 from nlosfw.transform.field import PhasorField
 
 if TYPE_CHECKING:
@@ -48,16 +52,6 @@ class DepthScale(TypedDict):
     vmax: float
 
 
-def run_title(info: RunInfo, capture: CaptureResult | None = None) -> str:
-    """What ran, in one line: the scene and simulator (or the capture file), the model
-    and the imager (for figure titles)."""
-    if capture is not None:
-        source = f"{'capture' if capture.path is not None else 'scene'} {capture.label}"
-    else:
-        source = f"scene {info.scene} ({info.simulator})"
-    return visible(f"{source} · model {info.model} · imager {info.imager}")
-
-
 def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
                   scores: ReconstructionMetrics, dpi: int) -> None:
     """Write every figure of a run into ``figures/``.
@@ -69,8 +63,11 @@ def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
     """
     title = run_title(info, results.capture)
     labels = source_labels(results)
-    fields = results.fields.by_source()
     recons = results.reconstructions
+    write_views(files, recons.by_source, labels, results.capture.capture, title, dpi)
+    if results.fields is None or results.fit is None:
+        return  # model=none: the capture imaged alone, nothing to compare
+    fields = results.fields.by_source()
     truth_depth = results.capture.truth_depth
     for single in recons.single_frequency:
         files.write(f"figures/fields_f{single.index}.png",
@@ -114,6 +111,8 @@ def _extent(field: PhasorField) -> list[float]:
 def source_labels(results: RunResults) -> dict[str, str]:
     """How the figures name each source: the model by its plugin, a ``compare`` label with
     its plugin (``pe (pe_torch)``), the others by their role."""
+    if results.fit is None:  # model=none
+        return {"true": "the capture (every sample)"}
     labels = {m.source: (m.plugin if m.source == "model" else
                          _SOURCE_TITLES.get(m.source, f"{m.source} ({m.plugin})"))
               for m in results.fit.models}

@@ -24,6 +24,7 @@ from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.report.quality import QualityTable, parse_overrides
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import format_cell
+from nlosfw.report.titles import run_title
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1400px;
@@ -37,6 +38,9 @@ figure { margin: 1em 0 2em; } figure img { max-width: 100%; height: auto;
   border: 1px solid #ddd; } figcaption { color: #555; font-size: 0.9em; }
 pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; }
 .meta { color: #555; } .muted { color: #888; } .scroll { overflow-x: auto; }
+.views { display: flex; flex-wrap: wrap; gap: 0.8em; align-items: flex-start; }
+.views figure { margin: 0.4em 0; flex: 1 1 22em; max-width: 32em; }
+.views figure.wide { flex: 2 1 40em; max-width: none; }
 """
 
 
@@ -59,11 +63,12 @@ def table(header: Sequence[str], rows: Sequence[Sequence[Scalar]]) -> str:
             "</tbody>\n</table></div>")
 
 
-def png_figure(data: bytes, caption: str) -> str:
-    """A PNG embedded as a data URI, with its caption."""
+def png_figure(data: bytes, caption: str, wide: bool = False) -> str:
+    """A PNG embedded as a data URI, with its caption (``wide``: twice a view's width)."""
     encoded = base64.b64encode(data).decode("ascii")
     text = html.escape(caption)
-    return (f"<figure><img src=\"data:image/png;base64,{encoded}\" alt=\"{text}\">"
+    kind = ' class="wide"' if wide else ""
+    return (f"<figure{kind}><img src=\"data:image/png;base64,{encoded}\" alt=\"{text}\">"
             f"<figcaption>{text}</figcaption></figure>")
 
 
@@ -95,17 +100,15 @@ def run_report(run_dir: Path, metrics: RunMetrics, config: Mapping[str, object],
                overrides: Sequence[str] = ()) -> str:
     """The HTML of a run's ``report.html`` (figures read from ``run_dir/figures``)."""
     info = metrics.run
-    title = f"nlosfw run: {info.scene} · model {info.model} · imager {info.imager}"
-    capture = metrics.capture
-    if capture is not None and capture.path is not None:
-        title = f"nlosfw run: {Path(capture.path).name} · model {info.model} · imager {info.imager}"
+    title = f"nlosfw run: {run_title(info)}"
     meta = (f"<p class=\"meta\">status <b>{html.escape(metrics.status)}</b>"
             f"{' after ' + html.escape(info.stopped_after) if info.stopped_after else ''}"
             f" · started {html.escape(info.started)} · nlosfw {html.escape(info.nlosfw_version)}"
             f" · {html.escape(info.dir)}</p>")
     if overrides:
         meta += f"<p class=\"meta\">overrides: <code>{html.escape(' '.join(overrides))}</code></p>"
-    sections = [meta, *_run_metrics(metrics), _run_figures(run_dir),
+    sections = [meta, _run_views(run_dir, metrics), *_run_metrics(metrics),
+                _run_figures(run_dir),
                 _section("Timings (s)", table(["stage", "seconds"], list(_timings(metrics)
                                                                          .items()))),
                 _run_inputs(metrics),
@@ -119,6 +122,13 @@ def _run_metrics(metrics: RunMetrics) -> list[str]:
     out = []
     if metrics.reconstruction is not None:
         rec = metrics.reconstruction
+        if list(rec.sources) == ["true"]:  # model=none: the capture alone, nothing to score
+            seconds = rec.sources["true"].seconds
+            return [_section("Reconstruction", (
+                f"<p>The capture imaged with <code>{html.escape(rec.imager)}</code> on "
+                f"{len(rec.depths)} depth planes from {min(rec.depths):.3g} to "
+                f"{max(rec.depths):.3g} m" + ("" if seconds is None else f" in {seconds:.3g} s")
+                + "; no field model (model=none), so no scores.</p>"))]
         rows = [[s, v.ssim, v.psnr, v.rmse, v.seconds] for s, v in rec.sources.items()]
         parts = [f"<p>Max-intensity image of each field against the true field's, imager "
                  f"<code>{html.escape(rec.imager)}</code>, {len(rec.depths)} depth planes "
@@ -148,15 +158,44 @@ def _run_metrics(metrics: RunMetrics) -> list[str]:
     return out
 
 
+def _run_views(run_dir: Path, metrics: RunMetrics) -> str:
+    """The views of every imaged source side by side (front view, depth map, depth slices),
+    then the capture's time profile with the depth range marked; nothing without them."""
+    folder = run_dir / "figures"
+    imager = metrics.run.imager or "?"
+    sources = list(metrics.reconstruction.sources) if metrics.reconstruction else []
+    rows = []
+    for source in sources:
+        shown = [(folder / f"{view}_{source}.png", caption) for view, caption in (
+            ("front", "front view over the planes' depths"),
+            ("depth", "depth map (grey: no signal)"),
+            ("slices", "depth slices"))]
+        figures = [png_figure(path.read_bytes(), f"{path.name}: {caption}",
+                              wide=path.name.startswith("slices_"))
+                   for path, caption in shown if path.is_file()]
+        if figures:
+            name = "the capture" if sources == ["true"] else source
+            rows.append(f"<h3>{html.escape(name)} · imager {html.escape(imager)}</h3>"
+                        f"<div class=\"views\">{''.join(figures)}</div>")
+    profile = folder / "time_profile.png"
+    if profile.is_file():
+        rows.append(png_figure(profile.read_bytes(), "time_profile.png: the capture's "
+                               "histograms summed over the wall, the planes' depth range "
+                               "shaded"))
+    return _section("Views", *rows) if rows else ""
+
+
 def _run_figures(run_dir: Path) -> str:
     folder = run_dir / "figures"
     parts = []
     for pattern, caption in _FIGURES:
         for path in sorted(folder.glob(pattern)) if folder.is_dir() else []:
             parts.append(png_figure(path.read_bytes(), f"{path.name}: {caption}"))
+    if not parts and folder.is_dir() and any(folder.glob("*.png")):
+        return ""  # the views are all there is (model=none)
     if not parts:
         parts = ["<p class=\"muted\">No figures (figures.enabled=false, or the run stopped "
-                 "before its report).</p>"]
+                 "before it imaged).</p>"]
     return _section("Figures", *parts)
 
 
@@ -164,8 +203,10 @@ def _run_inputs(metrics: RunMetrics) -> str:
     rows: list[list[Scalar]] = []
     if metrics.capture is not None:
         c = metrics.capture
-        rows += [["capture", c.source if c.path is None else f"file {c.path}"],
-                 ["simulator", c.simulator], ["shape (t, x, y)", " × ".join(map(str, c.shape))],
+        origin: list[Scalar] = (["simulator", c.simulator] if c.path is None else
+                                ["format", c.format])
+        rows += [["capture", c.source if c.path is None else f"file {c.path}"], origin,
+                 ["shape (t, x, y)", " × ".join(map(str, c.shape))],
                  ["kind", c.kind.value], ["bin width (m)", c.delta_t],
                  ["noise", None if c.noise is None else str(c.noise)]]
     if metrics.transform is not None:

@@ -1,0 +1,61 @@
+"""``python -m nlosfw image FILE [OVERRIDE ...]``: reconstruct one capture file.
+
+The shorthand of ``capture.path=FILE model=none output.keep=[reconstructions]``: the run
+reads FILE (its format detected from its content), preprocesses it, images its phasor
+field and writes the volume (``reconstructions/true.hdf5``), the front view, the depth map
+and a strip of depth slices (``figures/``), the capture's time profile and
+``report.html`` (with the run's own config.yaml, metrics.json and run.log); no split, no
+field model. Any other override applies as in a normal run (``imager=lct``,
+``reconstruction.depth_range=[0.3,0.8]``, ``output.keep=[...]``).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+from nlosfw.common.errors import ConfigError, DataError
+
+USAGE = "python -m nlosfw image FILE [OVERRIDE ...]"
+
+#: What an image run keeps of the large files: the volume, not the capture's copy.
+KEEP = "output.keep=[reconstructions]"
+
+
+def image_overrides(argv: Sequence[str]) -> list[str]:
+    """The overrides of the run ``image FILE [OVERRIDE ...]`` stands for; a one-line error
+    when FILE is missing, not a readable file, or the overrides choose another model or
+    capture."""
+    args = list(argv)
+    if not args or "=" in args[0] or args[0].startswith("-"):
+        raise ConfigError("", f"image needs a capture file first: {USAGE}")
+    path = Path(args[0]).expanduser()
+    if not path.exists():
+        raise DataError(f"{path}: no such capture file")
+    if not path.is_file():
+        raise DataError(f"{path}: not a file (give a capture file: {USAGE})")
+    if not os.access(path, os.R_OK):
+        raise DataError(f"{path}: cannot be read (permission denied)")
+    rest = args[1:]
+    for arg in rest:
+        key = arg.lstrip("+~").split("=", 1)[0]
+        if key in ("model", "capture.path"):
+            raise ConfigError(key, f"image sets it (capture.path=FILE model=none); to fit a "
+                              f"field model run python -m nlosfw capture.path={path} "
+                              f"model=NAME instead")
+    keep = [] if any(a.lstrip("+~").startswith("output.keep=") for a in rest) else [KEEP]
+    return [f"capture.path={_quoted(str(path.resolve()))}", "model=none", *keep, *rest]
+
+
+def _quoted(value: str) -> str:
+    """``value`` as a quoted Hydra override value (brackets, commas, spaces kept as is; a
+    quote and an interpolation's ``${`` escaped)."""
+    return "'" + value.replace("'", "\\'").replace("${", "\\${") + "'"
+
+
+def image_command(argv: Sequence[str]) -> int:
+    """Run ``image FILE [OVERRIDE ...]``; returns the exit status."""
+    from nlosfw.cli.app import main as hydra_main
+
+    return hydra_main(image_overrides(argv))
