@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from nlosfw.capture.source import check_files, file_transient_shape, load_file_capture
+from nlosfw.capture.thinning import photon_counts
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem
 from nlosfw.compose.output_dirs import check_output_dirs
@@ -162,7 +163,9 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         return
     # a malformed file, a wrong format or an option that does not fit the file must fail
     # here, before any output exists
-    load_file_capture(settings.capture, formats)
+    loaded = load_file_capture(settings.capture, formats)
+    if settings.split.thinning:  # count splitting needs photon counts: refused here, not later
+        photon_counts(loaded.prepared.capture, str(loaded.path))
 
 
 def _check_plugin(spec: PluginSpec, what: str) -> None:

@@ -27,9 +27,14 @@ from nlosfw.common.errors import DataError
 from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[5]
+SchemaVersion = Literal[6]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 5
+SCHEMA_VERSION: Final[SchemaVersion] = 6
+
+#: Older versions :meth:`RunMetrics.from_json` still reads: each later version only added
+#: optional keys (6: count splitting, ``capture.thinning`` and
+#: ``field.*.splits.heldout_measurement``), so such a file reads as this version.
+READABLE_VERSIONS: Final = (5, 6)
 
 Status = Literal["running", "completed", "stopped", "failed", "interrupted"]
 """``running`` only while the run is in progress: metrics.json is written when it ends.
@@ -99,6 +104,19 @@ class CaptureMetrics:
     t_start: float = documented("path length of the first bin (m)")
     total: float = documented("sum of H")
     noise: Any = optional("the noise the capture carries, as its scene_info records it")
+    thinning: ThinningMetrics | None = optional("count splitting (split.thinning): the "
+                                                "capture above is half A")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ThinningMetrics:
+    """Count splitting: every bin's count n split into Binomial(n, 1/2) (half A, which the
+    models train on) and the rest (half B, which every score uses)."""
+
+    seed: int = documented("split.thinning_seed")
+    count_scale: float = documented("photon counts per unit of H (1: a file's raw counts)")
+    counts_a: int = documented("photon counts in half A")
+    counts_b: int = documented("photon counts in half B")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -160,8 +178,25 @@ class ErrorMetrics:
 
 
 @dataclass(frozen=True, kw_only=True)
+class HeldoutMeasurementMetrics:
+    """Count splitting: the prediction at the wall points not kept against half B's measured
+    field there, over the whole band, as ratios to B's power there in dB (10 log10)."""
+
+    nmse_db: float | None = documented("the error: sum |P^ - P_B|^2 / sum |P_B|^2")
+    floor_db: float | None = documented(
+        "the noise floor, the error of a perfect predictor: the variance B's Poisson noise "
+        "adds to its field (through the transform) / sum |P_B|^2")
+    excess_db: float | None = documented(
+        "the error minus the floor (linear units, then dB): the error against B's "
+        "noise-free field; null when the error is within the floor")
+    excess: float = documented("the error minus the floor as a ratio (may be <= 0)")
+    n_samples: int = documented("held-out samples (points x frequencies)")
+
+
+@dataclass(frozen=True, kw_only=True)
 class SplitErrors:
-    """A prediction's errors on the sets of the thesis's protocol."""
+    """A prediction's errors on the sets of the thesis's protocol (against half B's field
+    with count splitting)."""
 
     heldout_pixels: ErrorMetrics = documented("wall samples never trained on, at training "
                                               "frequencies")
@@ -169,15 +204,21 @@ class SplitErrors:
     all: ErrorMetrics = documented("every sample")
     heldout_pixels_inside: ErrorMetrics = documented("held-out pixels inside the training "
                                                      "grid's bounding box")
+    heldout_measurement: HeldoutMeasurementMetrics | None = optional(
+        "count splitting: the held-out measurement error, its noise floor and the excess "
+        "(the primary score on measured data)")
 
     @classmethod
-    def of(cls, errors: Mapping[str, Mapping[str, Any]]) -> SplitErrors:
-        """From :func:`nlosfw.model.field_metrics`'s result."""
-        return cls(**{name: ErrorMetrics(**values) for name, values in errors.items()})
+    def of(cls, errors: Mapping[str, Mapping[str, Any]],
+           heldout: HeldoutMeasurementMetrics | None = None) -> SplitErrors:
+        """From :func:`nlosfw.model.field_metrics`'s result (and count splitting's score)."""
+        return cls(**{name: ErrorMetrics(**values) for name, values in errors.items()},
+                   heldout_measurement=heldout)
 
     def by_set(self) -> dict[str, ErrorMetrics]:
         """The errors by set name, in declaration order."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if isinstance(getattr(self, f.name), ErrorMetrics)}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -207,7 +248,8 @@ class FieldMetrics:
 
 @dataclass(frozen=True, kw_only=True)
 class ImageScores:
-    """A reconstruction against the full capture's (source ``true``), on amplitudes (the
+    """A reconstruction against the full capture's (source ``true``; with count splitting
+    half B's full scan, and source ``ceiling`` is half A's full scan), on amplitudes (the
     square root of the intensity) each normalised to its maximum, with scikit-image's
     PSNR and SSIM at their defaults (null where undefined: PSNR of identical images,
     SSIM of images under 7 pixels a side)."""
@@ -298,10 +340,13 @@ class RunMetrics:
     def from_json(cls, data: Any, where: str = "") -> RunMetrics:
         """Metrics from the JSON object of a metrics.json of this :data:`SCHEMA_VERSION`."""
         version = data.get("schema_version") if isinstance(data, dict) else None
-        if isinstance(data, dict) and version != SCHEMA_VERSION:
+        if isinstance(data, dict) and version not in READABLE_VERSIONS:
             raise DataError(f"{where + ': ' if where else ''}schema_version is {version!r}; this "
-                            f"nlosfw reads version {SCHEMA_VERSION} (written by another nlosfw "
-                            "version: rerun it, or read it with the version that wrote it)")
+                            f"nlosfw reads versions {', '.join(map(str, READABLE_VERSIONS))} "
+                            "(written by another nlosfw version: rerun it, or read it with the "
+                            "version that wrote it)")
+        if isinstance(data, dict) and version != SCHEMA_VERSION:
+            data = {**data, "schema_version": SCHEMA_VERSION}  # later versions only add keys
         return from_json(cls, data, where)
 
     @classmethod
