@@ -7,6 +7,7 @@ over independently drawn captures."""
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
@@ -201,15 +202,24 @@ def test_floor_matches_monte_carlo_and_a_perfect_predictor_sits_on_it(transform)
 
 
 # ---------------------------------------------------------------- a run with it
-def test_a_run_with_thinning_scores_against_half_b(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
-    run = tmp_path / "run"
-    status = main(["scene=tiny", "scene.noise.model=poisson", "scene.noise.photons=2e5",
-                   "model=interp", "imager=fft", "figures.enabled=false",
-                   "transform.n_frequencies=21", "reconstruction.n_depths=4",
-                   "split.thinning=true", "split.thinning_seed=1", f"hydra.run.dir={run}"])
-    assert status == 0
+@pytest.fixture(scope="module")
+def thinned_sweep(tmp_path_factory) -> Path:
+    """The real-data study's preset on a simulated capture of counts (the tiny scene with
+    Poisson noise), one sparsity, interp only, two thinning seeds."""
+    tmp = tmp_path_factory.mktemp("thinned")
+    sweep = tmp / "sweep"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("NLOSFW_CACHE_DIR", str(tmp / "cache"))
+        mp.chdir(tmp)
+        assert main(["-m", "experiment=sparsity_real", "scene=tiny", "scene.noise.model=poisson",
+                     "scene.noise.photons=2e5", "model=interp", "split.spatial_step=2",
+                     "sampling=grid", "split.thinning_seed=1,2", "transform.n_frequencies=21",
+                     "reconstruction.n_depths=4", f"hydra.sweep.dir={sweep}"]) == 0
+    return sweep
+
+
+def test_a_run_with_thinning_scores_against_half_b(thinned_sweep):
+    run = thinned_sweep / "0"
     m = json.loads((run / "metrics.json").read_text())
     assert m["schema_version"] == 6
     thinning = m["capture"]["thinning"]
@@ -230,6 +240,24 @@ def test_a_run_with_thinning_scores_against_half_b(tmp_path, monkeypatch):
     assert list(sources) == ["true", "raw", "ceiling", "interp"]
     assert sources["true"]["ssim"] == pytest.approx(1.0)
     assert sources["ceiling"]["ssim"] < 1.0 and math.isfinite(sources["ceiling"]["psnr"])
+
+
+def test_the_study_report_shows_the_excess_and_the_ceiling(thinned_sweep):
+    assert main(["report", str(thinned_sweep)]) == 0
+    report = thinned_sweep / "report"
+    rows = list(csv.DictReader((report / "study.csv").open()))
+    by_series = {r["series"]: r for r in rows}
+    assert set(by_series) == {"true", "ceiling", "raw", "interp"}
+    interp = by_series["interp"]
+    assert interp["runs"] == "2" and interp["seeds"] == "1 2"
+    runs = [json.loads((thinned_sweep / k / "metrics.json").read_text()) for k in ("0", "1")]
+    excess = [r["field"]["interp"]["splits"]["heldout_measurement"]["excess_db"] for r in runs]
+    assert float(interp["heldout_excess_db_mean"]) == pytest.approx(np.mean(excess), rel=1e-4)
+    ceiling = [r["reconstruction"]["sources"]["ceiling"]["psnr"] for r in runs]
+    assert float(by_series["ceiling"]["psnr_mean"]) == pytest.approx(np.mean(ceiling), rel=1e-4)
+    assert by_series["ceiling"]["heldout_excess_db_mean"] == ""
+    text = (report / "report.md").read_text()
+    assert "held-out excess (dB)" in text and "Count splitting" in text
 
 
 @pytest.mark.skipif(not (REAL / "data_diffuse_s.mat").is_file(),

@@ -114,7 +114,11 @@ def run_plan(picked: Mapping[str, str], settings: RunSettings) -> list[str]:
         parts.append("predict")
     if not settings.runs("reconstruct"):
         return [" → ".join(parts) + f" (stop after {settings.last_stage})"]
-    fields = {"true": "the reference", "raw": "the training samples"}
+    thinning = settings.split.thinning
+    fields = {"true": "half B's full scan (count splitting)" if thinning else "the reference",
+              "raw": "the training samples"}
+    if thinning:
+        fields["ceiling"] = "half A's full scan"
     for label, plugin in sources.items():
         fields[label] = "the baseline" if label == "interp" else plugin
     singles = single_frequency_count(settings)

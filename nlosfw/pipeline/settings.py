@@ -21,10 +21,10 @@ from nlosfw.simulate.scene import Scene
 
 #: The config groups that select a scene or a plugin (plus presets and acquisitions).
 SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment",
-                   "acquisition")
+                   "acquisition", "sampling")
 
 #: The selector groups whose choice may be null (nothing selected).
-OPTIONAL_GROUPS = ("experiment", "acquisition")
+OPTIONAL_GROUPS = ("experiment", "acquisition", "sampling")
 
 #: Pipeline stages in order; ``stop_after`` accepts any of them (``simulate`` = ``capture``).
 STAGES = ("capture", "transform", "fit", "predict", "reconstruct", "report")
