@@ -25,6 +25,9 @@ from nlosfw.transform.common import histogram_2d, to_field_layout
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.interface import PhasorTransform
 
+#: The built-in transforms, plain temporal DFTs (the pre-run check probes any other).
+DFT_TRANSFORMS = ("fft", "wavelet")
+
 #: Relative spread of |K|^2 over time allowed by the probe (round-off of an exact DFT).
 _RTOL = 1e-6
 
