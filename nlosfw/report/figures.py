@@ -27,7 +27,7 @@ from nlosfw.pipeline.results import CaptureResult, RunResults
 from nlosfw.transform.field import PhasorField
 
 _SOURCE_TITLES = {"true": "true field", "raw": "raw (training samples)",
-                  "interp": "interp baseline"}
+                  "interp": "interp baseline", "ceiling": "ceiling (half A's full scan)"}
 
 
 #: The viewpoint of every reconstruction image, stated on the figures.
