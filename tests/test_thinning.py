@@ -11,6 +11,8 @@ import csv
 import json
 import math
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -258,6 +260,26 @@ def test_the_study_report_shows_the_excess_and_the_ceiling(thinned_sweep):
     assert by_series["ceiling"]["heldout_excess_db_mean"] == ""
     text = (report / "report.md").read_text()
     assert "held-out excess (dB)" in text and "Count splitting" in text
+
+
+def test_the_benchmark_collects_the_study_with_its_verdicts(thinned_sweep, tmp_path):
+    """benchmarks/sparsity_real.py collect: the JSON holds the study's rows, the markdown its
+    table (labelled as a reduced run) and the verdict against interp."""
+    out = tmp_path / "real.json"
+    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "sparsity_real.py"),
+                             "collect", str(thinned_sweep), "--reduced", "--out", str(out)],
+                            cwd=tmp_path, capture_output=True, text=True, timeout=600,
+                            check=False)
+    assert result.returncode == 0, result.stderr
+    results = json.loads(out.read_text())
+    assert results["reduced"] is True and results["completed"] == 2
+    rows = {r["series"]: r for r in results["rows"]}
+    runs = [json.loads((thinned_sweep / k / "metrics.json").read_text()) for k in ("0", "1")]
+    floor = [r["field"]["interp"]["splits"]["heldout_measurement"]["floor_db"] for r in runs]
+    assert rows["interp"]["scores"]["heldout_floor_db"]["mean"] == pytest.approx(
+        np.mean(floor), rel=1e-6)
+    assert "**Reduced run**" in result.stdout
+    assert "| ceiling |" in result.stdout and "| interp |" in result.stdout
 
 
 @pytest.mark.skipif(not (REAL / "data_diffuse_s.mat").is_file(),
