@@ -299,10 +299,10 @@ def results_markdown(results: dict[str, Any]) -> str:
     ]) + "\n"
 
 
-def write_readme_section(text: str) -> None:
-    """Replace the README's text between the Results markers."""
+def write_readme_section(text: str, markers: tuple[str, str] = MARKERS) -> None:
+    """Replace the README's text between ``markers`` (default: the Results markers)."""
     readme = README.read_text(encoding="utf-8")
-    start, end = MARKERS
+    start, end = markers
     pattern = re.compile(re.escape(start) + r"\n.*?" + re.escape(end), re.S)
     if not pattern.search(readme):
         raise SystemExit(f"README.md: markers {start} ... {end} not found")

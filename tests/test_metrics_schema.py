@@ -33,7 +33,8 @@ LAYOUTS = {1: "df68d9802d66f6c788ccb3f73598862a1b3e03e0195b95c4a5dababd971930e2"
            2: "ce78167a70994c606d7a3b3d98a98dfe2568b521dff6e36e6459c5f264f7c834",
            3: "d12b6fae65c59b8af0701ab5ee039d632e8e4ca443ef212f9a9c6a9f64066991",
            4: "2ac7c966168c6a245c856da8074390a631b91e30621f4d35ae5aa37b2565bad3",
-           5: "8a557b10430447143b70ff16e69beb7561b11132ef0c0774eb4a960439886eb4"}
+           5: "8a557b10430447143b70ff16e69beb7561b11132ef0c0774eb4a960439886eb4",
+           6: "f97056c1ab226f7f0bdb9c183d927b8d7234b7e023c544ca3d9a5f9fb44efeb9"}
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +58,7 @@ def _validator(run: Path) -> jsonschema.Draft202012Validator:
 def test_a_run_writes_a_schema_its_metrics_match(finished_run):
     data = json.loads((finished_run / "metrics.json").read_text())
     _validator(finished_run).validate(data)
-    assert data["schema_version"] == SCHEMA_VERSION == 5
+    assert data["schema_version"] == SCHEMA_VERSION == 6
     metrics = RunMetrics.read(finished_run / "metrics.json")
     assert metrics.to_json() == data
     assert set(metrics.field or {}) == {"interp"}
@@ -128,8 +129,8 @@ def _sweep_with(tmp_path, finished_run, text):
 @pytest.mark.malformed_metrics
 @pytest.mark.parametrize(("edit", "message"), [
     (lambda d: d.update(schema_version=0),
-     f"schema_version is 0; this nlosfw reads version {SCHEMA_VERSION} (written by another "
-     "nlosfw version"),
+     "schema_version is 0; this nlosfw reads versions 5, 6 (written by another nlosfw "
+     "version"),
     (lambda d: d["field"]["interp"]["splits"].pop("all"), "field.interp.splits.all: is missing"),
     (lambda d: d["timings"].update(total="slow"), "timings.total: must be a number, got 'slow'"),
     (None, "unreadable ("),
@@ -137,7 +138,7 @@ def _sweep_with(tmp_path, finished_run, text):
 def test_report_names_the_file_and_the_problem(tmp_path, capsys, finished_run, edit, message):
     data = json.loads((finished_run / "metrics.json").read_text())
     if edit is None:
-        text = '{"schema_version": 5, "status": '   # cut off mid-write
+        text = '{"schema_version": 6, "status": '   # cut off mid-write
     else:
         edit(data)
         text = json.dumps(data)
@@ -147,6 +148,20 @@ def test_report_names_the_file_and_the_problem(tmp_path, capsys, finished_run, e
     assert err.startswith(f"error: {sweep / '1' / 'metrics.json'}: {message}"), err
     assert err.count("\n") == 1
     assert not (sweep / "report").exists()
+
+
+def test_a_version_5_file_still_reads(tmp_path, finished_run):
+    """Version 6 only added optional keys (count splitting): a version-5 metrics.json (one
+    without them) reads, as this version, with the same values."""
+    data = json.loads((finished_run / "metrics.json").read_text())
+    assert "thinning" not in data["capture"]
+    assert "heldout_measurement" not in data["field"]["interp"]["splits"]
+    old = tmp_path / "metrics_v5.json"
+    old.write_text(json.dumps({**data, "schema_version": 5}))
+    metrics = RunMetrics.read(old)
+    assert metrics.schema_version == SCHEMA_VERSION
+    assert metrics.to_json() == data
+    assert metrics.field_entry("interp").splits.heldout_measurement is None
 
 
 def test_report_reads_runs_through_the_typed_metrics(tmp_path, finished_run):

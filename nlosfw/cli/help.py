@@ -51,6 +51,8 @@ SELECTOR_DOCS = {
                       "(capture.format=NAME forces one)",
     "acquisition": "how a study captures its scenes (clean: analytic, noise-free; noisy: "
                    "embree with Poisson noise)",
+    "sampling": "the scan pattern of a sparse scan (grid; random: drawn with "
+                "split.thinning_seed)",
     "experiment": "a preset (thesis figures, the noise and sparsity studies)",
 }
 
@@ -91,7 +93,7 @@ def help_text(host: PluginHost, conf: Path) -> str:
               "python -m nlosfw plugins NAME lists a plugin's options)"]
     groups = []
     for group, what in SELECTOR_DOCS.items():
-        if group in ("experiment", "acquisition"):
+        if group in ("experiment", "acquisition", "sampling"):
             names = sorted(p.stem for p in (conf / group).glob("*.yaml"))
         elif group == "scene":
             names = scenes

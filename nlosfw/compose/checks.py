@@ -16,7 +16,9 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
+from nlosfw.capture.data import Capture
 from nlosfw.capture.source import check_files, file_transient_shape, load_file_capture
+from nlosfw.capture.thinning import photon_counts
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem
 from nlosfw.compose.output_dirs import check_output_dirs
@@ -27,6 +29,7 @@ from nlosfw.pipeline.settings import NO_MODEL, OPTIONAL_GROUPS, SELECTOR_GROUPS,
 from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
 from nlosfw.simulate.geometry import validate_scene
 from nlosfw.simulate.scene import scene_from_config
+from nlosfw.transform.noise_floor import DFT_TRANSFORMS, kernel_power
 
 if TYPE_CHECKING:
     from hydra.core.config_loader import ConfigLoader
@@ -184,7 +187,21 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         return
     # a malformed file, a wrong format or an option that does not fit the file must fail
     # here, before any output exists
-    load_file_capture(settings.capture, formats)
+    loaded = load_file_capture(settings.capture, formats)
+    if settings.split.thinning:  # count splitting needs photon counts: refused here, not later
+        photon_counts(loaded.prepared.capture, str(loaded.path))
+        _check_noise_floor(cfg, host, loaded.prepared.capture)
+
+
+def _check_noise_floor(cfg: Mapping[str, object], host: PluginHost, capture: Capture) -> None:
+    """Count splitting's noise floor needs a DFT-like transform: the built-in ones are;
+    another is probed on the capture (a ConfigError for split.thinning when it is not)."""
+    node = cfg.get("transform")
+    name = str(node.get("name")) if isinstance(node, Mapping) else ""
+    if name in DFT_TRANSFORMS or not isinstance(node, Mapping):
+        return
+    spec = host.registry.get(PluginKind.PHASOR_TRANSFORM, name)
+    kernel_power(spec.create(_plugin_options(node, spec.config_class())), capture, name)
 
 
 def _check_plugin(spec: PluginSpec, what: str) -> None:

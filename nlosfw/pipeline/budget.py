@@ -132,12 +132,15 @@ def estimate_memory(config: Mapping[str, object], file_shape: FileShape | None =
                else int(_get(config, "reconstruction.single_frequency_images", 2)))
     history = _history(_get(config, "model")) + sum(_history(o) for o in compare.values())
     per_field = 16.0 * freqs * sensors * lasers
+    thinned = bool(_get(config, "split.thinning", False))  # halves A and B, B's field, ceiling
+    imaged = fields + int(thinned)
     return [
-        MemoryPart("the transient H", why, samples * (20 if noisy else 16)),
+        MemoryPart("the transient H", why,
+                   samples * (20 if noisy else 16) + (24 * samples if thinned else 0)),
         MemoryPart("the phasor transform", f"{why}, {freqs} frequencies",
-                   8 * samples + per_field * (2 if noisy else 1)),
+                   8 * samples + per_field * ((2 if noisy else 1) + (2 if thinned else 0))),
         MemoryPart("the fields imaged", f"{freqs} frequencies × {sensors * lasers} samples × "
-                   f"{fields} fields", 16.0 * freqs * sensors * fields),
+                   f"{imaged} fields", 16.0 * freqs * sensors * imaged),
         MemoryPart("the voxels and images", f"{depths} depth planes × {sensors} voxels each",
                    8.0 * depths * sensors * (3 + fields * (1 + singles))),
         MemoryPart("the training history", "model.steps / model.eval_every", history),

@@ -1,5 +1,5 @@
 """The capture stage: read ``capture.path`` or simulate the scene (cached), preprocess it,
-write ``capture.hdf5``.
+split its counts in two (``split.thinning``), write ``capture.hdf5`` (half A when split).
 
 A noisy scene's transport is rendered once: the noise-free capture is cached under its
 own key, the noisy one is that capture with noise added (cached too), and the
@@ -12,9 +12,12 @@ import dataclasses
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from nlosfw.capture.data import Capture
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.capture.source import load_file_capture, prepare
+from nlosfw.capture.thinning import thin
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.hashing import cache_key, file_digest
 from nlosfw.pipeline.context import StageContext
@@ -31,6 +34,8 @@ def capture_stage(run: StageContext, done: StageResults) -> CaptureResult:
         result = _file_capture(run)
     else:
         result = _preprocessed(run, _simulated_capture(run))
+    if run.plan.settings.split.thinning:
+        result = thinned(result, run.plan.settings.split.thinning_seed)
     run.files.write("capture", lambda p: write_capture(
         p, result.capture, compression=run.plan.settings.output.compression),
         keep_as=Artefact.capture)
@@ -86,6 +91,21 @@ def _preprocessed(run: StageContext, raw: CaptureResult) -> CaptureResult:
         clean_key = cache_key({"capture": raw.clean_key, **prepared.key_material})
     return dataclasses.replace(raw, capture=prepared.capture, key=key, steps=prepared.steps,
                                clean=clean, clean_key=clean_key)
+
+
+def thinned(result: CaptureResult, seed: int) -> CaptureResult:
+    """Count splitting of the run's capture: half A becomes the capture (the models train
+    on it), half B the one every score uses; the noise-free capture, if any, is halved to
+    A's exposure. A ConfigError for ``split.thinning`` when the capture is not counts."""
+    halves = thin(result.capture, seed, where=result.label)
+    key = cache_key({"capture": result.key, "thinning": int(seed), "half": "A"})
+    score_key = cache_key({"capture": result.key, "thinning": int(seed), "half": "B"})
+    clean, clean_key = result.clean, result.clean_key
+    if clean is not None and clean_key is not None:
+        clean = clean.replace(H=np.asarray(clean.H) * np.asarray(0.5, dtype=clean.H.dtype))
+        clean_key = cache_key({"capture": clean_key, "scaled": 0.5})
+    return dataclasses.replace(result, capture=halves.a, key=key, thinning=halves,
+                               score_key=score_key, clean=clean, clean_key=clean_key)
 
 
 def _cached(run: StageContext, key: str,

@@ -183,10 +183,13 @@ class Pipeline:
 
 
 def objective(metrics: RunMetrics) -> float | None:
-    """The held-out pixels' NMSE (dB) of the model (else of interp): what a sweep minimises."""
+    """The held-out pixels' NMSE (dB) of the model (else of interp), against half B's
+    measured field with count splitting: what a sweep minimises."""
     entry = metrics.field_entry("model") or metrics.field_entry("interp")
     if entry is None or entry.splits is None:
         return None
+    if entry.splits.heldout_measurement is not None:
+        return entry.splits.heldout_measurement.nmse_db
     return entry.splits.heldout_pixels.nmse_db
 
 

@@ -1,6 +1,8 @@
-"""The stages between the capture and the images: its phasor field (``transform``), the
+"""The stages between the capture and the images: its phasor field (``transform``; with
+count splitting half A's, half B's and the variance B's noise adds to it), the
 split and the field models fitted to its training samples (``fit``), and the fields that
-are imaged (``predict``: the true field, the raw samples and every model's prediction)."""
+are imaged (``predict``: the true field (half B's with count splitting), the raw samples,
+half A's full field as the ceiling (count splitting) and every model's prediction)."""
 
 from __future__ import annotations
 
@@ -30,6 +32,7 @@ from nlosfw.transform import frequencies as frequencies_module
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 from nlosfw.transform.frequencies import warn_aliasing
+from nlosfw.transform.noise_floor import field_variance
 
 
 def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
@@ -53,11 +56,16 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
         if capture.clean is not None and capture.clean_key is not None:
             clean = cached_field(capture.clean, capture.clean_key)[0]
         _warn_aliasing(field)
+        score = variance = None
+        if capture.thinning is not None and capture.score_key is not None:
+            score = cached_field(capture.thinning.b, capture.score_key)[0]
+            variance = field_variance(planned.plugin, capture.thinning.b, planned.name)
     run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
                         + (" (cached)" if hit else ""))
     run.files.write("phasor_field", lambda p: write_phasor_field(p, field),
                     keep_as=Artefact.phasor_field)
-    return TransformResult(field=field, cache_hit=hit, clean=clean, plugin=planned.name)
+    return TransformResult(field=field, cache_hit=hit, clean=clean, plugin=planned.name,
+                           score=score, score_variance=variance)
 
 
 def fit_stage(run: StageContext, done: StageResults) -> FitResult:
@@ -83,7 +91,8 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
 def predict_stage(run: StageContext, done: StageResults) -> ImagedFields:
     """The fields to image: true, raw (training samples, all frequencies), every model's
     prediction of the full field; written as ``fields/<source>.hdf5`` (``output.keep``)."""
-    field = required(done.transform, "transform").field
+    transformed = required(done.transform, "transform")
+    field = transformed.field
     fitted = required(done.fit, "fit")
     predicted, seconds = {}, {}
     for index, fm in enumerate(fitted.models):
@@ -95,8 +104,9 @@ def predict_stage(run: StageContext, done: StageResults) -> ImagedFields:
         seconds[fm.source] = round(time.perf_counter() - start, 4)
     run.events.progress("predict", len(fitted.models), len(fitted.models),
                         ", ".join(fm.plugin for fm in fitted.models))
-    fields = ImagedFields(true=field, raw=fitted.split.raw_field(field), predicted=predicted,
-                          seconds=seconds)
+    fields = ImagedFields(true=transformed.reference, raw=fitted.split.raw_field(field),
+                          predicted=predicted, seconds=seconds,
+                          ceiling=None if transformed.score is None else field)
     for source, f in fields.items():
         run.files.write(f"fields/{source}.hdf5", partial(write_phasor_field, field=f),
                         kind="phasor_field", keep_as=Artefact.fields)

@@ -10,17 +10,20 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.scores import reconstruction_scores
+from nlosfw.model.heldout import HeldoutMeasurement, heldout_measurement
 from nlosfw.model.protocol import FieldSplit, SpatialPattern
 from nlosfw.pipeline.metrics import (
     CaptureMetrics,
     DenoisingMetrics,
     FieldMetrics,
     FitMetrics,
+    HeldoutMeasurementMetrics,
     ImageScores,
     PreprocessingStep,
     ReconstructionMetrics,
     SingleFrequencyMetrics,
     SplitMetrics,
+    ThinningMetrics,
     TransformMetrics,
 )
 from nlosfw.pipeline.results import CaptureResult, FittedModel, Reconstructions, TransformResult
@@ -28,8 +31,13 @@ from nlosfw.transform.field import PhasorField
 
 
 def capture_metrics(result: CaptureResult) -> CaptureMetrics:
-    """Where the capture came from, its preprocessing, its shape, timing and total signal."""
+    """Where the capture came from, its preprocessing, its shape, timing and total signal
+    (of half A with count splitting)."""
     capture = result.capture
+    halves = result.thinning
+    thinning = None if halves is None else ThinningMetrics(
+        seed=halves.seed, count_scale=halves.count_scale, counts_a=halves.counts_a,
+        counts_b=halves.counts_b)
     return CaptureMetrics(
         source=result.source,
         path=None if result.path is None else str(result.path),
@@ -40,7 +48,7 @@ def capture_metrics(result: CaptureResult) -> CaptureMetrics:
         shape=tuple(int(n) for n in capture.H.shape), kind=capture.kind,
         delta_t=float(capture.delta_t), t_start=float(capture.t_start),
         total=float(np.sum(capture.H, dtype=np.float64)),
-        noise=capture.scene_info.get("noise"))
+        noise=capture.scene_info.get("noise"), thinning=thinning)
 
 
 def truth_depth_image(capture: Capture) -> np.ndarray | None:
@@ -98,6 +106,18 @@ def denoising_metrics(clean: PhasorField, noisy: PhasorField,
     noisy_error, model_error = rel(noisy), rel(predicted)
     return DenoisingMetrics(noisy_relative_l2=noisy_error, relative_l2=model_error,
                             gain_db=float(20 * np.log10(noisy_error / model_error)))
+
+
+def heldout_measurement_metrics(predicted: PhasorField, measured: PhasorField,
+                                variance: np.ndarray, split: FieldSplit
+                                ) -> HeldoutMeasurementMetrics:
+    """Count splitting: a prediction's error at the held-out wall points against half B's
+    field, its noise floor and the excess (:func:`nlosfw.model.heldout.heldout_measurement`)."""
+    score = heldout_measurement(predicted.values, measured.values, variance, split.spatial_mask)
+    db = HeldoutMeasurement.db
+    return HeldoutMeasurementMetrics(nmse_db=db(score.error), floor_db=db(score.floor),
+                                     excess_db=db(score.excess), excess=score.excess,
+                                     n_samples=score.n_samples)
 
 
 def image_scores(recons: Mapping[str, Reconstruction],

@@ -34,9 +34,14 @@ from nlosfw.common.typed_json import (
 )
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[5]
+SchemaVersion = Literal[6]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 5
+SCHEMA_VERSION: Final[SchemaVersion] = 6
+
+#: Older versions :meth:`RunMetrics.from_json` still reads: each later version only added
+#: optional keys (6: count splitting, ``capture.thinning`` and
+#: ``field.*.splits.heldout_measurement``), so such a file reads as this version.
+READABLE_VERSIONS: Final = (5, 6)
 
 Status = Literal["running", "completed", "stopped", "failed", "interrupted"]
 """``running`` only while the run is in progress: metrics.json is written when it ends.
@@ -86,6 +91,16 @@ class PreprocessingStep(Document, frozen=True, kw_only=True):
     effect: Annotated[str, doc("what it did, in words")]
 
 
+class ThinningMetrics(Document, frozen=True, kw_only=True):
+    """Count splitting: every bin's count n split into Binomial(n, 1/2) (half A, which the
+    models train on) and the rest (half B, which every score uses)."""
+
+    seed: Annotated[int, doc("split.thinning_seed")]
+    count_scale: Annotated[float, doc("photon counts per unit of H (1: a file's raw counts)")]
+    counts_a: Annotated[int, doc("photon counts in half A")]
+    counts_b: Annotated[int, doc("photon counts in half B")]
+
+
 class CaptureMetrics(Document, frozen=True, kw_only=True):
     """The capture: where it came from, how it was preprocessed, its shape, timing and
     total signal (after preprocessing)."""
@@ -105,6 +120,8 @@ class CaptureMetrics(Document, frozen=True, kw_only=True):
     total: Annotated[float, doc("sum of H")]
     noise: Annotated[Absent[Any], doc(
         "the noise the capture carries, as its scene_info records it")] = None
+    thinning: Annotated[Absent[ThinningMetrics], doc(
+        "count splitting (split.thinning): the capture above is half A")] = None
 
 
 class TransformMetrics(Document, frozen=True, kw_only=True):
@@ -162,8 +179,24 @@ class ErrorMetrics(Document, frozen=True, kw_only=True):
     n_samples: int
 
 
+class HeldoutMeasurementMetrics(Document, frozen=True, kw_only=True):
+    """Count splitting: the prediction at the wall points not kept against half B's measured
+    field there, over the whole band, as ratios to B's power there in dB (10 log10)."""
+
+    nmse_db: Annotated[float | None, doc("the error: sum |P^ - P_B|^2 / sum |P_B|^2")]
+    floor_db: Annotated[float | None, doc(
+        "the noise floor, the error of a perfect predictor: the variance B's Poisson noise "
+        "adds to its field (through the transform) / sum |P_B|^2")]
+    excess_db: Annotated[float | None, doc(
+        "the error minus the floor (linear units, then dB): the error against B's "
+        "noise-free field; null when the error is within the floor")]
+    excess: Annotated[float, doc("the error minus the floor as a ratio (may be <= 0)")]
+    n_samples: Annotated[int, doc("held-out samples (points x frequencies)")]
+
+
 class SplitErrors(Document, frozen=True, kw_only=True):
-    """A prediction's errors on the sets of the thesis's protocol."""
+    """A prediction's errors on the sets of the thesis's protocol (against half B's field
+    with count splitting)."""
 
     heldout_pixels: Annotated[ErrorMetrics, doc("wall samples never trained on, at training "
                                                 "frequencies")]
@@ -171,15 +204,21 @@ class SplitErrors(Document, frozen=True, kw_only=True):
     all: Annotated[ErrorMetrics, doc("every sample")]
     heldout_pixels_inside: Annotated[ErrorMetrics, doc("held-out pixels inside the training "
                                                        "grid's bounding box")]
+    heldout_measurement: Annotated[Absent[HeldoutMeasurementMetrics], doc(
+        "count splitting: the held-out measurement error, its noise floor and the excess "
+        "(the primary score on measured data)")] = None
 
     @classmethod
-    def of(cls, errors: Mapping[str, Mapping[str, Any]]) -> "SplitErrors":
-        """From :func:`nlosfw.model.field_metrics`'s result."""
-        return cls(**{name: ErrorMetrics(**values) for name, values in errors.items()})
+    def of(cls, errors: Mapping[str, Mapping[str, Any]],
+           heldout: HeldoutMeasurementMetrics | None = None) -> "SplitErrors":
+        """From :func:`nlosfw.model.field_metrics`'s result (and count splitting's score)."""
+        return cls(**{name: ErrorMetrics(**values) for name, values in errors.items()},
+                   heldout_measurement=heldout)
 
     def by_set(self) -> dict[str, ErrorMetrics]:
         """The errors by set name, in declaration order."""
-        return {name: getattr(self, name) for name in self.__struct_fields__}
+        return {name: value for name in self.__struct_fields__
+                if isinstance(value := getattr(self, name), ErrorMetrics)}
 
 
 class DenoisingMetrics(Document, frozen=True, kw_only=True):
@@ -207,7 +246,8 @@ class FieldMetrics(Document, frozen=True, kw_only=True):
 
 
 class ImageScores(Document, frozen=True, kw_only=True):
-    """A reconstruction against the full capture's (source ``true``), on amplitudes (the
+    """A reconstruction against the full capture's (source ``true``; with count splitting
+    half B's full scan, and source ``ceiling`` is half A's full scan), on amplitudes (the
     square root of the intensity) each normalised to its maximum, with scikit-image's
     PSNR and SSIM at their defaults (null where undefined: PSNR of identical images,
     SSIM of images under 7 pixels a side)."""
@@ -295,10 +335,13 @@ class RunMetrics(Document, frozen=True, kw_only=True):
     def from_json(cls, data: object, where: str = "") -> "RunMetrics":
         """Metrics from the JSON object of a metrics.json of this :data:`SCHEMA_VERSION`."""
         version = data.get("schema_version") if isinstance(data, dict) else None
-        if isinstance(data, dict) and version != SCHEMA_VERSION:
+        if isinstance(data, dict) and version not in READABLE_VERSIONS:
             raise DataError(f"{where + ': ' if where else ''}schema_version is {version!r}; this "
-                            f"nlosfw reads version {SCHEMA_VERSION} (written by another nlosfw "
-                            "version: rerun it, or read it with the version that wrote it)")
+                            f"nlosfw reads versions {', '.join(map(str, READABLE_VERSIONS))} "
+                            "(written by another nlosfw version: rerun it, or read it with the "
+                            "version that wrote it)")
+        if isinstance(data, dict) and version != SCHEMA_VERSION:
+            data = {**data, "schema_version": SCHEMA_VERSION}  # later versions only add keys
         return from_json(cls, data, where)
 
     @classmethod

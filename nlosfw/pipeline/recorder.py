@@ -15,6 +15,7 @@ from nlosfw.pipeline.measure import (
     capture_metrics,
     denoising_metrics,
     fit_metrics,
+    heldout_measurement_metrics,
     reconstruction_metrics,
     split_metrics,
     transform_metrics,
@@ -82,12 +83,15 @@ class MetricsRecorder:
         """Every model's field errors against the full field (and denoising gains)."""
         if self._transform is None or self._split is None or self.metrics.field is None:
             raise ValueError("predictions are recorded after the transform and fit stages")
-        true, clean = self._transform.field, self._transform.clean
+        true, clean = self._transform.reference, self._transform.clean
+        variance = self._transform.score_variance
         entries: dict[str, FieldMetrics] = dict(self.metrics.field)
         for source, prediction in fields.predicted.items():
+            heldout = (None if variance is None else heldout_measurement_metrics(
+                prediction, true, variance, self._split))
             entries[source] = replace(
                 entries[source], predict_seconds=fields.seconds.get(source),
-                splits=SplitErrors.of(field_metrics(true, prediction, self._split)),
+                splits=SplitErrors.of(field_metrics(true, prediction, self._split), heldout),
                 denoising=(None if clean is None
                            else denoising_metrics(clean, true, prediction)))
         self.metrics = replace(self.metrics, field=entries)

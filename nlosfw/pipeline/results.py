@@ -25,6 +25,7 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.preprocess import AppliedStep
+from nlosfw.capture.thinning import ThinnedCapture
 from nlosfw.common.errors import DataError
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.model.interface import FieldModel, FitReport
@@ -73,10 +74,17 @@ class CaptureResult:
     """Whether the simulated capture came from the cache."""
     clean: Capture | None = None
     clean_key: str | None = None
+    thinning: ThinnedCapture | None = None
+    """Count splitting (``split.thinning``): ``capture`` is half A (the models train on it),
+    ``thinning.b`` is half B (cached under ``score_key``: every score uses it), and ``clean``
+    is the noise-free capture at half the exposure."""
+    score_key: str | None = None
 
     def __post_init__(self) -> None:
         if (self.clean is None) != (self.clean_key is None):
             raise ValueError("CaptureResult: clean and clean_key come together")
+        if (self.thinning is None) != (self.score_key is None):
+            raise ValueError("CaptureResult: thinning and score_key come together")
         if (self.source == "file") != (self.path is not None and self.format is not None):
             raise ValueError("CaptureResult: a path and a format exactly when the source is a "
                              "file")
@@ -97,6 +105,17 @@ class TransformResult:
     clean: PhasorField | None = None
     plugin: str = ""
     """The transform plugin that made ``field``."""
+    score: PhasorField | None = None
+    """Count splitting: the field of half B (``field`` is half A's), which every score uses."""
+    score_variance: np.ndarray | None = None
+    """Count splitting: the variance B's Poisson noise adds to each sample of ``score``
+    (F, Y, X) (:func:`nlosfw.transform.noise_floor.field_variance`)."""
+
+    @property
+    def reference(self) -> PhasorField:
+        """The field scores are measured against: half B's with count splitting, else
+        ``field``."""
+        return self.field if self.score is None else self.score
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,17 +151,24 @@ class ImagedFields:
     """Predictions of the full field by source, in the order the models were fitted."""
     seconds: Mapping[str, float] = dataclasses.field(default_factory=dict)
     """Time each prediction took, by source."""
+    ceiling: PhasorField | None = None
+    """Count splitting: half A's full field (``true`` is half B's); scored against ``true``
+    it is the ceiling of what a model trained on A can reach."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "predicted", _frozen_mapping(self.predicted))
         object.__setattr__(self, "seconds", _frozen_mapping(self.seconds))
-        if {"true", "raw"} & set(self.predicted):
-            raise ValueError("ImagedFields: 'true' and 'raw' are not prediction sources")
+        if {"true", "raw", "ceiling"} & set(self.predicted):
+            raise ValueError("ImagedFields: 'true', 'raw' and 'ceiling' are not prediction "
+                             "sources")
 
     def items(self) -> Iterator[tuple[str, PhasorField]]:
-        """(source, field) for every field: true, raw, then the predictions."""
+        """(source, field) for every field: true, raw, the ceiling (count splitting), then
+        the predictions."""
         yield "true", self.true
         yield "raw", self.raw
+        if self.ceiling is not None:
+            yield "ceiling", self.ceiling
         yield from self.predicted.items()
 
     def by_source(self) -> Mapping[str, PhasorField]:

@@ -21,10 +21,10 @@ from nlosfw.simulate.scene import Scene
 
 #: The config groups that select a scene or a plugin (plus presets and acquisitions).
 SELECTOR_GROUPS = ("scene", "simulator", "transform", "model", "imager", "experiment",
-                   "acquisition")
+                   "acquisition", "sampling")
 
 #: The selector groups whose choice may be null (nothing selected).
-OPTIONAL_GROUPS = ("experiment", "acquisition")
+OPTIONAL_GROUPS = ("experiment", "acquisition", "sampling")
 
 #: The ``model`` choice that fits no field model: the run images the capture alone (no
 #: split, no fit, no prediction, no field scores); ``python -m nlosfw image FILE`` selects it.
@@ -63,6 +63,15 @@ class SplitSettings:
     """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
     spectral_fraction: float = 0.1
     """The fraction of the frequencies held out (``interleaved``: every 1/fraction-th)."""
+    thinning: bool = False
+    """Count splitting: split every bin's photon count n into Binomial(n, 1/2) (capture A)
+    and the rest (B), two independent Poisson captures of half the exposure; the models
+    train on A's kept wall points, every score uses B (the held-out measurement error and
+    its noise floor; reconstructions against B's full scan, with A's full scan as the
+    ceiling). Needs raw integer counts (no capture.background); approximate under dead
+    time and pile-up; assumes equal dwell per scan point."""
+    thinning_seed: int = 0
+    """The seed of the binomial split (count splitting)."""
 
     def __post_init__(self) -> None:
         require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
@@ -210,7 +219,10 @@ class RunSettings:
     """Reference numbers of a thesis experiment preset, reported next to ours."""
 
     def __post_init__(self) -> None:
-        reserved = {"true", "raw", "model", "interp"}
+        require(not (self.split.thinning and self.capture.background), "split.thinning",
+                "count splitting needs raw photon counts; a background subtraction "
+                "(capture.background) makes them non-integer: drop one of the two")
+        reserved = {"true", "raw", "model", "interp", "ceiling"}
         for label, options in self.compare.items():
             require(label not in reserved and label.isidentifier(), f"compare.{label}",
                     f"labels must be identifiers other than {', '.join(sorted(reserved))}")

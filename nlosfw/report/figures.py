@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
 _SOURCE_TITLES = {"true": "true field", "raw": "raw (training samples)",
-                  "interp": "interp baseline"}
+                  "interp": "interp baseline", "ceiling": "ceiling (half A's full scan)"}
 
 
 #: The viewpoint of every reconstruction image, stated on the figures.

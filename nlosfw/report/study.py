@@ -10,6 +10,12 @@ seeds: mean, standard deviation (n - 1), minimum and maximum of each score.
 :func:`study_figure` plots them against the undersampling factor, one panel row per
 condition, one line per series.
 
+With count splitting (``split.thinning``, the real-data study ``experiment=sparsity_real``)
+every field model also has its held-out measurement error, noise floor and excess
+(:data:`FIELD_SCORES`), the reconstructions are scored against half B's full scan, and
+``ceiling`` (half A's full scan) is a baseline; ``split.thinning_seed`` is then the seed of
+every row, and the ``sampling`` group only sets the pattern.
+
 Overrides decide what separates runs: ``model.seed`` (and ``compare.<label>.seed``)
 are the seeds; other ``model.*`` overrides are options of the model (a separate
 series); ``split.spatial_step``, ``split.pattern``, ``split.spatial_fraction`` and
@@ -37,15 +43,22 @@ if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.typing import ColorType
 
-#: The scores aggregated, in order (attributes of :class:`~nlosfw.pipeline.metrics.ImageScores`).
+#: The reconstruction scores aggregated, in order (attributes of
+#: :class:`~nlosfw.pipeline.metrics.ImageScores`).
 SCORES = ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m")
 
-#: Sources that are not field models: the reference, the samples imaged directly, interp.
-BASELINES = ("true", "raw", "interp")
+#: Count splitting's field scores (``field.<source>.splits.heldout_measurement``): the
+#: held-out measurement error, its noise floor and the excess, in dB.
+FIELD_SCORES = ("heldout_excess_db", "heldout_nmse_db", "heldout_floor_db")
+
+#: Sources that are not field models: the reference, the ceiling (count splitting: half
+#: A's full scan), the samples imaged directly, interp.
+BASELINES = ("true", "ceiling", "raw", "interp")
 
 #: Override keys that the metrics already describe (scene, acquisition) or that run the
 #: sweep (experiment, hydra): never part of a condition's label.
-_DESCRIBED = re.compile(r"^(scene|acquisition|simulator|experiment|capture\.path|stop_after|"
+_DESCRIBED = re.compile(r"^(scene|acquisition|sampling|simulator|experiment|capture\.path|"
+                        r"stop_after|split\.thinning|split\.thinning_seed|"
                         r"scene\.noise\.model|hydra\..*|figures\..*|cache\..*|output\..*)$")
 
 
@@ -155,13 +168,18 @@ def study_rows(records: Sequence[RunRecord]) -> list[StudyRow]:
     rows = []
     for (condition, pattern, under, samples, series, kind), members in groups.items():
         scores = [m.image_scores(source) for m, source in members]
-        seeds = sorted({entry.seed for m, source in members
-                        if (entry := m.field_entry(source)) is not None
-                        and entry.seed is not None}) if kind == "model" else []
+        thinning = [m.capture.thinning.seed for m, _ in members
+                    if m.capture is not None and m.capture.thinning is not None]
+        seeds = sorted(set(thinning)) if thinning else sorted(
+            {entry.seed for m, source in members
+             if (entry := m.field_entry(source)) is not None
+             and entry.seed is not None}) if kind == "model" else []
+        stats = {name: Stat.of([_score(s, name) for s in scores]) for name in SCORES}
+        stats.update({name: Stat.of([_field_score(m, source, name) for m, source in members])
+                      for name in FIELD_SCORES})
         rows.append(StudyRow(
             condition=condition, pattern=pattern, undersampling=under, train_samples=samples,
-            series=series, kind=kind, runs=len(members), seeds=tuple(seeds),
-            scores={name: Stat.of([_score(s, name) for s in scores]) for name in SCORES}))
+            series=series, kind=kind, runs=len(members), seeds=tuple(seeds), scores=stats))
     order = {"reference": 0, "baseline": 1, "model": 2}
     rows.sort(key=lambda r: (r.condition, r.pattern, r.undersampling, order[r.kind],
                              BASELINES.index(r.series) if r.kind != "model" else 0, r.series))
@@ -170,6 +188,13 @@ def study_rows(records: Sequence[RunRecord]) -> list[StudyRow]:
 
 def _score(scores: ImageScores | None, name: str) -> float | None:
     return None if scores is None else getattr(scores, name)
+
+
+def _field_score(metrics: RunMetrics, source: str, name: str) -> float | None:
+    """A held-out measurement score (``heldout_<key>``) of one source, if it has one."""
+    entry = metrics.field_entry(source)
+    held = None if entry is None or entry.splits is None else entry.splits.heldout_measurement
+    return None if held is None else getattr(held, name.removeprefix("heldout_"))
 
 
 def _key(override: str) -> str:
@@ -200,13 +225,21 @@ _TABLE = (("PSNR (dB)", "psnr", 1, 1.0), ("SSIM", "ssim", 3, 1.0),
           ("depth RMSE (mm)", "depth_rmse_m", 1, 1000.0))
 
 
+#: Columns of count splitting's scores, shown when a row has them.
+_FIELD_TABLE = (("held-out excess (dB)", "heldout_excess_db", 1, 1.0),
+                ("held-out NMSE (dB)", "heldout_nmse_db", 1, 1.0),
+                ("noise floor (dB)", "heldout_floor_db", 1, 1.0))
+
+
 def study_table(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[str]]]:
-    """(header, cells) of the study's markdown table: mean ± std over seeds."""
-    header = ["condition", "sparsity", "source", "runs", "seeds", *[h for h, *_ in _TABLE]]
+    """(header, cells) of the study's markdown table: mean ± std over seeds (with count
+    splitting, the held-out excess, error and floor first)."""
+    columns = tuple(c for c in _FIELD_TABLE if any(r.scores[c[1]].n for r in rows)) + _TABLE
+    header = ["condition", "sparsity", "source", "runs", "seeds", *[h for h, *_ in columns]]
     cells = [[r.condition, r.sparsity, r.series, str(r.runs),
               ",".join(str(s) for s in r.seeds) or "-",
               *[_reference_cell(r, name) or _cell(r.scores[name], digits, scale)
-                for _, name, digits, scale in _TABLE]]
+                for _, name, digits, scale in columns]]
              for r in rows]
     return header, cells
 
@@ -220,13 +253,13 @@ def study_csv_rows(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[Scala
     """(header, values) of study.csv: every statistic of every score."""
     header = ["condition", "pattern", "undersampling", "train_samples", "series", "kind", "runs",
               "seeds"]
-    for name in SCORES:
+    for name in (*SCORES, *FIELD_SCORES):
         header += [f"{name}_{stat}" for stat in ("mean", "std", "min", "max")]
     values = []
     for r in rows:
         line: list[Scalar] = [r.condition, r.pattern, f"{r.undersampling:.6g}", r.train_samples,
                            r.series, r.kind, r.runs, " ".join(str(s) for s in r.seeds)]
-        for name in SCORES:
+        for name in (*SCORES, *FIELD_SCORES):
             s = r.scores[name]
             line += ["" if v is None else f"{v:.6g}" for v in (s.mean, s.std, s.min, s.max)]
         values.append(line)
@@ -235,11 +268,13 @@ def study_csv_rows(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[Scala
 
 # ---------------------------------------------------------------------- figure
 #: Panels of the figure: (score, axis label, scale of the plotted values).
-_PANELS = (("psnr", "PSNR of the front view (dB)", 1.0),
+_PANELS = (("heldout_excess_db", "held-out excess error (dB)", 1.0),
+           ("psnr", "PSNR of the front view (dB)", 1.0),
            ("ssim", "SSIM of the front view", 1.0),
            ("depth_rmse_m", "depth RMSE (mm)", 1000.0))
 _STYLE = {"raw": {"color": "0.45", "linestyle": "--", "marker": "s"},
           "interp": {"color": "black", "linestyle": ":", "marker": "^"},
+          "ceiling": {"color": "tab:purple", "linestyle": "-.", "marker": "v"},
           "true": {"color": "tab:green", "linestyle": "-.", "marker": ""}}
 
 
@@ -299,6 +334,8 @@ def _plot_series(ax: Axes, line: Sequence[StudyRow], panel: tuple[str, float],
         style = _STYLE[first.series]
         if first.series == "true":
             name = "true (full capture)"
+        elif first.series == "ceiling":
+            name = "ceiling (half A's full scan)"
         ax.plot(x, mean, label=name, linewidth=1.2, markersize=4, color=style["color"],
                 linestyle=style["linestyle"], marker=style["marker"])
         return
