@@ -20,7 +20,12 @@ from typing import Any
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.pipeline.files import PLANNED_NAMES
-from nlosfw.pipeline.lifecycle import HYDRA_FILES, inspect_run_dir, verdict
+from nlosfw.pipeline.lifecycle import (
+    HYDRA_FILES,
+    check_outside_cache,
+    inspect_run_dir,
+    verdict,
+)
 
 log = logging.getLogger(__name__)
 
@@ -48,9 +53,10 @@ def check_output_dirs(compose: Compose, overrides: Sequence[str], first: Sequenc
     except OmegaConfBaseException:  # resolved by Hydra at run time only: the job checks
         return
     _check_writable(where, key)
+    plain = OmegaConf.to_container(compose(list(first), False), resolve=True,
+                                   enum_to_str=True)
+    check_outside_cache(where, plain, key)  # type: ignore[arg-type]
     if not multirun:
-        plain = OmegaConf.to_container(compose(list(first), False), resolve=True,
-                                       enum_to_str=True)
         overwrite = bool(OmegaConf.select(cfg, "output.overwrite", default=False))
         earlier = inspect_run_dir(where, (*PLANNED_NAMES, *HYDRA_FILES))  # Hydra's too
         verdict(where, earlier, plain, overwrite=overwrite, resume=False)  # type: ignore[arg-type]

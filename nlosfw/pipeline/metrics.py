@@ -24,6 +24,7 @@ from typing import Any, Final, Literal
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import DataError
+from nlosfw.common.files import is_regular_file
 from nlosfw.common.typed_json import documented, from_json, json_schema, optional, outline, to_json
 from nlosfw.model.interface import FitReport
 
@@ -307,6 +308,9 @@ class RunMetrics:
     @classmethod
     def read(cls, path: Path) -> RunMetrics:
         """Read a metrics.json; a one-line :class:`DataError` names the file and the problem."""
+        if Path(path).exists() and not is_regular_file(path):
+            raise DataError(f"{path}: not a regular file (a FIFO, a device or a directory); "
+                            "it is not read")
         try:
             data = json.loads(Path(path).read_text(encoding="utf-8"))
         except (OSError, UnicodeDecodeError, ValueError) as err:
