@@ -69,10 +69,22 @@ def check_output_dirs(compose: Compose, overrides: Sequence[str], first: Sequenc
                          bool(OmegaConf.select(cfg, "output.overwrite", default=False)))
 
 
+#: The longest name of one file or folder most file systems accept (bytes).
+NAME_MAX = 255
+
+
 def _check_writable(path: Path, option: str) -> None:
-    """Refuse a location whose nearest existing folder cannot be written."""
+    """Refuse a location with a name too long, a link to nowhere, or whose nearest existing
+    folder cannot be written."""
+    for part in path.parts:
+        if len(os.fsencode(part)) > NAME_MAX:
+            raise ConfigError(option, f"the name {part[:40]}... is longer than {NAME_MAX} "
+                              "bytes, more than file systems accept")
     target = path
     while not target.exists() and target != target.parent:
+        if target.is_symlink():
+            raise ConfigError(option, f"{target} is a link to {os.readlink(target)}, which "
+                              "does not exist; remove the link or choose another directory")
         target = target.parent
     if not target.is_dir():
         raise ConfigError(option, f"{target} is not a directory")
