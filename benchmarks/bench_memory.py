@@ -54,8 +54,17 @@ def estimate(overrides: tuple[str, ...]) -> float:
     config = compose_run_config(list(overrides), host)
     forced = (config.get("capture") or {}).get("format")
     formats = host.capture_formats()
-    parts = estimate_memory(config, lambda path: file_transient_shape(path, forced, formats))
+    parts = estimate_memory(config, lambda path: file_transient_shape(path, forced, formats),
+                            program=True)
     return sum(p.nbytes for p in parts)
+
+
+def estimate_in_child(name: str) -> float:
+    """:func:`estimate` of configuration ``name`` in a fresh process (whose resident memory,
+    counted as the program's, is then a run's: nothing else loaded)."""
+    done = subprocess.run([sys.executable, __file__, "--estimate", name], capture_output=True,
+                          text=True, check=True)
+    return float(done.stdout.split()[-1])
 
 
 #: Runs the command given to it and prints its peak RSS (KiB): each run measured alone.
@@ -81,7 +90,11 @@ def measure(overrides: tuple[str, ...]) -> tuple[float, float, int]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--only", nargs="*", choices=sorted(CONFIGS), default=None)
+    parser.add_argument("--estimate", choices=sorted(CONFIGS), help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.estimate:
+        print(estimate(CONFIGS[args.estimate][0]))
+        return 0
     rows = []
     for name, (overrides, real) in CONFIGS.items():
         if args.only and name not in args.only:
@@ -89,7 +102,7 @@ def main() -> int:
         if real and not REAL.exists():
             print(f"{name}: skipped ({REAL} is absent)")
             continue
-        est = estimate(overrides)
+        est = estimate_in_child(name)
         peak, seconds, status = measure(overrides)
         ratio = peak / est if est else float("inf")
         rows.append({"name": name, "overrides": list(overrides), "estimate_bytes": est,
