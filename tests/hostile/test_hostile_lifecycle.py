@@ -123,3 +123,20 @@ def test_two_threads_run_at_once(tmp_path, monkeypatch):
         assert not isinstance(out, Exception), repr(out)
         assert out.metrics.status == "stopped"
         assert json.loads(Path(out.dir, "metrics.json").read_text())["status"] == "stopped"
+
+
+def test_enospc_in_hydras_own_writes_is_one_line(workdir, tools, monkeypatch):
+    import errno
+
+    from hydra.core import utils
+
+    def full(cfg, filename, output_dir):
+        path = Path(output_dir) / filename
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(utils, "_save_config", full)
+    run = workdir / "run"
+    result = tools.run(*CAPTURE_ONLY, f"hydra.run.dir={run}")
+    assert result.returncode == 1, result.stderr
+    assert tools.one_error_line(result).startswith(
+        f"error: {run / '.hydra' / 'config.yaml'}: no space left on device")
