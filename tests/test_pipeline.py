@@ -194,16 +194,16 @@ def test_corrupt_cache_entries_are_recomputed(tmp_path):
         calls.append(1)
         return capture
 
-    first, hit = cache.get_or_compute("captures", "k", compute, write_capture, read_capture)
+    first, hit = cache.get_or_compute("captures", "0" * 64, compute, write_capture, read_capture)
     assert not hit and len(calls) == 1
-    again, hit = cache.get_or_compute("captures", "k", compute, write_capture, read_capture)
+    again, hit = cache.get_or_compute("captures", "0" * 64, compute, write_capture, read_capture)
     assert hit and len(calls) == 1
     np.testing.assert_array_equal(again.H, capture.H)
-    entry = tmp_path / "captures" / "k.hdf5"
+    entry = tmp_path / "captures" / f"{'0' * 64}.hdf5"
     data = bytearray(entry.read_bytes())
     data[len(data) // 2] ^= 0xFF                      # flip one byte
     entry.write_bytes(bytes(data))
-    healed, hit = cache.get_or_compute("captures", "k", compute, write_capture, read_capture)
+    healed, hit = cache.get_or_compute("captures", "0" * 64, compute, write_capture, read_capture)
     assert not hit and len(calls) == 2
     np.testing.assert_array_equal(healed.H, capture.H)
 

@@ -25,9 +25,11 @@ from typing import TYPE_CHECKING
 
 from hydra.experimental.callback import Callback
 
-from nlosfw.cli.errors import report_user_error
+from nlosfw.cli.errors import report_user_error, unexpected_error
 from nlosfw.cli.reporter import ConsoleReporter
 from nlosfw.common.errors import ConfigError, NlosfwError, one_line
+from nlosfw.common.files import storage_error
+from nlosfw.common.logs import FILE_ONLY
 from nlosfw.common.resources import config_dir
 from nlosfw.compose import (
     composition_error,
@@ -54,6 +56,7 @@ def main(argv: Sequence[str]) -> int:
     from omegaconf.errors import OmegaConfBaseException
 
     argv = normalise_overrides(argv)
+    check_override_shapes(argv)
     for arg in argv:
         if arg.split("=", 1)[0] in REFUSED_FLAGS:
             raise ConfigError("", f"{arg.split('=', 1)[0]} is not supported: it unpickles a "
@@ -75,7 +78,40 @@ def main(argv: Sequence[str]) -> int:
         if _raised_in_a_job(err):
             raise
         raise ConfigError("", f"command line: {one_line(err, whole=True)}") from None
+    except OSError as err:  # Hydra's own writes (.hydra/, run.log): a full disk, a bad name
+        if _raised_in_a_job(err):
+            raise
+        where = Path(str(err.filename or "hydra.run.dir"))
+        raise (storage_error(where, err) or ConfigError(
+            "hydra.run.dir", f"{where}: {err.strerror or one_line(err)}")) from None
+    except RecursionError:  # Hydra's parser on a deeply nested value
+        raise ConfigError("", "command line: an override is nested too deeply") from None
     return 0
+
+
+#: The deepest nesting of brackets and the most dotted parts an override may have.
+MAX_OVERRIDE_DEPTH = 32
+MAX_KEY_PARTS = 32
+
+
+def check_override_shapes(argv: Sequence[str]) -> None:
+    """Refuse (one line) an override nested deeper than :data:`MAX_OVERRIDE_DEPTH` or with
+    a key of more than :data:`MAX_KEY_PARTS` parts: Hydra's parser would recurse past
+    Python's limit, or look the key up as a file name too long for the system."""
+    for arg in argv:
+        if arg.startswith("-") or "=" not in arg:
+            continue
+        key, value = arg.split("=", 1)
+        if key.count(".") >= MAX_KEY_PARTS:
+            raise ConfigError("", f"command line: the key {key[:40]}... has more than "
+                                  f"{MAX_KEY_PARTS} dotted parts")
+        depth = deepest = 0
+        for char in value:
+            depth += (char in "[{(") - (char in "]})")
+            deepest = max(deepest, depth)
+        if deepest > MAX_OVERRIDE_DEPTH:
+            raise ConfigError(key.lstrip("+~"), f"its value is nested {deepest} levels deep; "
+                              f"at most {MAX_OVERRIDE_DEPTH} are allowed")
 
 
 def _raised_in_a_job(err: BaseException) -> bool:
@@ -144,6 +180,10 @@ def _task(cfg: DictConfig) -> float | None:
     except MemoryError as err:  # the estimate let it through: still one line
         report_user_error(NlosfwError(f"out of memory ({one_line(err)}); make the run "
                                       "smaller (the sizes, or fewer sweep jobs at once)"))
+        raise SystemExit(1) from None
+    except Exception as err:  # any other failure: one line, the traceback in run.log
+        log.error("the run failed:", exc_info=err, extra=FILE_ONLY)
+        report_user_error(unexpected_error(err))
         raise SystemExit(1) from None
 
 

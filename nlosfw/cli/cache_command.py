@@ -4,13 +4,16 @@
 recently used entries (all of them, or down to ``--keep-gb``), never one a running process
 is using, and removes temporary files left by processes that died. The cache directory
 is ``--dir``, else ``$NLOSFW_CACHE_DIR``, else ``~/.cache/nlosfw`` (``cache.dir``'s
-default). Mistakes end with one line and exit status 2; a directory that cannot be
+default). Only a directory the cache owns (its ``.nlosfw-cache`` marker, or an older cache
+whose files are all entries) is cleaned: ``clean`` pointed anywhere else removes nothing
+and says so. Mistakes end with one line and exit status 2; a directory that cannot be
 written, with one line and exit status 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
@@ -19,7 +22,14 @@ from rich.console import Console
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.files import format_bytes, storage_error
-from nlosfw.pipeline.cache import cache_info, clean_cache, default_cache_dir
+from nlosfw.pipeline.cache import (
+    MARKER_NAME,
+    cache_info,
+    claim,
+    clean_cache,
+    default_cache_dir,
+    owns,
+)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -51,6 +61,10 @@ def cache_command(argv: Sequence[str], console: Console | None = None) -> int:
     if root.exists() and not root.is_dir():
         raise ConfigError("--dir", f"{root} is not a directory")
     if args.action == "info":
+        if root.is_dir() and not owns(root) and not claim(root, adopt_only=True):
+            console.print(f"{_shown(root)} is not an nlosfw cache (no {MARKER_NAME} marker); "
+                          "it holds no entries")
+            return 0
         info = cache_info(root)
         console.print(f"cache {root}: {info.entries} entries, {format_bytes(info.nbytes)}")
         for kind, (n, size) in sorted(info.by_kind.items()):
@@ -59,12 +73,21 @@ def cache_command(argv: Sequence[str], console: Console | None = None) -> int:
             console.print(f"  {info.temporaries} temporary files of processes that died "
                           "(cache clean removes them)")
         return 0
-    if args.keep_gb < 0:
+    if not args.keep_gb >= 0:  # NaN too
         raise ConfigError("--keep-gb", f"must be >= 0, got {args.keep_gb}")
+    if root.is_dir() and not claim(root, adopt_only=True):
+        raise ConfigError("--dir", f"{_shown(root)} is not an nlosfw cache (no {MARKER_NAME} "
+                          "marker, and it holds files nlosfw did not write); nothing was removed")
+    keep = 1 << 62 if math.isinf(args.keep_gb) else int(args.keep_gb * 1e9)
     try:
-        removed, freed, busy = clean_cache(root, int(args.keep_gb * 1e9))
+        removed, freed, busy = clean_cache(root, keep)
     except OSError as err:
         raise (storage_error(root / "entry", err) or err) from None
     kept = f"; {busy} in use by running processes were kept" if busy else ""
     console.print(f"cache {root}: removed {removed} entries ({format_bytes(freed)}){kept}")
     return 0
+
+
+def _shown(path: Path) -> str:
+    """``path`` for a one-line message (control characters escaped)."""
+    return ascii(str(path))[1:-1] if not str(path).isprintable() else str(path)

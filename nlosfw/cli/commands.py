@@ -2,8 +2,9 @@
 image FILE [overrides...] | --debug | Hydra overrides...]``.
 
 Errors end with one line on stderr: exit status 2 for a mistake in the input or the
-configuration, 1 for a storage failure (a full disk); SIGINT and SIGTERM stop a run
-cleanly with 130 and 143.
+configuration, 1 for a storage failure (a full disk) or an unexpected failure (its
+traceback with ``--debug``); SIGINT, SIGTERM and SIGHUP stop a run cleanly with 130,
+143 and 129.
 """
 
 from __future__ import annotations
@@ -38,7 +39,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return err.exit_status
     except SystemExit as err:  # a Hydra job's exit status (its error already reported)
         return err.code if isinstance(err.code, int) else (0 if err.code is None else 1)
-    except BaseException as err:  # SIGINT, SIGTERM: one line; anything else goes on
+    except RecursionError:  # a config or override nested past Python's limit
+        report_user_error(NlosfwError("the configuration is nested too deeply"))
+        return 2
+    except Exception as err:  # anything else: one line (the traceback with --debug)
+        from nlosfw.cli.errors import unexpected_error
+
+        report_user_error(unexpected_error(err))
+        return 1
+    except BaseException as err:  # SIGINT, SIGTERM, SIGHUP: one line; anything else goes on
         interruption = as_interruption(err)
         if interruption is None:
             raise

@@ -8,7 +8,7 @@ import traceback
 
 from rich.console import Console
 
-from nlosfw.common.errors import RunInterrupted, one_line
+from nlosfw.common.errors import NlosfwError, RunInterrupted, one_line
 from nlosfw.common.text import console_text as escape
 
 log = logging.getLogger("nlosfw")
@@ -20,6 +20,17 @@ def report_user_error(err: BaseException) -> None:
     if os.environ.get("NLOSFW_DEBUG") == "1":
         console.print(escape("".join(traceback.format_exception(err))), end="")
     console.print(f"[bold red]error:[/] {escape(one_line(err, whole=True))}")
+
+
+def unexpected_error(err: BaseException) -> NlosfwError:
+    """An unexpected exception (a bug, a library's failure) as a one-line error with exit
+    status 1, naming its type and where the traceback is."""
+    failure = NlosfwError(f"{type(err).__name__}: {one_line(err, whole=True)} (an unexpected "
+                          "failure; the traceback is in run.log, or on the console with "
+                          "--debug)")
+    failure.exit_status = 1
+    failure.__traceback__ = err.__traceback__
+    return failure
 
 
 def report_interruption(err: RunInterrupted) -> None:

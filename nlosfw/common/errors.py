@@ -3,7 +3,7 @@
 Every subclass of :class:`NlosfwError` is reported by the command line as a
 single line (no traceback) with its ``exit_status``: 2 for input and configuration
 mistakes, 1 for a storage failure (a full disk). Anything else is a bug.
-:class:`RunInterrupted` is not an error: it is how SIGINT and SIGTERM stop a run.
+:class:`RunInterrupted` is not an error: it is how SIGINT, SIGTERM and SIGHUP stop a run.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ class StorageError(NlosfwError, OSError):
 
 
 class RunInterrupted(BaseException):
-    """SIGINT or SIGTERM arrived: stop, clean up and exit with 128 + the signal number.
+    """SIGINT, SIGTERM or SIGHUP arrived: stop, clean up and exit with 128 + the signal number.
 
     A :class:`BaseException` (like :class:`KeyboardInterrupt`) so that ``except
     Exception`` in a plugin does not swallow it.
@@ -91,5 +91,6 @@ class RunInterrupted(BaseException):
 
     @property
     def exit_status(self) -> int:
-        """128 + the signal number (130 for SIGINT, 143 for SIGTERM), as shells report."""
+        """128 + the signal number (130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP), as shells
+        report."""
         return 128 + self.signum

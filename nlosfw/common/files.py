@@ -30,6 +30,19 @@ _HEADROOM = 64 << 10
 TEMPORARY_NAME = re.compile(r"^\..+\.(?P<pid>\d+)\.[0-9a-f]{8}\.tmp(\.[^.]+)?$")
 
 
+def is_regular_file(path: str | Path, follow: bool = True) -> bool:
+    """Whether ``path`` is a regular file (a link followed unless not ``follow``), checked
+    without opening it: a FIFO, a device or a directory in a file's place is never opened
+    (opening a FIFO blocks until a writer comes)."""
+    import stat
+
+    try:
+        info = os.stat(path) if follow else os.lstat(path)
+    except (OSError, ValueError):
+        return False
+    return stat.S_ISREG(info.st_mode)
+
+
 def format_bytes(n: float) -> str:
     """``n`` bytes in a short human form: ``512 B``, ``1.5 MB`` (decimal units, as ``ls -h
     --si`` and file browsers show them)."""

@@ -27,6 +27,7 @@ import importlib
 import math
 import operator
 import re
+import threading
 import types
 from collections.abc import Mapping
 from typing import Any, TypeGuard, Union, get_args, get_origin, get_type_hints
@@ -61,9 +62,16 @@ def schema_class(cls: type, name: str | None = None) -> type:
 
     With ``name``, the twin starts with a field ``name`` defaulting to it (a plugin's
     entry in its Hydra config group: ``model: {name: siren_torch, ...}``). The same
-    arguments give the same class.
+    arguments give the same class, in every thread: the twins are made under a lock (two
+    threads making the same twin at once would each get a class of their own, and
+    OmegaConf would then refuse one as "X is not a subclass of X").
     """
-    return _twin(cls, name)
+    with _TWINS_LOCK:
+        return _twin(cls, name)
+
+
+#: Held while twins are made (re-entrant: a twin's fields make the twins of theirs).
+_TWINS_LOCK = threading.RLock()
 
 
 @functools.cache

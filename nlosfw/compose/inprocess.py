@@ -81,9 +81,9 @@ def compose_run_config(overrides: Sequence[str], host: PluginHost,
         if ov.key_or_group.split("/")[0].split(".")[0] == "hydra":
             raise ConfigError("overrides", f"{text!r}: Hydra's own settings do not apply here "
                               "(choose the run directory with output_dir=)")
-    register_configs(host)
-    ensure_resolvers()
-    with hydra_session():
+    with hydra_session():  # one thread at a time: Hydra's state is the process's
+        register_configs(host)
+        ensure_resolvers()
         preflight(overrides, host, config_name)
         try:
             cfg = compose(config_name=config_name, overrides=list(overrides))

@@ -20,7 +20,12 @@ from typing import TYPE_CHECKING
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.pipeline.files import PLANNED_NAMES
-from nlosfw.pipeline.lifecycle import HYDRA_FILES, inspect_run_dir, verdict
+from nlosfw.pipeline.lifecycle import (
+    HYDRA_FILES,
+    check_outside_cache,
+    inspect_run_dir,
+    verdict,
+)
 
 if TYPE_CHECKING:  # hydra and omegaconf are imported when a check runs
     from hydra.core.override_parser.types import Override
@@ -52,9 +57,10 @@ def check_output_dirs(compose: Compose, overrides: Sequence[str], first: Sequenc
     except OmegaConfBaseException:  # resolved by Hydra at run time only: the job checks
         return
     _check_writable(where, key)
+    plain = OmegaConf.to_container(compose(list(first), False), resolve=True,
+                                   enum_to_str=True)
+    check_outside_cache(where, plain, key)  # type: ignore[arg-type]
     if not multirun:
-        plain = OmegaConf.to_container(compose(list(first), False), resolve=True,
-                                       enum_to_str=True)
         overwrite = bool(OmegaConf.select(cfg, "output.overwrite", default=False))
         earlier = inspect_run_dir(where, (*PLANNED_NAMES, *HYDRA_FILES))  # Hydra's too
         verdict(where, earlier, plain, overwrite=overwrite, resume=False)  # type: ignore[arg-type]
@@ -67,10 +73,22 @@ def check_output_dirs(compose: Compose, overrides: Sequence[str], first: Sequenc
                          bool(OmegaConf.select(cfg, "output.overwrite", default=False)))
 
 
+#: The longest name of one file or folder most file systems accept (bytes).
+NAME_MAX = 255
+
+
 def _check_writable(path: Path, option: str) -> None:
-    """Refuse a location whose nearest existing folder cannot be written."""
+    """Refuse a location with a name too long, a link to nowhere, or whose nearest existing
+    folder cannot be written."""
+    for part in path.parts:
+        if len(os.fsencode(part)) > NAME_MAX:
+            raise ConfigError(option, f"the name {part[:40]}... is longer than {NAME_MAX} "
+                              "bytes, more than file systems accept")
     target = path
     while not target.exists() and target != target.parent:
+        if target.is_symlink():
+            raise ConfigError(option, f"{target} is a link to {os.readlink(target)}, which "
+                              "does not exist; remove the link or choose another directory")
         target = target.parent
     if not target.is_dir():
         raise ConfigError(option, f"{target} is not a directory")

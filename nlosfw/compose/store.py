@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import threading
 import uuid
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -76,16 +77,24 @@ def normalise_overrides(args: Sequence[str]) -> list[str]:
     return out
 
 
+#: Held by :func:`hydra_session`: Hydra's ConfigStore and its global session are shared by
+#: every thread of the process, so threads (``nlosfw.run`` called from two at once) take
+#: turns composing; the runs themselves go on in parallel.
+SESSION_LOCK = threading.RLock()
+
+
 @contextmanager
 def hydra_session() -> Iterator[None]:
     """Hydra's compose API ready over nlosfw's configs: the running app's (a check inside
-    ``hydra.main``), else a session of its own, ended with the block."""
+    ``hydra.main``), else a session of its own, ended with the block; one thread at a time
+    (:data:`SESSION_LOCK`)."""
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
-    if GlobalHydra.instance().is_initialized():
-        yield
-        return
-    with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3",
-                               job_name="nlosfw"):
-        yield
+    with SESSION_LOCK:
+        if GlobalHydra.instance().is_initialized():
+            yield
+            return
+        with initialize_config_dir(config_dir=str(config_dir()), version_base="1.3",
+                                   job_name="nlosfw"):
+            yield

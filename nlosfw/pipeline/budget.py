@@ -15,7 +15,13 @@ the fields         16·F·S·(2 + M) (true, raw, each model's prediction)
 the voxels         8·D·S·(3 + (2 + M)·(1 + single-frequency images)); D, when it is
                    automatic, at most the time window over half a wall spacing
 training logs      400 bytes per evaluation (steps / eval_every) of neural models
+the program        with ``program=True``: this process's resident memory now (Python,
+                   numpy, h5py, Hydra and the plugins loaded), which the run keeps
 =================  ===========================================================
+
+The check against the memory available leaves the program out (the memory available is
+what is left beside it); the log's summary and ``benchmarks/bench_memory.py``, which
+compares the estimate with a run's measured peak resident memory, count it.
 """
 
 from __future__ import annotations
@@ -110,14 +116,33 @@ def _history(options: Mapping[str, object] | None) -> float:
     return float(steps) / max(int(every), 1) * _HISTORY_ENTRY
 
 
-def estimate_memory(config: Mapping[str, object], file_shape: FileShape | None = None
-                    ) -> list[MemoryPart]:
+def process_memory() -> int:
+    """This process's resident memory now (bytes; 0 when unknown)."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+    except (OSError, ValueError, IndexError):
+        return 0
+    return pages * os.sysconf("SC_PAGE_SIZE")
+
+
+def estimate_memory(config: Mapping[str, object], file_shape: FileShape | None = None,
+                    program: bool = False) -> list[MemoryPart]:
     """The parts of the memory a run of ``config`` (composed, validated) needs, in bytes;
     ``file_shape``: how to size a ``capture.path`` from its header (none: unknown, no
-    estimate for such a run)."""
+    estimate for such a run); ``program``: count this process's own resident memory too
+    (the interpreter and its libraries, as the run will hold them)."""
     shape = _capture_shape(config, file_shape)
     if shape is None:
         return []
+    parts = _array_parts(config, shape)
+    if program:
+        parts.append(MemoryPart("the program", "Python and the libraries loaded (resident "
+                                "memory now)", float(process_memory())))
+    return parts
+
+
+def _array_parts(config: Any, shape: tuple[int, int, int, str]) -> list[MemoryPart]:
+    """The arrays of :func:`estimate_memory`."""
     bins, sensors, lasers, why = shape
     samples = float(bins) * sensors * lasers
     noisy = _get(config, "scene.noise.model", "none") != "none" and not _get(config,
@@ -202,8 +227,8 @@ def check_memory(config: Mapping[str, object], available: int | None = None,
 
 
 def memory_summary(config: Mapping[str, object], file_shape: FileShape | None = None) -> str:
-    """The estimate as one line (for the log)."""
-    parts = estimate_memory(config, file_shape)
+    """The estimate as one line (for the log), the program itself included."""
+    parts = estimate_memory(config, file_shape, program=True)
     total = sum(p.nbytes for p in parts)
     return f"estimated memory {format_bytes(total)}: " + ", ".join(
         f"{p.what} {format_bytes(p.nbytes)}" for p in parts if p.nbytes)

@@ -9,6 +9,15 @@ cannot be read, is reported, removed and recomputed. A lock per key makes
 concurrent runs (parallel or SLURM sweeps sharing the cache) wait for one
 computation instead of repeating it.
 
+The cache owns only what it wrote. Its directory holds a marker, ``.nlosfw-cache``, written
+when the cache first stores there; a directory without the marker is never cleaned nor
+evicted from (one whose files are all entries, ``<kind>/<64 hex>.hdf5`` with their
+``.sha256``, is an older cache and is adopted: the marker is written then), and anywhere
+else the run goes on without the cache. Only a regular file named ``<64 hex>.hdf5`` with a
+regular ``<64 hex>.sha256`` beside it, in a sub-folder of the marked directory, is an
+entry; anything else there (a user's file, a directory or a FIFO in an entry's place) is
+never read, evicted or removed.
+
 The cache never fails a run: an unwritable cache directory disables it (with a warning),
 and an entry that cannot be stored (a full disk) is skipped, leaving nothing partial.
 With ``max_gb`` the least recently used entries (by the time their checksum file was last
@@ -20,11 +29,15 @@ running process holds. :func:`cache_info` and :func:`clean_cache` back
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
+import math
 import os
+import re
+import stat
 import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
@@ -40,20 +53,81 @@ T = TypeVar("T")
 DEFAULT_DIR = "~/.cache/nlosfw"
 
 
+#: The marker file at the root of a cache directory: the cache's claim on it.
+MARKER_NAME = ".nlosfw-cache"
+MARKER_FORMAT = "nlosfw-cache"
+#: An entry's file name: the key (the SHA-256 of what produced it) and ``.hdf5``.
+ENTRY_NAME = re.compile(r"^(?P<key>[0-9a-f]{64})\.hdf5$")
+#: The files an entry is made of besides ``<key>.hdf5``.
+_ENTRY_SUFFIXES = (".sha256", ".lock")
+_KIND_NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
+
+
 def default_cache_dir() -> Path:
     """``$NLOSFW_CACHE_DIR``, else ``~/.cache/nlosfw`` (as ``cache.dir`` defaults)."""
     return Path(os.environ.get("NLOSFW_CACHE_DIR") or DEFAULT_DIR).expanduser()
 
 
-@contextlib.contextmanager
-def _locked(path: Path) -> Iterator[None]:
-    """An exclusive advisory lock on ``path`` (created if needed) for the block."""
-    handle = open_locked(path, blocking=True)
-    assert handle is not None  # a blocking lock is always taken
+def _regular(path: Path) -> bool:
+    """Whether ``path`` is a regular file (not followed through a link; never opened)."""
     try:
-        yield
-    finally:
-        handle.close()
+        return stat.S_ISREG(os.lstat(path).st_mode)
+    except OSError:
+        return False
+
+
+def owns(root: Path) -> bool:
+    """Whether the cache owns ``root``: its marker is there (a regular file saying so)."""
+    marker = root / MARKER_NAME
+    if not _regular(marker):
+        return False
+    try:
+        with open(marker, encoding="utf-8") as f:
+            found = json.loads(f.read(4096) or "null")
+    except (OSError, ValueError):
+        return False
+    return isinstance(found, dict) and found.get("format") == MARKER_FORMAT
+
+
+def claim(root: Path, adopt_only: bool = False) -> bool:
+    """Make ``root`` the cache's: True when it already is, or when it is new, empty (unless
+    ``adopt_only``) or an older cache (every file in it an entry's), the marker then
+    written. False when it holds anything else: the cache then never touches it."""
+    if owns(root):
+        return True
+    if not _adoptable(root, allow_empty=not adopt_only):
+        return False
+    root.mkdir(parents=True, exist_ok=True)
+    write_text(root / MARKER_NAME, json.dumps({"format": MARKER_FORMAT, "version": 1}) + "\n",
+               overwrite=True)
+    return True
+
+
+def _adoptable(root: Path, allow_empty: bool) -> bool:
+    """Whether ``root`` is absent or empty (when ``allow_empty``) or holds only entries
+    (``<kind>/<64 hex>.hdf5`` each with its ``.sha256``, their locks and temporaries)."""
+    if not root.exists():
+        return allow_empty
+    if not root.is_dir() or root.is_symlink():
+        return False
+    entries = 0
+    for kind in root.iterdir():
+        if kind.name.startswith(".probe-"):
+            continue
+        if not (kind.is_dir() and not kind.is_symlink() and _KIND_NAME.match(kind.name)):
+            return False
+        for path in kind.iterdir():
+            if TEMPORARY_NAME.match(path.name) and _regular(path):
+                continue
+            stem, suffix = path.name[:64], path.name[64:]
+            if not (ENTRY_NAME.match(stem + ".hdf5") and suffix in (".hdf5", *_ENTRY_SUFFIXES)
+                    and _regular(path)):
+                return False
+            if suffix == ".hdf5":
+                if not _regular(path.with_suffix(".sha256")):
+                    return False
+                entries += 1
+    return allow_empty or entries > 0
 
 
 @dataclass(frozen=True)
@@ -74,34 +148,40 @@ class CacheEntry:
 
 
 def cache_entries(root: Path) -> list[CacheEntry]:
-    """Every entry under ``root`` (``<kind>/<key>.hdf5``), least recently used first."""
+    """Every entry under ``root`` (a regular ``<kind>/<64 hex>.hdf5`` with a regular
+    ``.sha256`` beside it), least recently used first; none when the cache does not own
+    ``root`` (no marker)."""
     out: list[CacheEntry] = []
-    if not root.is_dir():
+    if not root.is_dir() or not owns(root):
         return out
-    for kind in sorted(p for p in root.iterdir() if p.is_dir()):
-        for path in kind.glob("*.hdf5"):
-            if path.name.startswith("."):
-                continue  # a temporary
+    for kind in sorted(p for p in root.iterdir() if p.is_dir() and not p.is_symlink()):
+        for path in kind.iterdir():
+            if not ENTRY_NAME.match(path.name):
+                continue
             check = path.with_suffix(".sha256")
             try:
-                size = path.stat().st_size
-                used = check.stat().st_mtime if check.exists() else 0.0
-                size += check.stat().st_size if check.exists() else 0
-            except FileNotFoundError:  # removed meanwhile
+                data, checked = os.lstat(path), os.lstat(check)
+            except OSError:  # no checksum (not an entry), or removed meanwhile
                 continue
-            out.append(CacheEntry(path=path, nbytes=size, last_used=used))
+            if not (stat.S_ISREG(data.st_mode) and stat.S_ISREG(checked.st_mode)):
+                continue  # not something the cache wrote: never touched
+            out.append(CacheEntry(path=path, nbytes=data.st_size + checked.st_size,
+                                  last_used=checked.st_mtime))
     return sorted(out, key=lambda e: (e.last_used, str(e.path)))
 
 
 def evict(entry: CacheEntry) -> bool:
     """Remove ``entry`` unless a running process holds its lock; True when removed."""
+    if entry.lock.exists() and not _regular(entry.lock):
+        return False  # a lock that is not a file: not the cache's, left alone
     handle = open_locked(entry.lock, blocking=False)
     if handle is None:
         return False
     try:
         for path in (entry.path, entry.check, entry.lock):
-            with contextlib.suppress(FileNotFoundError):
-                path.unlink()
+            if _regular(path):
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()
     finally:
         handle.close()
     return True
@@ -114,23 +194,35 @@ class Cache:
                  max_gb: float | None = None) -> None:
         self.root = Path(root).expanduser()
         self.enabled = enabled
-        self.max_bytes = None if max_gb is None else int(max_gb * 1e9)
+        self.max_bytes = (None if max_gb is None or not math.isfinite(max_gb)
+                          else int(max(max_gb, 0.0) * 1e9))
         self._checked = False
 
     def get_or_compute(self, kind: str, key: str, compute: Callable[[], T],
                        write: Callable[[Path, T], Path | None],
                        read: Callable[[Path], T]) -> tuple[T, bool]:
-        """The cached value for ``key`` or ``compute()`` (then stored). Returns (value, hit)."""
+        """The cached value for ``key`` (a SHA-256, 64 hex digits) or ``compute()`` (then
+        stored). Returns (value, hit)."""
+        if not ENTRY_NAME.match(f"{key}.hdf5") or not _KIND_NAME.match(kind):
+            raise ValueError(f"cache: {kind}/{key} is not <kind>/<64 hex digits>")
         if not self._usable():
             return compute(), False
         entry = self.root / kind / f"{key}.hdf5"
+        lock = entry.with_suffix(".lock")
         try:
             entry.parent.mkdir(parents=True, exist_ok=True)
+            for path in (entry, entry.with_suffix(".sha256"), lock):
+                if (path.exists() or path.is_symlink()) and not _regular(path):
+                    raise OSError(f"{path} is not a regular file")
+            handle = open_locked(lock, blocking=True)
+            if handle is None:  # never, when blocking
+                raise OSError(f"{lock} could not be locked")
         except OSError as err:  # an unusable cache must not fail the run
-            log.warning("cache: %s is not usable (%s); computing without it", entry.parent, err)
+            log.warning("cache: %s is not usable (%s); computing without it", entry.parent,
+                        err.strerror or err)
             return compute(), False
-        with _locked(entry.with_suffix(".lock")):
-            if entry.exists():
+        with contextlib.closing(handle):  # closing drops the lock
+            if _regular(entry):
                 value = self._load(entry, read)
                 if value is not None:
                     return value, True
@@ -147,7 +239,12 @@ class Cache:
             return self.enabled
         self._checked = True
         try:
-            self.root.mkdir(parents=True, exist_ok=True)
+            if not claim(self.root):
+                log.warning("cache: %s holds files nlosfw did not write (it has no %s "
+                            "marker); running without the cache (choose another cache.dir)",
+                            self.root, MARKER_NAME)
+                self.enabled = False
+                return False
             with tempfile.NamedTemporaryFile(dir=self.root, prefix=".probe-"):
                 pass
         except OSError as err:
@@ -174,8 +271,17 @@ class Cache:
 
     def _load(self, entry: Path, read: Callable[[Path], T]) -> T | None:
         check = entry.with_suffix(".sha256")
-        expected = check.read_text().strip() if check.exists() else ""
-        if expected != file_digest(entry):
+        try:
+            if not _regular(check):
+                raise OSError("no checksum file")
+            with open(check, encoding="ascii", errors="replace") as f:
+                expected = f.read(100).strip()
+            actual = file_digest(entry)
+        except OSError as err:
+            log.warning("cache: %s cannot be read (%s); recomputing", entry, err.strerror or err)
+            self._evict(entry, check)
+            return None
+        if expected != actual:
             log.warning("cache: %s is corrupt (checksum mismatch); recomputing", entry)
             self._evict(entry, check)
             return None
@@ -203,8 +309,9 @@ class Cache:
     @staticmethod
     def _evict(entry: Path, check: Path) -> None:
         for path in (entry, check):
-            with contextlib.suppress(FileNotFoundError):
-                path.unlink()
+            if _regular(path):
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()
 
 
 @dataclass(frozen=True)
@@ -233,7 +340,10 @@ def cache_info(root: Path) -> CacheInfo:
 def clean_cache(root: Path, keep_bytes: int = 0) -> tuple[int, int, int]:
     """Evict least recently used entries until at most ``keep_bytes`` remain, and remove
     temporaries of processes that no longer run. Returns (entries removed, bytes freed,
-    entries skipped because a running process holds them)."""
+    entries skipped because a running process holds them). A directory the cache does
+    not own (no marker, not an older cache to adopt) is left untouched: nothing removed."""
+    if not root.is_dir() or not claim(root, adopt_only=True):
+        return 0, 0, 0
     entries = cache_entries(root)
     total = sum(e.nbytes for e in entries)
     removed = freed = busy = 0
@@ -254,14 +364,14 @@ def _stale_temporaries(root: Path, min_age: float = 3600.0) -> list[Path]:
     """Temporary files (of :func:`~nlosfw.common.files.atomic_path`) older than ``min_age``
     seconds whose process no longer runs on this machine (the age guards a cache shared
     with other machines, whose process ids mean nothing here)."""
-    if not root.is_dir():
+    if not root.is_dir() or not owns(root):
         return []
     out = []
     now = time.time()
     for path in root.glob("*/.*"):
         match = TEMPORARY_NAME.match(path.name)
         try:
-            old = now - path.stat().st_mtime >= min_age
+            old = now - path.lstat().st_mtime >= min_age and _regular(path)
         except FileNotFoundError:
             continue
         if match and old and not _alive(int(match.group("pid"))):

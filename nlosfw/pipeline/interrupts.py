@@ -1,11 +1,12 @@
-"""SIGINT and SIGTERM as an exception, so that a run stops cleanly.
+"""SIGINT, SIGTERM and SIGHUP as an exception, so that a run stops cleanly.
 
-Inside :func:`signals_raise` both signals raise
+Inside :func:`signals_raise` the signals raise
 :class:`~nlosfw.common.errors.RunInterrupted` in the main thread: ``finally`` blocks
 remove temporary files, the pipeline writes ``metrics.json`` with status
-``interrupted`` and the stage reached, and the command line exits with 130 (SIGINT) or
-143 (SIGTERM) after one line. Python checks for signals between bytecodes, so a signal
-arriving during a long numpy or HDF5 call takes effect when the call returns.
+``interrupted`` and the stage reached, and the command line exits with 130 (SIGINT),
+143 (SIGTERM) or 129 (SIGHUP: the terminal closed) after one line. Python checks for
+signals between bytecodes, so a signal arriving during a long numpy or HDF5 call takes
+effect when the call returns.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from types import FrameType
 
 from nlosfw.common.errors import RunInterrupted
 
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 def _raise(signum: int, frame: FrameType | None) -> None:
@@ -27,7 +28,7 @@ def _raise(signum: int, frame: FrameType | None) -> None:
 
 @contextlib.contextmanager
 def signals_raise() -> Iterator[None]:
-    """SIGINT and SIGTERM raise :class:`RunInterrupted` while the block runs (in the main
+    """SIGINT, SIGTERM and SIGHUP raise :class:`RunInterrupted` while the block runs (in the main
     thread; elsewhere the block runs unchanged), the previous handlers restored after."""
     if threading.current_thread() is not threading.main_thread():
         yield

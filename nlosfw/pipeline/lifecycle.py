@@ -12,6 +12,10 @@ safe:
                       claimed, recorded *before* the file is written. Only files listed
                       there are ever moved or removed by a later run.
 
+A run directory inside the cache directory (``cache.dir``) is refused, and so is
+``output.overwrite=true`` when a file the new run reads (``capture.path``,
+``capture.background``, ``capture.tofgrid``) is one of the files it would replace.
+
 What a later run does with an earlier one (:func:`verdict`): nothing to see: start;
 a live run, or a file in the way that no run claimed: refuse (one line, exit status
 2, nothing changed); an earlier run and ``output.overwrite=true``: remove its files,
@@ -52,6 +56,8 @@ RUN_CONTROL_OPTIONS = ("cache", "limits", "output.overwrite")
 HYDRA_FILES = (".hydra", "run.log")
 #: Statuses of a finished run (one a resumed sweep may skip).
 FINISHED = ("completed", "stopped")
+#: The options naming files a run reads (never replaced by ``output.overwrite``).
+INPUT_OPTIONS = ("capture.path", "capture.background", "capture.tofgrid")
 
 
 class Verdict(enum.Enum):
@@ -170,6 +176,7 @@ def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object], *,
 
     ``resume``: the run is a job of a multirun (a sweep may be resumed in its directory).
     """
+    check_outside_cache(run_dir, config)
     if earlier.live_pid is not None:
         raise ConfigError("", f"{run_dir}: another nlosfw run (process {earlier.live_pid}) is "
                               "writing there; wait for it to end or choose another directory")
@@ -179,6 +186,7 @@ def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object], *,
     if earlier.marker is None:
         return Verdict.start
     if overwrite:
+        _check_inputs_kept(run_dir, earlier, config)
         return Verdict.replace
     state = earlier.status if earlier.status in FINISHED else "unfinished"
     if not resume:
@@ -189,6 +197,53 @@ def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object], *,
     if earlier.marker["config_hash"] != config_hash(config):
         raise _differs(run_dir, config)
     return Verdict.skip if state in FINISHED else Verdict.set_aside
+
+
+def _option(config: Mapping[str, object], dotted: str) -> object:
+    node: object = config
+    for key in dotted.split("."):
+        node = node.get(key) if isinstance(node, Mapping) else None
+    return node
+
+
+def check_outside_cache(run_dir: Path, config: Mapping[str, object],
+                        option: str = "hydra.run.dir") -> None:
+    """Refuse (one-line :class:`ConfigError`) a run directory inside ``cache.dir`` (or the
+    cache directory itself): the cache's directory holds only the cache's entries."""
+    cache = _option(config, "cache.dir")
+    if not isinstance(cache, str) or not cache:
+        return
+    try:
+        root = Path(cache).expanduser().resolve()
+        where = Path(run_dir).expanduser().resolve()
+    except (OSError, RuntimeError):  # a link loop: the directory checks say so
+        return
+    if where == root or root in where.parents:
+        raise ConfigError(option, f"{run_dir} is inside the cache directory {root} "
+                          "(cache.dir); choose a run directory outside it, or another "
+                          "cache.dir")
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    try:
+        info = path.stat()
+    except (OSError, RuntimeError, ValueError):
+        return None
+    return info.st_dev, info.st_ino
+
+
+def _check_inputs_kept(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object]) -> None:
+    """Refuse ``output.overwrite=true`` when a file the run reads is one it would replace."""
+    replaced = {_identity(run_dir / name) for name in earlier.files} - {None}
+    for option in INPUT_OPTIONS:
+        value = _option(config, option)
+        if not isinstance(value, str) or not value:
+            continue
+        if _identity(Path(value).expanduser()) in replaced:
+            raise ConfigError(option, f"{value} is a file of the earlier run in {run_dir}, "
+                              "which output.overwrite=true would remove; copy it elsewhere "
+                              "and read the copy, or choose another run directory (nothing "
+                              "was changed)")
 
 
 def _differs(run_dir: Path, config: Mapping[str, object]) -> ConfigError:

@@ -22,6 +22,7 @@ import msgspec
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import DataError
+from nlosfw.common.files import is_regular_file
 from nlosfw.common.typed_json import (
     Absent,
     Document,
@@ -347,6 +348,9 @@ class RunMetrics(Document, frozen=True, kw_only=True):
     @classmethod
     def read(cls, path: Path) -> "RunMetrics":
         """Read a metrics.json; a one-line :class:`DataError` names the file and the problem."""
+        if Path(path).exists() and not is_regular_file(path):
+            raise DataError(f"{path}: not a regular file (a FIFO, a device or a directory); "
+                            "it is not read")
         try:
             data = msgspec.json.decode(Path(path).read_bytes())
         except (OSError, msgspec.DecodeError) as err:

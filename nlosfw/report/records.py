@@ -11,6 +11,7 @@ import yaml
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError
+from nlosfw.common.files import is_regular_file
 from nlosfw.pipeline.metrics import RunMetrics
 
 
@@ -29,7 +30,7 @@ class RunRecord:
 def find_runs(root: Path) -> list[Path]:
     """Every run directory (one holding metrics.json) under ``root``, sorted."""
     return sorted({p.parent for p in root.rglob("metrics.json")
-                   if "interrupted-" not in str(p.relative_to(root))})
+                   if "interrupted-" not in str(p.relative_to(root)) and is_regular_file(p)})
 
 
 def read_run(run_dir: Path, root: Path) -> RunRecord:
@@ -49,6 +50,8 @@ def read_run(run_dir: Path, root: Path) -> RunRecord:
 def _yaml(path: Path) -> Any:
     if not path.exists():
         return None
+    if not is_regular_file(path):  # a FIFO would block the read
+        raise DataError(f"{path}: not a regular file; it is not read")
     try:
         return yaml_safe.load(path.read_text(encoding="utf-8"))  # bounded: no alias bombs
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:

@@ -177,7 +177,7 @@ def read_only_cache(tmp_path: Path) -> Iterator[Path]:
     path = tmp_path / "ro-cache"
 
     def fill() -> None:
-        Cache(path).get_or_compute("blobs", "k", lambda: b"x" * 100,
+        Cache(path).get_or_compute("blobs", "0" * 64, lambda: b"x" * 100,
                                    lambda p, v: p.write_bytes(v), lambda p: p.read_bytes())
 
     if os.geteuid() != 0:

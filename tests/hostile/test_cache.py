@@ -15,22 +15,27 @@ from nlosfw.pipeline.cache import Cache, cache_entries
 ENTRY = 1000          # bytes of each test entry (its .sha256 adds 65)
 
 
+def full(key: str) -> str:
+    """The 64-hex-digit cache key of the short test key (``aaaa``: ``a`` 64 times)."""
+    return key * (64 // len(key))
+
+
 def put(cache: Cache, key: str) -> bool:
     """Store (or read back) entry ``key``; whether it was a hit."""
-    _, hit = cache.get_or_compute("blobs", key, lambda: key.encode() * (ENTRY // len(key)),
+    _, hit = cache.get_or_compute("blobs", full(key), lambda: key.encode() * (ENTRY // len(key)),
                                   lambda p, v: p.write_bytes(v), lambda p: p.read_bytes())
     return hit
 
 
 def age(root: Path, key: str, seconds_ago: float) -> None:
     """Mark entry ``key`` as last used ``seconds_ago``."""
-    check = root / "blobs" / f"{key}.sha256"
+    check = root / "blobs" / f"{full(key)}.sha256"
     t = check.stat().st_mtime - seconds_ago
     os.utime(check, (t, t))
 
 
 def keys(root: Path) -> list[str]:
-    return sorted(e.path.stem for e in cache_entries(root))
+    return sorted(e.path.stem[:4] for e in cache_entries(root))
 
 
 def test_the_least_recently_used_entries_go_beyond_max_gb(tmp_path):
@@ -50,7 +55,7 @@ def test_an_entry_in_use_by_another_process_is_never_evicted(tmp_path):
     put(cache, "bbbb")
     age(tmp_path, "aaaa", 100)
     age(tmp_path, "bbbb", 50)
-    lock = tmp_path / "blobs" / "aaaa.lock"
+    lock = tmp_path / "blobs" / f"{full('aaaa')}.lock"
     holder = subprocess.Popen(     # holds the lock until its stdin closes, however long
         [sys.executable, "-c", "import fcntl, sys; f = open(sys.argv[1], 'a'); "
          "fcntl.flock(f, fcntl.LOCK_EX); print('held', flush=True); sys.stdin.read()",

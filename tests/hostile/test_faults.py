@@ -14,7 +14,7 @@ import pytest
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import files
 from nlosfw.common.errors import StorageError
-from nlosfw.pipeline.cache import Cache, cache_entries, file_digest
+from nlosfw.pipeline.cache import MARKER_NAME, Cache, cache_entries, file_digest
 from nlosfw.pipeline.lifecycle import LOCK_NAME
 from nlosfw.testing import fixtures
 
@@ -77,6 +77,7 @@ def test_a_full_cache_disk_is_skipped_and_the_cache_stays_consistent(workdir, to
     for entry in entries:
         assert entry.check.read_text().strip() == file_digest(entry.path)
     stray = [p for p in disk.path.rglob("*") if p.is_file() and p.suffix not in (".lock",)
+             and p.name != MARKER_NAME
              and p not in {e.path for e in entries} | {e.check for e in entries}]
     assert stray == []
     metrics = json.loads((workdir / "run1" / "metrics.json").read_text())
@@ -151,10 +152,10 @@ def test_enospc_injected_into_a_cache_write_leaves_no_entry(tmp_path, monkeypatc
                                                                         1000), raising=False)
     cache = Cache(tmp_path)
     capture = fixtures.tiny_capture()
-    value, hit = cache.get_or_compute("captures", "k", lambda: capture, write_capture,
+    value, hit = cache.get_or_compute("captures", "0" * 64, lambda: capture, write_capture,
                                       read_capture)
     assert value is capture and not hit
-    assert sorted(p.name for p in (tmp_path / "captures").iterdir()) == ["k.lock"]
+    assert sorted(p.name for p in (tmp_path / "captures").iterdir()) == [f"{'0' * 64}.lock"]
 
 
 # ------------------------------------------------------------------------ read-only

@@ -1,0 +1,123 @@
+"""Memory benchmark (issue 20): the pre-run estimate against the measured peak RSS.
+
+Each named configuration runs on the CPU as ``python -m nlosfw ...`` in a child process;
+its peak resident set size is read from ``resource.getrusage(RUSAGE_CHILDREN)`` of a
+wrapper process whose only child it is, once it has ended, and its estimate
+from :func:`nlosfw.pipeline.budget.estimate_memory` on the same composed configuration
+(the interpreter and its libraries included, as the run holds them too). The target: the
+measured peak within [estimate / 1.5, 1.5 × estimate]. Results go to
+``benchmarks/results/bench_memory.json``.
+
+    nice -n 10 python benchmarks/bench_memory.py [--only NAME ...]
+
+The real capture (64 × 64 × 2048, the LCT release's ``data_diffuse_s.mat``) is read from
+``$NLOSFW_REAL_DATA``, else ``../shared/data/real`` beside the repository; without it
+that configuration is skipped.
+It is heavy (a minute or more and over a gigabyte per configuration): run it alone.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+REAL_DIR = Path(os.environ.get("NLOSFW_REAL_DATA") or REPO.parent / "shared" / "data" / "real")
+REAL = REAL_DIR / "data_diffuse_s.mat"
+RESULTS = Path(__file__).parent / "results" / "bench_memory.json"
+FAST = ("model=interp", "imager=fft", "figures.enabled=false")
+
+#: name -> (overrides, needs the real capture)
+CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
+    "real-64x64x2048": ((f"capture.path={REAL}", *FAST), True),
+    "simulated-default": (FAST, False),
+    "simulated-32x32x1024": (("scene.wall.resolution=[32,32]", "scene.time.bins=1024",
+                              *FAST), False),
+}
+
+
+def estimate(overrides: tuple[str, ...]) -> float:
+    """The run's estimate (bytes), composed exactly as the command line composes it."""
+    from nlosfw.capture.source import file_transient_shape
+    from nlosfw.compose.inprocess import compose_run_config
+    from nlosfw.pipeline.budget import estimate_memory
+    from nlosfw.plugins import load_plugins
+
+    host = load_plugins()
+    config = compose_run_config(list(overrides), host)
+    forced = (config.get("capture") or {}).get("format")
+    formats = host.capture_formats()
+    parts = estimate_memory(config, lambda path: file_transient_shape(path, forced, formats),
+                            program=True)
+    return sum(p.nbytes for p in parts)
+
+
+def estimate_in_child(name: str) -> float:
+    """:func:`estimate` of configuration ``name`` in a fresh process (whose resident memory,
+    counted as the program's, is then a run's: nothing else loaded)."""
+    done = subprocess.run([sys.executable, __file__, "--estimate", name], capture_output=True,
+                          text=True, check=True)
+    return float(done.stdout.split()[-1])
+
+
+#: Runs the command given to it and prints its peak RSS (KiB): each run measured alone.
+_WRAPPER = ("import resource, subprocess, sys; "
+            "status = subprocess.run(sys.argv[1:], capture_output=True).returncode; "
+            "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, status)")
+
+
+def measure(overrides: tuple[str, ...]) -> tuple[float, float, int]:
+    """(peak RSS in bytes, seconds, exit status) of one run, in a child process of a
+    wrapper process of its own (so that no other run's peak is counted)."""
+    with tempfile.TemporaryDirectory(prefix="nlosfw-bench-memory-") as tmp:
+        start = time.perf_counter()
+        done = subprocess.run([sys.executable, "-c", _WRAPPER, sys.executable, "-m", "nlosfw",
+                               *overrides, f"hydra.run.dir={tmp}/run",
+                               f"cache.dir={tmp}/cache"],
+                              capture_output=True, text=True, check=True)
+        seconds = time.perf_counter() - start
+    peak_kib, status = (int(v) for v in done.stdout.split())
+    return peak_kib * 1024.0, seconds, status
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", nargs="*", choices=sorted(CONFIGS), default=None)
+    parser.add_argument("--estimate", choices=sorted(CONFIGS), help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.estimate:
+        print(estimate(CONFIGS[args.estimate][0]))
+        return 0
+    rows = []
+    for name, (overrides, real) in CONFIGS.items():
+        if args.only and name not in args.only:
+            continue
+        if real and not REAL.exists():
+            print(f"{name}: skipped ({REAL} is absent)")
+            continue
+        est = estimate_in_child(name)
+        peak, seconds, status = measure(overrides)
+        ratio = peak / est if est else float("inf")
+        rows.append({"name": name, "overrides": list(overrides), "estimate_bytes": est,
+                     "peak_rss_bytes": peak, "ratio": ratio, "seconds": seconds,
+                     "exit_status": status, "within_target": 1 / 1.5 <= ratio <= 1.5})
+    print(f"{'configuration':<24}{'estimate MB':>13}{'peak RSS MB':>13}{'ratio':>8}  ok")
+    for r in rows:
+        print(f"{r['name']:<24}{r['estimate_bytes'] / 1e6:>13.0f}"
+              f"{r['peak_rss_bytes'] / 1e6:>13.0f}{r['ratio']:>8.2f}  "
+              f"{'yes' if r['within_target'] else 'NO'}")
+    RESULTS.parent.mkdir(exist_ok=True)
+    RESULTS.write_text(json.dumps({"machine": platform.platform(), "rows": rows}, indent=1)
+                       + "\n")
+    return 0 if rows and all(r["within_target"] and r["exit_status"] == 0 for r in rows) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
