@@ -10,6 +10,7 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.progress import accepts_progress
 from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.interface import Imager
@@ -19,7 +20,6 @@ from nlosfw.model.protocol import FieldSplit
 from nlosfw.pipeline.context import StageContext
 from nlosfw.pipeline.results import (
     FrequencySplit,
-    ImagedFields,
     Reconstructions,
     SingleFrequencyImages,
     StageResults,
@@ -41,7 +41,7 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
     # as in the thesis figures: images from one frequency at a time, too
     chosen = chosen_frequencies(split,
                                 run.plan.settings.reconstruction.single_frequency_images)
-    sources = fields.by_source()
+    sources = {name: with_capture_hints(f, capture) for name, f in fields.by_source().items()}
     log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
              len(sources) * (1 + len(chosen)), imager.name, len(sources), ", ".join(sources),
              fields.true.n_frequencies,
@@ -49,11 +49,12 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
                      for label, i in chosen.items()))
     by_source: dict[str, Reconstruction] = {}
     seconds: dict[str, float] = {}
-    for source, field in fields.items():
+    for source, field in sources.items():
         start = time.perf_counter()
         by_source[source] = _image(run, imager.plugin, field, voxels, f"image {source}")
         seconds[source] = round(time.perf_counter() - start, 4)
-    singles = _single_frequency_images(run, imager.plugin, fields, voxels, chosen)
+    singles = _single_frequency_images(run, imager.plugin, sources, fields.true, voxels,
+                                       chosen)
     for source, recon in by_source.items():
         run.files.write(f"reconstructions/{source}.hdf5",
                         partial(write_reconstruction, recon=recon),
@@ -86,6 +87,15 @@ def run_voxels(settings: ReconstructionSettings, capture: Capture,
     return wall_voxels(field, depths)
 
 
+def with_capture_hints(field: PhasorField, capture: Capture) -> PhasorField:
+    """``field`` carrying the capture's imaging hints (a field model's prediction does not
+    inherit the transform's metadata)."""
+    hints = capture.scene_info.get(HINTS_KEY)
+    if hints is None or HINTS_KEY in field.metadata:
+        return field
+    return field.replace(metadata={**field.metadata, HINTS_KEY: hints})
+
+
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:
     """Up to ``count`` frequency indices to show alone: a training one near the top of the
     band, then a held-out one (if any), by label."""
@@ -109,13 +119,13 @@ def _image(run: StageContext, imager: Imager, field: PhasorField, voxels: np.nda
     return recon
 
 
-def _single_frequency_images(run: StageContext, imager: Imager, fields: ImagedFields,
+def _single_frequency_images(run: StageContext, imager: Imager,
+                             sources: dict[str, PhasorField], true: PhasorField,
                              voxels: np.ndarray, chosen: dict[FrequencySplit, int]
                              ) -> list[SingleFrequencyImages]:
     """Every field imaged from each chosen frequency alone."""
     if not chosen:
         return []
-    sources = fields.by_source()
     task, total, count = "single-frequency images", len(chosen) * len(sources), 0
     singles = []
     for label, index in chosen.items():
@@ -126,7 +136,7 @@ def _single_frequency_images(run: StageContext, imager: Imager, fields: ImagedFi
                                                 voxels)
             count += 1
         singles.append(SingleFrequencyImages(
-            index=index, frequency=float(fields.true.frequencies[index]), split=label,
+            index=index, frequency=float(true.frequencies[index]), split=label,
             by_source=images))
     run.events.progress(task, total, total, ", ".join(f"f = {s.frequency:.4g} /m ({s.split})"
                                                       for s in singles))
