@@ -13,6 +13,7 @@ from functools import partial
 from nlosfw.capture.data import Capture
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.hashing import cache_key
+from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
 from nlosfw.model.interface import TrainingStep
 from nlosfw.model.protocol import split_field
 from nlosfw.pipeline.context import StageContext
@@ -64,6 +65,11 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
     """Split the field; fit the selected model, the interp baseline and every ``compare``
     model to its training samples; write the selected model."""
     field = required(done.transform, "transform").field
+    # the run's depth range bounds a model's own depth search (rsd_prior's)
+    span = run.plan.settings.reconstruction.depth_range or depth_span(
+        required(done.capture, "capture").capture)
+    field = field.replace(metadata={**field.metadata,
+                                    DEPTH_RANGE_KEY: [float(v) for v in span]})
     s = run.plan.settings.split
     split = split_field(field, s.sampling, spectral=s.spectral,
                         spectral_fraction=s.spectral_fraction)
