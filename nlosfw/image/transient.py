@@ -119,6 +119,7 @@ class TransientImager(Imager):
 
     config_class: ClassVar[type] = TransientImagerConfig
     imager_name: ClassVar[str] = "transient"
+    full_grid_only: ClassVar[bool] = True
 
     def reconstruct(self, field: PhasorField, voxels: np.ndarray,
                     on_progress: ProgressCallback | None = None) -> Reconstruction:

@@ -53,7 +53,8 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
         clean = None
         if capture.clean is not None and capture.clean_key is not None:
             clean = cached_field(capture.clean, capture.clean_key)[0]
-        _warn_aliasing(field)
+        if not run.plan.imager.plugin.full_grid_only:   # time-domain imagers: no aliasing
+            _warn_aliasing(field)
     run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
                         + (" (cached)" if hit else ""))
     run.files.write("phasor_field", lambda p: write_phasor_field(p, field),

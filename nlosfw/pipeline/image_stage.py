@@ -42,6 +42,8 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
     chosen = chosen_frequencies(split,
                                 run.plan.settings.reconstruction.single_frequency_images)
     sources = {name: with_capture_hints(f, capture) for name, f in fields.by_source().items()}
+    if imager.plugin.full_grid_only and sources["raw"].grid_shape != fields.true.grid_shape:
+        sources["raw"] = with_capture_hints(zero_filled(split, fields.true), capture)
     log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
              len(sources) * (1 + len(chosen)), imager.name, len(sources), ", ".join(sources),
              fields.true.n_frequencies,
@@ -94,6 +96,14 @@ def with_capture_hints(field: PhasorField, capture: Capture) -> PhasorField:
     if hints is None or HINTS_KEY in field.metadata:
         return field
     return field.replace(metadata={**field.metadata, HINTS_KEY: hints})
+
+
+def zero_filled(split: FieldSplit, field: PhasorField) -> PhasorField:
+    """The training samples of ``field`` on its full grid, zeros elsewhere: the ``raw``
+    source for imagers that image only the full wall grid (a zero adds nothing to a
+    back-projection or to the light-cone convolution)."""
+    values = np.where(split.spatial_mask[None], field.values, 0).astype(field.values.dtype)
+    return field.replace(values=values, metadata={**field.metadata, "zero_filled": True})
 
 
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:
