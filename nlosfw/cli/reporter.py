@@ -81,7 +81,11 @@ class ConsoleReporter:
             return  # the command line prints the error in one line
         self.console.print(summary_table(RunMetrics.from_json(metrics)))
         size = sum(p.stat().st_size for p in Path(run_dir).rglob("*") if p.is_file())
-        self.console.print(f"[bold green]done[/] ({status}): {escape(run_dir)}, "
+        run_info = metrics.get("run")
+        stopped_after = run_info.get("stopped_after") if isinstance(run_info, dict) else None
+        if status == "stopped" and stopped_after:
+            status = f"stopped after {stopped_after}"
+        self.console.print(f"[bold green]done[/] ({escape(status)}): {escape(run_dir)}, "
                            f"{format_bytes(size)} {escape(self._kept_text())}",
                            highlight=False)
 
