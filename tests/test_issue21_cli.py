@@ -28,3 +28,33 @@ def test_the_kit_without_pytest_is_one_line(tmp_path):
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "needs pytest" in lines[0], done.stderr
+
+
+def test_run_from_python_hands_only_warnings_to_the_callers_handlers(tmp_path, monkeypatch):
+    """A notebook's root handler (at INFO) sees no INFO line of the run; run.log has them."""
+    import logging
+
+    import nlosfw
+
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    seen: list[logging.LogRecord] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            seen.append(record)
+
+    root = logging.getLogger()
+    keep, level = Keep(logging.INFO), root.level
+    root.addHandler(keep)
+    root.setLevel(logging.INFO)
+    try:
+        out = nlosfw.run(["scene=tiny", "stop_after=transform",
+                          "transform.f_max=20"],              # past the aliasing limit: a warning
+                         output_dir=tmp_path / "run")
+    finally:
+        root.removeHandler(keep)
+        root.setLevel(level)
+    mine = [r for r in seen if r.name.startswith("nlosfw")]
+    assert mine and all(r.levelno >= logging.WARNING for r in mine)
+    assert "INFO" in (out.dir / "run.log").read_text()
+    assert logging.getLogger("nlosfw").propagate
