@@ -242,6 +242,21 @@ def full_band_frequencies(n_bins: int, delta_t: float) -> np.ndarray:
     return np.arange(1, n_bins // 2 + 1) / (n_bins * delta_t)
 
 
+#: [1/m] The band for imaging measured captures with the transient imagers: issue 21 found
+#: 0.4-60 cycles/m clean on the Stanford LCT captures (the wall-aliasing band 5.7-22.9 gives
+#: poor classical images; the full 4 ps band is noisy and needs 6-9 GB).
+MEASURED_BAND = (0.4, 60.0)
+
+
+def measured_band_frequencies(n_bins: int, delta_t: float,
+                              band: tuple[float, float] = MEASURED_BAND) -> np.ndarray:
+    """The capture's DFT bins (:func:`full_band_frequencies`) within ``band`` (cycles per
+    metre of path): the imaging band for measured captures (at least two bins)."""
+    every = full_band_frequencies(n_bins, delta_t)
+    kept = every[(every >= band[0]) & (every <= band[1])]
+    return kept if kept.size >= 2 else every[:2]
+
+
 def lateral_frequencies(n: int, spacing: float) -> np.ndarray:
     """FFT frequencies (cycles/m) of a padded axis of ``n`` samples ``spacing`` apart."""
     return np.fft.fftfreq(n, d=spacing) if n > 1 else np.zeros(1)
