@@ -282,13 +282,18 @@ def test_plugins_name_of_a_network_model_reads_its_config():
     assert "python -m nlosfw model=siren_torch model.steps=3000" in out
 
 
-def test_an_ambiguous_or_unknown_plugin_name_is_one_line(capsys):
+def test_a_name_two_kinds_use_shows_both(capsys):
     from nlosfw.cli import main
 
-    assert main(["plugins", "fft"]) == 2
-    err = capsys.readouterr().err
-    assert err == ("error: plugin name 'fft' is used by 2 kinds; give one of: transform:fft, "
-                   "imager:fft\n")
+    assert main(["plugins", "lct"]) == 0
+    out = capsys.readouterr().out
+    assert "imager:lct" in out and "capture_format:lct" in out
+    assert "kind          imager" in out and "kind          capture_format" in out
+
+
+def test_an_unknown_plugin_name_is_one_line(capsys):
+    from nlosfw.cli import main
+
     assert main(["plugins", "nope"]) == 2
     assert capsys.readouterr().err.startswith("error: unknown plugin 'nope'; valid: "
                                               "simulator:analytic, ")

@@ -32,7 +32,8 @@ USAGE = """\
 python -m nlosfw plugins            every installed plugin, its distribution and status
 python -m nlosfw plugins --check    the same, importing every plugin (exit 1 if one is broken)
 python -m nlosfw plugins NAME       one plugin: options, capabilities, conformance checks
-                                    (KIND:NAME where two kinds use the name, e.g. imager:fft)"""
+                                    (each kind that uses the name; KIND:NAME for one of
+                                    them, e.g. imager:lct)"""
 
 
 @dataclass(frozen=True)
@@ -160,10 +161,16 @@ def _show_one(host: PluginHost, name: str, console: Console) -> int:
         console.print(f"[bold]{escape(name)}[/]: [red]broken: entry point failed to load: "
                       f"{escape(host.broken[name])}[/]")
         return BROKEN_EXIT_STATUS
-    spec = host.registry.find(name)
-    for item in plugin_details(spec):
-        console.print(item, highlight=False)
-    return 0 if plugin_status(spec, full=True).state != "broken" else BROKEN_EXIT_STATUS
+    # a bare name several kinds use (lct: a capture format and an imager) shows each of them
+    specs = ([s for s in host.registry.specs() if s.name == name] if ":" not in name
+             else []) or [host.registry.find(name)]
+    status = 0
+    for spec in specs:
+        for item in plugin_details(spec):
+            console.print(item, highlight=False)
+        if plugin_status(spec, full=True).state == "broken":
+            status = BROKEN_EXIT_STATUS
+    return status
 
 
 def _options_table(spec: PluginSpec, options: Sequence[OptionDoc]) -> Table:

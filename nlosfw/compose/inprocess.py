@@ -113,17 +113,42 @@ def _new_run_dir(output_dir: str | Path | None) -> Path:
 
 @contextmanager
 def _run_log(path: Path) -> Iterator[None]:
-    """nlosfw's log records at INFO and above into the run's ``run.log`` while it runs."""
+    """nlosfw's log records at INFO and above into the run's ``run.log`` while it runs; only
+    warnings and errors reach the caller's handlers (a notebook's), not every INFO line."""
     handler = logging.FileHandler(path, encoding="utf-8")
     handler.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] %(message)s"))
     logger = logging.getLogger("nlosfw")
-    level = logger.level
+    level, propagate = logger.level, logger.propagate
     logger.addHandler(handler)
+    forward = _Forward(logging.WARNING)
+    if propagate:
+        logger.addHandler(forward)
+        logger.propagate = False
     if logger.getEffectiveLevel() > logging.INFO:
         logger.setLevel(logging.INFO)
     try:
         yield
     finally:
         logger.removeHandler(handler)
+        logger.removeHandler(forward)
         logger.setLevel(level)
+        logger.propagate = propagate
         handler.close()
+
+
+class _Forward(logging.Handler):
+    """Hands records at its level and above to the parent loggers' handlers (as propagation
+    would), or to logging's last resort when they have none."""
+
+    def handle(self, record: logging.LogRecord) -> bool:
+        if record.levelno < self.level:
+            return False
+        parent = logging.getLogger("nlosfw").parent
+        if parent is not None and parent.hasHandlers():
+            parent.handle(record)
+        elif logging.lastResort is not None and record.levelno >= logging.lastResort.level:
+            logging.lastResort.handle(record)
+        return True
+
+    def emit(self, record: logging.LogRecord) -> None:  # handle() does the work
+        pass

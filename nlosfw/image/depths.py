@@ -13,8 +13,9 @@ any frequency of the band:
 With the automatic band (f_max = 1/(2 m Δ), see
 :func:`nlosfw.transform.frequencies.spatial_limit`) this is Δ/2 for both kinds.
 The planes span :func:`depth_span`: the capture's ground truth, else the hidden
-volume a Zaragoza file declares, else the part of its time profile that holds
-signal (device legs removed; a path t reaches at most t/2 deep).
+volume a Zaragoza file declares, else the part of its time profile where the
+signal stands above the background (:mod:`nlosfw.capture.signal`; device legs
+removed; a path t reaches at most t/2 deep).
 """
 
 from __future__ import annotations
@@ -26,9 +27,13 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.signal import signal_depth_range
+from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
+#: The key of a run's depth range [near, far] (m) in a field's metadata.
+DEPTH_RANGE_KEY = "depth_range"
 #: Most planes the automatic rule chooses (beyond it the step grows, with an INFO line).
 MAX_AUTOMATIC_PLANES = 512
 
@@ -54,8 +59,13 @@ def automatic_depths(span: tuple[float, float], f_max: float, kind: CaptureKind,
 
 
 def depth_span(capture: Capture) -> tuple[float, float]:
-    """Depths covering the hidden scene: from the ground truth, else the hidden volume a
-    Zaragoza file declares, else the span of the signal in time (device legs removed)."""
+    """The automatic depth range: depths covering the hidden scene from the ground truth,
+    else the hidden volume a Zaragoza file declares, else where the capture's signal rises
+    above its background (:func:`nlosfw.capture.signal.signal_depth_range`: robust to dark
+    counts and late background, unlike the last bin with counts), else 0.3-2 m.
+
+    A run's planes follow, in this order: ``reconstruction.depths``, then
+    ``reconstruction.depth_range``, then this range."""
     truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
     if truth is not None:
         depth = np.asarray(truth, dtype=float)
@@ -70,12 +80,16 @@ def depth_span(capture: Capture) -> tuple[float, float]:
         half = float(np.asarray(volume["size"], dtype=float).reshape(-1)[-1]) / 2
         if centre - half > 0:
             return centre - half, centre + half
-    profile = capture.H.reshape(capture.n_bins, -1).sum(axis=1)
-    nonzero = (np.flatnonzero(profile > 1e-3 * profile.max()) if profile.max() > 0
-               else np.zeros(0, dtype=np.int64))
-    if len(nonzero) == 0:
-        return 0.3, 2.0
-    legs = float(np.mean(capture.geometry.device_path(capture.sensor_points)))
-    first, last = capture.bin_centers[[nonzero[0], nonzero[-1]]] - legs
-    # a path of length t reaches at most t/2 deep (wall -> point -> wall)
-    return max(0.05, 0.8 * float(first) / 2), max(0.3, float(last) / 2)
+    found = signal_depth_range(capture)
+    return (0.3, 2.0) if found is None else found
+
+
+def field_depth_range(field: PhasorField) -> tuple[float, float] | None:
+    """The run's depth range a field carries in its metadata (:data:`DEPTH_RANGE_KEY`, set
+    by the pipeline before a field model is fitted), or None."""
+    value = field.metadata.get(DEPTH_RANGE_KEY)
+    if (isinstance(value, (list, tuple)) and len(value) == 2
+            and all(isinstance(v, (int, float)) for v in value)
+            and 0 <= float(value[0]) < float(value[1])):
+        return float(value[0]), float(value[1])
+    return None

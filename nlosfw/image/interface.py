@@ -26,6 +26,10 @@ class Imager(Configurable[ImagerConfigT], ABC):
     """Propagates a :class:`PhasorField` into the hidden volume and images it."""
 
     config_class: ClassVar[type] = ImagerConfig
+    #: True for imagers that image only fields on the wall's full regular grid, in the time
+    #: domain (lct, fk, fbp): the pipeline gives them the ``raw`` source's samples on the
+    #: full grid with zeros elsewhere, and does not warn about band aliasing for them.
+    full_grid_only: ClassVar[bool] = False
 
     @abstractmethod
     def reconstruct(self, field: PhasorField, voxels: np.ndarray,

@@ -42,12 +42,15 @@ from nlosfw.image.transient import (
     TransientImager,
     TransientImagerConfig,
     WallGrid,
+    field_hints,
     interpolate_depths,
 )
 from nlosfw.transform.field import PhasorField
 
 #: Depth steps (dt/2) of margin beyond the farthest voxel.
 _MARGIN_STEPS = 4
+#: The Wiener SNR without an option or a hint (O'Toole's code: 8e-2).
+DEFAULT_SNR = 0.08
 
 
 @dataclass(frozen=True)
@@ -66,13 +69,15 @@ class LightConeConfig(TransientImagerConfig):
 class LCTImagerConfig(LightConeConfig):
     """Options of the ``lct`` imager."""
 
-    snr: float = 0.08
-    """Signal-to-noise ratio of the Wiener filter conj(K^)/(|K^|^2 + 1/snr) (O'Toole: 8e-2)."""
+    snr: float | None = None
+    """Signal-to-noise ratio of the Wiener filter conj(K^)/(|K^|^2 + 1/snr); null: the
+    capture's imaging hint (O'Toole's demo: 0.8 retroreflective, 0.08 diffuse), else
+    0.08."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        require(math.isfinite(self.snr) and self.snr > 0, "snr",
-                f"must be a finite number > 0, got {self.snr}")
+        require(self.snr is None or (math.isfinite(self.snr) and self.snr > 0), "snr",
+                f"must be a finite number > 0 (or null: the capture's hint), got {self.snr}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -146,11 +151,18 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
     def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
                 window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         cone = self._cone(grid, depths, dt)
-        r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone,
-                              self.config.snr)
+        snr = self.snr_for(field)
+        r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone, snr)
         volume = interpolate_depths(r_z, 0.0, cone.dv, depths**2) * depths[:, None, None]
-        return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape),
-                        "snr": float(self.config.snr)}
+        return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape), "snr": snr}
+
+    def snr_for(self, field: PhasorField) -> float:
+        """The Wiener SNR for ``field``: the ``snr`` option if set, else the field's imaging
+        hint, else :data:`DEFAULT_SNR`."""
+        if self.config.snr is not None:
+            return float(self.config.snr)
+        hint = field_hints(field).snr
+        return DEFAULT_SNR if hint is None else float(hint)
 
 
 class FBPImager(LightConeImager[LightConeConfig]):

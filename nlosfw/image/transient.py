@@ -41,6 +41,7 @@ from typing import ClassVar, TypeVar
 import numpy as np
 
 from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.hints import HINTS_KEY, ImagingHints
 from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
@@ -65,8 +66,10 @@ class Falloff(Choice):
 class TransientImagerConfig(ImagerConfig):
     """Options shared by the ``lct``, ``fk`` and ``fbp`` imagers."""
 
-    falloff: Falloff = Falloff.diffuse
-    """Radiometric falloff undone before imaging (diffuse 1/r^4, retroreflective 1/r^2)."""
+    falloff: Falloff | None = None
+    """Radiometric falloff undone before imaging (diffuse 1/r^4, retroreflective 1/r^2);
+    null: the capture's imaging hint (the authors' setting for a known capture), else
+    diffuse."""
     samples_per_wavelength: float = 4.0
     """Time samples per shortest wavelength of the field's band (dt = 1/(this x f_max))."""
     workers: int = -1
@@ -78,10 +81,6 @@ class TransientImagerConfig(ImagerConfig):
         require(self.workers == -1 or self.workers >= 1, "workers",
                 f"must be -1 (all cores) or >= 1, got {self.workers}")
 
-    @property
-    def falloff_power(self) -> int:
-        """n of the 1/r^n falloff."""
-        return 4 if self.falloff == "diffuse" else 2
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,6 +122,7 @@ class TransientImager(Imager[TransientConfigT]):
 
     config_class: ClassVar[type] = TransientImagerConfig
     imager_name: ClassVar[str] = "transient"
+    full_grid_only: ClassVar[bool] = True
 
     def reconstruct(self, field: PhasorField, voxels: np.ndarray,
                     on_progress: ProgressCallback | None = None) -> Reconstruction:
@@ -151,7 +151,7 @@ class TransientImager(Imager[TransientConfigT]):
             "frequencies": [float(f) for f in field.frequencies],
             "weights_applied": False,
             "capture_kind": field.geometry.kind.value,
-            "falloff": str(self.config.falloff),
+            "falloff": str(self.falloff_for(field)),
             "time_step": dt,
             "time_window": list(window),
             "n_voxels": int(np.prod(planes.shape)),
@@ -165,6 +165,14 @@ class TransientImager(Imager[TransientConfigT]):
                 window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         """(complex volume (len(depths), Y, X) over the whole wall grid, metadata)."""
 
+    def falloff_for(self, field: PhasorField) -> Falloff:
+        """The falloff undone for ``field``: the ``falloff`` option if set, else the field's
+        imaging hint (:mod:`nlosfw.capture.hints`), else diffuse."""
+        if self.config.falloff is not None:
+            return Falloff(self.config.falloff)
+        hint = field_hints(field).falloff
+        return Falloff(hint) if hint is not None else Falloff.diffuse
+
     def transient(self, field: PhasorField, grid: WallGrid, times: np.ndarray,
                   window: tuple[float, float]) -> np.ndarray:
         """h at ``times`` (path from the wall, m) inside ``window``, zero outside: (T, Y, X),
@@ -176,10 +184,16 @@ class TransientImager(Imager[TransientConfigT]):
             return out
         coeffs = np.exp(
             2j * np.pi * np.outer(t[inside], field.frequencies))         # (T', F)
-        coeffs *= ((t[inside] / 2.0) ** (self.config.falloff_power - 1))[:, None]
+        power = 4 if self.falloff_for(field) == "diffuse" else 2          # 1/r^n falloff
+        coeffs *= ((t[inside] / 2.0) ** (power - 1))[:, None]
         flat = grid.values.reshape(grid.values.shape[0], -1)
         out[inside] = (coeffs @ flat).reshape((-1,) + grid.shape)
         return out
+
+
+def field_hints(field: PhasorField) -> ImagingHints:
+    """The imaging hints the field carries from its capture (empty when none)."""
+    return ImagingHints.from_mapping(field.metadata.get(HINTS_KEY))
 
 
 def canonical_wall(field: PhasorField) -> WallGrid:
@@ -229,6 +243,21 @@ def full_band_frequencies(n_bins: int, delta_t: float) -> np.ndarray:
     """Every positive DFT bin k / (n_bins delta_t), k = 1 .. n_bins/2, of a capture: with
     ``transform.frequencies`` set to these the classical imagers see the whole transient."""
     return np.arange(1, n_bins // 2 + 1) / (n_bins * delta_t)
+
+
+#: [1/m] The band for imaging measured captures with the transient imagers: issue 21 found
+#: 0.4-60 cycles/m clean on the Stanford LCT captures (the wall-aliasing band 5.7-22.9 gives
+#: poor classical images; the full 4 ps band is noisy and needs 6-9 GB).
+MEASURED_BAND = (0.4, 60.0)
+
+
+def measured_band_frequencies(n_bins: int, delta_t: float,
+                              band: tuple[float, float] = MEASURED_BAND) -> np.ndarray:
+    """The capture's DFT bins (:func:`full_band_frequencies`) within ``band`` (cycles per
+    metre of path): the imaging band for measured captures (at least two bins)."""
+    every = full_band_frequencies(n_bins, delta_t)
+    kept = every[(every >= band[0]) & (every <= band[1])]
+    return kept if kept.size >= 2 else every[:2]
 
 
 def lateral_frequencies(n: int, spacing: float) -> np.ndarray:

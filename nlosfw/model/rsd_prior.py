@@ -27,13 +27,13 @@ training spacing is a whole multiple of it) covering the training grid and half 
 training spacing beyond. Enough frequencies are fitted that paths over twice the depth
 span do not alias in time.
 
-Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a
-coarse lattice (the training spacing laterally, planes a quarter of the shortest
-wavelength of the lower half of the band apart, from the wall to half the capture's
-time span) finds the depths where a plane's largest contribution ||A e_v|| a_v reaches
-``depth_threshold`` of the largest; the fine planes are those within ``depth_margin``
-(plus half a coarse step) of them. Separate objects thus cost separate clusters of
-planes, not the whole depth range between them.
+Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a coarse
+lattice (the training spacing laterally, planes a quarter of the shortest wavelength of the
+lower half of the band apart, from the wall to half the capture's time span, within the
+run's depth range if the field carries it) finds the depths where a plane's largest
+contribution ||A e_v|| a_v reaches ``depth_threshold`` of the largest; the fine planes are
+those within ``depth_margin`` (plus half a coarse step) of them. Separate objects thus cost
+separate clusters of planes, not the whole depth range between them.
 
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
@@ -54,6 +54,7 @@ import numpy as np
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import number, require
 from nlosfw.common.errors import ConfigError, DataError, FitError
+from nlosfw.image.depths import field_depth_range
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout, to_canonical
 from nlosfw.image.rsd_kernel import check_geometry, path_multiplier, wall_field
@@ -265,7 +266,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             f[lower], cfg.fit_frequencies, deepest))]
         freqs = f[chosen]
         coarse = 1.0 / (4.0 * float(freqs.max()))
-        depths = np.arange(coarse, deepest + coarse / 2, coarse)
+        lo, hi = field_depth_range(field) or (coarse, deepest)   # the run's range, if any
+        depths = np.arange(max(coarse, lo), max(min(deepest, hi), lo) + coarse / 2, coarse)
         lattice = voxel_lattice(wall, max(wall.spacing), depths)
         op = SceneOperator(lattice, wall, field.geometry, freqs, self._options())
         albedo, _ = self._solve(op, values[chosen], cfg.depth_iterations)
@@ -278,8 +280,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         reach = cfg.depth_margin + coarse / 2
         grid = np.arange(max(step, found.min() - reach), found.max() + reach + step / 2, step)
         near = np.abs(grid[:, None] - found[None, :]).min(axis=1) <= reach
-        log.info("rsd_prior: a coarse fit of %d planes and %d frequencies finds the scene at "
-                 "%s m", depths.size, freqs.size, np.round(found, 3).tolist())
+        log.info("rsd_prior: the coarse fit's %d planes (%.3f-%.3f m) find the scene on %d in "
+                 "%.3f-%.3f m", depths.size, depths[0], depths[-1], found.size, *found[[0, -1]])
         return grid[near]
 
     def _options(self, cache: bool = True) -> OperatorOptions:

@@ -48,7 +48,7 @@ def _file_capture(run: StageContext) -> CaptureResult:
     versions = run.plan.format_versions or {}
     key = loaded.cache_key(versions.get(loaded.format, "unknown"))
     return CaptureResult(capture=loaded.prepared.capture, key=key, source="file",
-                         label=f"{loaded.path.name} ({loaded.format})",
+                         label=f"{loaded.path.name} ({loaded.format} format)",
                          path=loaded.path.resolve(), format=loaded.format,
                          steps=loaded.prepared.steps)
 

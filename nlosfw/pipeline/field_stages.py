@@ -15,6 +15,7 @@ from functools import partial
 from nlosfw.capture.data import Capture
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.hashing import cache_key
+from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
 from nlosfw.model.interface import TrainingStep
 from nlosfw.model.protocol import split_field
 from nlosfw.pipeline.context import StageContext
@@ -55,7 +56,8 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
         clean = None
         if capture.clean is not None and capture.clean_key is not None:
             clean = cached_field(capture.clean, capture.clean_key)[0]
-        _warn_aliasing(field)
+        if not run.plan.imager.plugin.full_grid_only:   # time-domain imagers: no aliasing
+            _warn_aliasing(field)
         score = variance = None
         if capture.thinning is not None and capture.score_key is not None:
             score = cached_field(capture.thinning.b, capture.score_key)[0]
@@ -72,6 +74,11 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
     """Split the field; fit the selected model, the interp baseline and every ``compare``
     model to its training samples; write the selected model."""
     field = required(done.transform, "transform").field
+    # the run's depth range bounds a model's own depth search (rsd_prior's)
+    span = run.plan.settings.reconstruction.depth_range or depth_span(
+        required(done.capture, "capture").capture)
+    field = field.replace(metadata={**field.metadata,
+                                    DEPTH_RANGE_KEY: [float(v) for v in span]})
     s = run.plan.settings.split
     split = split_field(field, s.sampling, spectral=s.spectral,
                         spectral_fraction=s.spectral_fraction)

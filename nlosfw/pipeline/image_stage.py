@@ -11,6 +11,7 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.progress import accepts_progress
 from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.interface import Imager
@@ -35,14 +36,20 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
     """Image every field on the same voxels, then each from single frequencies alone."""
     capture = required(done.capture, "capture").capture
     imager = run.plan.imager
-    sources: Mapping[str, PhasorField]
+    sources: dict[str, PhasorField]
     chosen: dict[FrequencySplit, int] = {}
     if done.fields is None:  # model=none: the capture's own field, imaged alone
-        sources = {"true": required(done.transform, "transform").field}
+        sources = {"true": with_capture_hints(required(done.transform, "transform").field,
+                                              capture)}
     else:
-        sources = done.fields.by_source()
+        split = required(done.fit, "fit").split
+        sources = {name: with_capture_hints(f, capture)
+                   for name, f in done.fields.by_source().items()}
+        if imager.plugin.full_grid_only and sources["raw"].grid_shape != \
+                done.fields.true.grid_shape:
+            sources["raw"] = with_capture_hints(zero_filled(split, done.fields.true), capture)
         # as in the thesis figures: images from one frequency at a time, too
-        chosen = chosen_frequencies(required(done.fit, "fit").split,
+        chosen = chosen_frequencies(split,
                                     run.plan.settings.reconstruction.single_frequency_images)
     true = sources["true"]
     voxels = run_voxels(run.plan.settings.reconstruction, capture, true)
@@ -88,6 +95,23 @@ def run_voxels(settings: ReconstructionSettings, capture: Capture,
                   else automatic_depths(span, float(field.frequencies.max()),
                                         field.geometry.kind))
     return wall_voxels(field, depths)
+
+
+def with_capture_hints(field: PhasorField, capture: Capture) -> PhasorField:
+    """``field`` carrying the capture's imaging hints (a field model's prediction does not
+    inherit the transform's metadata)."""
+    hints = capture.scene_info.get(HINTS_KEY)
+    if hints is None or HINTS_KEY in field.metadata:
+        return field
+    return field.replace(metadata={**field.metadata, HINTS_KEY: hints})
+
+
+def zero_filled(split: FieldSplit, field: PhasorField) -> PhasorField:
+    """The training samples of ``field`` on its full grid, zeros elsewhere: the ``raw``
+    source for imagers that image only the full wall grid (a zero adds nothing to a
+    back-projection or to the light-cone convolution)."""
+    values = np.where(split.spatial_mask[None], field.values, 0).astype(field.values.dtype)
+    return field.replace(values=values, metadata={**field.metadata, "zero_filled": True})
 
 
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:

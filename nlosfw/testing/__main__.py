@@ -58,7 +58,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     sys.stdout.write("\n".join(plan.format() for plan in plans) + "\n")
     if args.plan:
         return 0
-    import pytest
+    try:
+        import pytest
+    except ModuleNotFoundError:
+        sys.stderr.write("error: running the conformance checks needs pytest (pip install "
+                         "pytest, or pip install 'nlosfw[test]'); --plan prints the plan "
+                         "without it\n")
+        return USER_ERROR_EXIT_STATUS
 
     return int(pytest.main(["--pyargs", "nlosfw.testing.conformance", "-p", "no:cacheprovider",
                             *pytest_args], plugins=[_Selection(tuple(args.names))]))

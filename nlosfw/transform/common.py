@@ -16,6 +16,7 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat
+from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.temporal_dft import temporal_dft, unit_phasor
@@ -107,5 +108,7 @@ def transform_capture(capture: Capture, frequencies: np.ndarray,
         "device_legs_removed": removed,
     }
     info.update(options.metadata)  # no wall-clock time: same capture, same bytes
+    if HINTS_KEY in capture.scene_info:     # how the capture's authors image it
+        info[HINTS_KEY] = capture.scene_info[HINTS_KEY]
     return PhasorField(values=values, frequencies=f, wall_xyz=wall_points(capture),
                        geometry=geometry, weights=options.weights, metadata=info)

@@ -1,0 +1,114 @@
+"""Imaging hints: how the authors of a published capture image it, attached to the capture.
+
+A capture's ``scene_info["imaging_hints"]`` may say which radiometric falloff to undo
+(``diffuse`` 1/r^4 or ``retroreflective`` 1/r^2), the Wiener filter's signal-to-noise
+ratio and the depth window the authors show. The transient imagers (``lct``, ``fk``,
+``fbp``) use them when their own options ``falloff`` and ``snr`` are not set; an option
+given explicitly always wins. The phasor-field transform copies the hints into the field's
+metadata (``field.metadata["imaging_hints"]``), so an imager that gets only a field sees
+them too.
+
+The Stanford LCT captures get their hints from the authors' ``cnlos_reconstruction.m``
+(per scene: ``isdiffuse``, ``snr``, ``z_offset``; the displayed depth window runs from
+``z_offset`` for ``2 width`` of depth): the diffuse "S" is diffuse with SNR 0.08, the
+retroreflective charts and letters use 1/r^2 and SNR 0.8.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from nlosfw.capture.data import Capture
+
+#: The key of the hints in ``Capture.scene_info`` and ``PhasorField.metadata``.
+HINTS_KEY = "imaging_hints"
+
+
+@dataclass(frozen=True)
+class ImagingHints:
+    """How a capture is best imaged; ``None`` fields: no hint (the imager's default)."""
+
+    falloff: str | None = None
+    """``diffuse`` (1/r^4) or ``retroreflective`` (1/r^2)."""
+    snr: float | None = None
+    """Signal-to-noise ratio of the LCT Wiener filter."""
+    depth_window: tuple[float, float] | None = None
+    """[near, far] (m) of the depths the authors show."""
+    origin: str = ""
+    """Where the hints come from (shown in metrics and reports)."""
+
+    def to_dict(self) -> dict[str, object]:
+        """Plain values for ``scene_info`` (YAML/JSON)."""
+        out: dict[str, object] = {"origin": self.origin}
+        if self.falloff is not None:
+            out["falloff"] = self.falloff
+        if self.snr is not None:
+            out["snr"] = float(self.snr)
+        if self.depth_window is not None:
+            out["depth_window"] = [float(v) for v in self.depth_window]
+        return out
+
+    @classmethod
+    def from_mapping(cls, mapping: object) -> ImagingHints:
+        """The hints a ``scene_info``/metadata entry holds; unknown or bad values are ignored
+        (hints are advice: a file cannot make an imager fail through them)."""
+        if not isinstance(mapping, Mapping):
+            return cls()
+        falloff = mapping.get("falloff")
+        snr = mapping.get("snr")
+        window: tuple[float, float] | None = None
+        given = mapping.get("depth_window")
+        if (isinstance(given, (list, tuple)) and len(given) == 2
+                and all(isinstance(v, (int, float)) for v in given)
+                and 0 <= float(given[0]) < float(given[1])):
+            window = (float(given[0]), float(given[1]))
+        return cls(
+            falloff=falloff if falloff in ("diffuse", "retroreflective") else None,
+            snr=float(snr) if isinstance(snr, (int, float)) and 0 < float(snr) < 1e12 else None,
+            depth_window=window,
+            origin=str(mapping.get("origin", "")))
+
+
+@dataclass(frozen=True)
+class _AuthorsScene:
+    diffuse: bool
+    snr: float
+    z_offset: int           # first bin (4 ps) of the depth window shown
+
+
+#: Scenes of the LCT release, by file name (cnlos_reconstruction.m); other files of the
+#: release get no hints (the imagers' defaults: diffuse, SNR 0.08).
+LCT_SCENES: dict[str, _AuthorsScene] = {
+    "data_resolution_chart_40cm": _AuthorsScene(False, 0.8, 350),
+    "data_dot_chart_40cm": _AuthorsScene(False, 0.8, 350),
+    "data_diffuse_s": _AuthorsScene(True, 0.08, 100),
+}
+
+
+def lct_hints(stem: str, half_width: float, n_bins: int, delta_t: float) -> ImagingHints | None:
+    """The authors' settings for the LCT capture named ``stem`` (None for another name):
+    their falloff and SNR, and their depth window, ``z_offset`` bins of depth (half a bin of
+    path each) for ``2 half_width`` of depth."""
+    scene = LCT_SCENES.get(stem)
+    if scene is None:
+        return None
+    dz = delta_t / 2
+    near = scene.z_offset * dz
+    far = min(near + 2 * half_width, n_bins * dz)
+    return ImagingHints(falloff="diffuse" if scene.diffuse else "retroreflective",
+                        snr=scene.snr, depth_window=(near, far),
+                        origin=f"the authors' settings for {stem} (cnlos_reconstruction.m)")
+
+
+def capture_hints(capture: Capture) -> ImagingHints:
+    """The hints attached to ``capture`` (empty hints when none are)."""
+    return ImagingHints.from_mapping(capture.scene_info.get(HINTS_KEY))
+
+
+def with_hints(capture: Capture, hints: ImagingHints) -> Capture:
+    """A copy of ``capture`` carrying ``hints`` in its scene_info."""
+    info = dict(capture.scene_info)
+    info[HINTS_KEY] = hints.to_dict()
+    return dataclasses.replace(capture, scene_info=info)

@@ -1,0 +1,90 @@
+"""The automatic depth range (issue 21): where the signal rises above the background, not
+the last bin with counts; and the same range bounds rsd_prior's depth search."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from nlosfw import load_capture
+from nlosfw.capture.signal import signal_bins, signal_depth_range
+from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span, field_depth_range
+from nlosfw.model.protocol import split_field
+from nlosfw.model.rsd_prior import RSDPriorFieldModel
+from nlosfw.simulate.analytic import AnalyticSimulator
+from nlosfw.simulate.scene import scene_from_config
+from nlosfw.testing import fixtures, layouts
+from tests.real_data import LCT_CAPTURES, real_capture
+from tests.test_rsd_prior import _field, _point_field
+
+DEPTH = 0.5
+
+
+@pytest.fixture(scope="module")
+def measured_like():
+    """A patch 0.5 m from the wall, scanned confocally (16 x 16 over 0.6 m, 4 ps bins, 2000
+    bins: 1.2 m deep), as photon counts on a dark-count floor with Poisson noise and the
+    direct reflection's tail after a gate, without ground truth (as read from a file)."""
+    config = layouts.lct_scene(resolution=16, bins=2000)
+    config["wall"]["size"] = [0.6, 0.6]
+    config["geometry"] = [{"type": "rectangle", "position": [0.0, 0.0, DEPTH],
+                           "size": [0.2, 0.2]}]
+    capture = AnalyticSimulator().simulate(scene_from_config(config))
+    signal = capture.H / capture.H.max() * 40
+    t = np.arange(capture.n_bins)[:, None, None]
+    direct = np.where(t >= 600, 30 * np.exp(-(t - 600) / 60.0), 0)
+    rng = np.random.default_rng(0)
+    counts = rng.poisson(signal + direct + 0.5 * (t >= 600)).astype(np.float32)
+    return capture.replace(H=counts, scene_info={}), capture
+
+
+def test_range_holds_the_object_and_stops_where_its_signal_does(measured_like):
+    noisy, clean = measured_like
+    near, far = depth_span(noisy)
+    assert near <= DEPTH
+    # the farthest path of the patch seen from the scan's corners, halved
+    corners = np.array([[x, y, 0] for x in (-0.3, 0.3) for y in (-0.3, 0.3)])
+    patch = np.array([[x, y, DEPTH] for x in (-0.1, 0.1) for y in (-0.1, 0.1)])
+    farthest = np.linalg.norm(corners[:, None] - patch[None], axis=-1).max()
+    assert DEPTH + 0.02 <= far <= farthest + 0.02
+    assert far < 0.9 * clean.n_bins * clean.delta_t / 2      # not the end of the histogram
+
+
+def test_signal_bins_of_a_flat_background_and_of_nothing():
+    rng = np.random.default_rng(1)
+    assert signal_bins(np.zeros(100)) is None
+    flat = rng.poisson(50, 1000).astype(float)
+    pulse = flat.copy()
+    pulse[400:420] += 2000
+    first, last = signal_bins(pulse)
+    assert 395 <= first <= 405 and 415 <= last <= 425
+
+
+def test_the_run_range_bounds_rsd_priors_depth_search(caplog):
+    wall = fixtures.rect_wall_grid((12, 12), 1 / 12)
+    freqs = np.linspace(3.0, 6.0, 21)
+    meta = {"t_start": 0.0, "n_bins": 300, "delta_t": 0.01, DEPTH_RANGE_KEY: [0.5, 0.7]}
+    full = _field(_point_field((0.1, -0.05, 0.6), wall, freqs, False), wall, freqs, False,
+                  meta)
+    train = split_field(full, spatial_step=2).train_field
+    assert field_depth_range(train) == (0.5, 0.7)
+    model = RSDPriorFieldModel({"iterations": 5, "depth_iterations": 10, "workers": 1})
+    with caplog.at_level(logging.INFO, logger="nlosfw.model.rsd_prior"):
+        model.fit(train)
+    depths = model.lattice.depths
+    margin = model.config.depth_margin + 1 / (4 * 4.5)
+    assert depths.min() >= 0.5 - margin and depths.max() <= 0.7 + margin
+    coarse = [r.getMessage() for r in caplog.records if "coarse fit" in r.getMessage()]
+    assert len(coarse) == 1 and "[" not in coarse[0] and len(coarse[0]) < 160
+
+
+@pytest.mark.parametrize("name", LCT_CAPTURES)
+def test_shared_captures_range_holds_the_object_and_not_the_late_background(name):
+    capture = load_capture(real_capture(name))
+    near, far = depth_span(capture)
+    assert signal_depth_range(capture) == (near, far)
+    # the object: 40 cm (charts), about 0.5 m (the S: the authors' brightest plane)
+    depth = 0.5 if name == "data_diffuse_s" else 0.4
+    assert near < depth - 0.05 and depth + 0.1 < far < 0.85
