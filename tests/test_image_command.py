@@ -16,6 +16,7 @@ import pytest
 import nlosfw
 from nlosfw.capture.hdf5 import write_capture
 from nlosfw.cli import main
+from nlosfw.cli.image_command import image_overrides
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.reconstruction_io import read_reconstruction
 from nlosfw.report.views import masked_depth_map, round_trip_path, time_profile
@@ -173,3 +174,15 @@ def test_time_profile_peaks_at_the_round_trip_to_the_nearest_wall_sample(point_c
     assert np.corrcoef(counts, expected)[0, 1] > 0.9
     # no device legs in this capture's time axis: a depth's round trip is twice it
     np.testing.assert_allclose(round_trip_path(capture, np.array([0.3, 0.6])), [0.6, 1.2])
+
+
+def test_image_stands_for_capture_path_model_none_keeping_the_volume(tmp_path):
+    path = tmp_path / "it's [a] scan.mat"
+    path.write_bytes(b"")
+    quoted = "capture.path='" + str(path.resolve()).replace("'", "\\'") + "'"
+    assert image_overrides([str(path)]) == [quoted, "model=none",
+                                            "output.keep=[reconstructions]"]
+    # Hydra's flags go first (they must precede the overrides); output.keep given wins
+    assert image_overrides([str(path), "imager=lct", "-m", "-cn", "config",
+                            "output.keep=[]"]) == [
+        "-m", "-cn", "config", quoted, "model=none", "imager=lct", "output.keep=[]"]

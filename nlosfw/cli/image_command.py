@@ -6,7 +6,8 @@ field and writes the volume (``reconstructions/true.hdf5``), the front view, the
 and a strip of depth slices (``figures/``), the capture's time profile and
 ``report.html`` (with the run's own config.yaml, metrics.json and run.log); no split, no
 field model. Any other override applies as in a normal run (``imager=lct``,
-``reconstruction.depth_range=[0.3,0.8]``, ``output.keep=[...]``).
+``reconstruction.depth_range=[0.3,0.8]``, ``output.keep=[...]``), and Hydra's flags too
+(``-m imager=fft,lct`` images the capture with both).
 """
 
 from __future__ import annotations
@@ -44,8 +45,33 @@ def image_overrides(argv: Sequence[str]) -> list[str]:
             raise ConfigError(key, f"image sets it (capture.path=FILE model=none); to fit a "
                               f"field model run python -m nlosfw capture.path={path} "
                               f"model=NAME instead")
-    keep = [] if any(a.lstrip("+~").startswith("output.keep=") for a in rest) else [KEEP]
-    return [f"capture.path={_quoted(str(path.resolve()))}", "model=none", *keep, *rest]
+    flags, overrides = _hydra_flags(rest)
+    keep = [] if any(a.lstrip("+~").startswith("output.keep=") for a in overrides) else [KEEP]
+    return [*flags, f"capture.path={_quoted(str(path.resolve()))}", "model=none", *keep,
+            *overrides]
+
+
+#: Hydra's flags that take a value (the next argument unless written ``--flag=value``).
+_VALUE_FLAGS = frozenset({"-cn", "--config-name", "-cp", "--config-path", "-cd",
+                          "--config-dir", "-c", "--cfg", "-p", "--package"})
+
+
+def _hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(Hydra's flags with their values, the overrides): Hydra reads its flags before the
+    overrides (``image FILE -m imager=fft,lct`` sweeps)."""
+    flags: list[str] = []
+    overrides: list[str] = []
+    taking = False
+    for arg in args:
+        if taking:
+            flags.append(arg)
+            taking = False
+        elif arg.startswith("-"):
+            flags.append(arg)
+            taking = arg in _VALUE_FLAGS
+        else:
+            overrides.append(arg)
+    return flags, overrides
 
 
 def _quoted(value: str) -> str:
