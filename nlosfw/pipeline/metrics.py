@@ -284,8 +284,9 @@ class ReconstructionMetrics:
     depth_planes: int = documented("number of depth planes")
     depth_spacing: float | None = documented(
         "distance between neighbouring planes (m; null for one plane or uneven planes)")
-    sources: dict[str, ImageScores] = documented("true, raw, interp, model and every "
-                                                 "compare label", key="source")
+    sources: dict[str, ImageScores] = documented("true, raw, ceiling (count splitting), "
+                                                 "interp, model and every compare label",
+                                                 key="source")
     single_frequency: dict[str, SingleFrequencyMetrics] = documented(
         "by frequency index", key="index")
 
