@@ -281,8 +281,9 @@ class ReconstructionMetrics(Document, frozen=True, kw_only=True):
     depth_planes: Annotated[int, doc("number of depth planes")]
     depth_spacing: Annotated[float | None, doc(
         "distance between neighbouring planes (m; null for one plane or uneven planes)")]
-    sources: Annotated[dict[str, ImageScores], doc("true, raw, interp, model and every "
-                                                   "compare label", key="source")]
+    sources: Annotated[dict[str, ImageScores], doc(
+        "true, raw, ceiling (count splitting), interp, model and every compare label",
+        key="source")]
     single_frequency: Annotated[dict[str, SingleFrequencyMetrics], doc(
         "by frequency index", key="index")]
 
