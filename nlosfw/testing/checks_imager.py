@@ -10,6 +10,8 @@ frequencies around 4 cycles/m; voxels are planes parallel to the wall whose
 * the image agrees with the plain reference RSD of
   :func:`nlosfw.testing.reference.naive_rsd` (normalised correlation >= 0.99),
   on a defocused plane (a structured image, not just a spot);
+* two points 1 m away, two shortest wavelengths of the band apart, are resolved (the
+  image between them dips below 0.8 of the weaker peak);
 * moving the point parallel to the wall moves the peak by the same number of voxels;
 * voxels at or behind the wall give a one-line DataError; output shapes follow the voxels;
 * ``point_voxels``: a plain voxel list (N, 3) around the point gives the reference RSD's
@@ -78,6 +80,30 @@ def check_imager_focuses_point(spec: PluginSpec, confocal: bool) -> None:
         assert np.all(off <= 1), (
             f"{spec.qualified_name}: point at voxel (z, y, x) = {(iz, iy, ix)} imaged at {peak} "
             f"(confocal={confocal}, device legs in field={legs}); expected within one voxel")
+
+
+@requires(Capability.PLANE_VOXELS, each=GEOMETRIES)
+def check_imager_resolves_two_points(spec: PluginSpec, confocal: bool) -> None:
+    """Two point scatterers 1 m from the wall, two shortest wavelengths of the band apart
+    laterally, are resolved: on the line through them the image dips below 0.8 of the
+    weaker peak (an imager that does not migrate the field fails this)."""
+    f, _ = fixtures.gaussian_band(4.0, 0.75)
+    apart = int(np.ceil(2.0 / float(f.max()) / SPACING - 1e-9))     # wall samples
+    shape = (12, 32)                  # a 2 m aperture along the line: resolution ~ lambda / 2
+    row, left = shape[0] // 2, (shape[1] - apart) // 2
+    wall = fixtures.rect_wall_grid(shape, SPACING)
+    points = [(float(wall[row, ix, 0]), float(wall[row, ix, 1]), 1.0)
+              for ix in (left, left + apart)]
+    one, two = (_field(p, confocal, shape=shape) for p in points)
+    field = one.replace(values=one.values + two.values)
+    voxels = fixtures.aligned_voxels(wall, [1.0])[0]
+    line = spec.create(dict(spec.test_config)).reconstruct(field, voxels).intensity[row]
+    weaker = min(float(line[left]), float(line[left + apart]))
+    dip = float(line[left:left + apart + 1].min())
+    assert weaker > 0 and dip < 0.8 * weaker, (
+        f"{spec.qualified_name}: two points {apart * SPACING:.3f} m apart at 1 m "
+        f"(confocal={confocal}) are not resolved: the image between them is {dip:.3g}, the "
+        f"weaker peak {weaker:.3g}; expected below 0.8 of it")
 
 
 @requires(Capability.PLANE_VOXELS, Capability.RSD, each=GEOMETRIES)
@@ -186,6 +212,7 @@ def check_imager_reports_progress(spec: PluginSpec, confocal: bool) -> None:
 
 IMAGER_CHECKS = (
     check_imager_focuses_point,
+    check_imager_resolves_two_points,
     check_imager_matches_reference,
     check_imager_translation,
     check_imager_rejects_voxels_behind_wall,
