@@ -67,10 +67,16 @@ def html_text(text: object) -> str:
 
 def csv_cell(value: object) -> object:
     """A CSV cell: a string starting with ``= + - @`` (or tab / CR) prefixed with ``'`` so
-    that spreadsheets show it as text; numbers and other values unchanged."""
-    if isinstance(value, str) and value.startswith(_FORMULA_START):
+    that spreadsheets show it as text; numbers, and negative numbers written as text
+    (``-13.7``, ``-1e-05``: the reports format their numbers), unchanged."""
+    if isinstance(value, str) and value.startswith(_FORMULA_START) and \
+            not _NEGATIVE_NUMBER.fullmatch(value):
         return "'" + value
     return value
+
+
+#: A negative decimal number as Python formats one (``-13.7``, ``-1e-05``, ``-inf``).
+_NEGATIVE_NUMBER = re.compile(r"-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf)")
 
 
 def markdown(text: object) -> str:

@@ -81,12 +81,15 @@ def test_report_html_links_are_relative_and_quoted(tmp_path):
 # -------------------------------------------------------------------------- CSV
 def test_csv_string_cells_cannot_be_formulas():
     rows = [["=HYPERLINK(\"http://x\",\"y\")", "+1", "-cmd", "@SUM(A1)", "\t=1", "plain"],
-            [-1.5, 3, 0.0, "-", "a=b", None]]
+            [-1.5, 3, 0.0, "-", "a=b", None],
+            ["-13.7", "-1e-05", "-inf", "-1+1", "-2-cmd", "-.5"]]
     written = csv_text(["run", "b", "c", "d", "e", "f"], rows)
     parsed = list(csv.reader(io.StringIO(written)))
     assert parsed[1] == ["'=HYPERLINK(\"http://x\",\"y\")", "'+1", "'-cmd", "'@SUM(A1)",
                          "'\t=1", "plain"]
     assert parsed[2] == ["-1.5", "3", "0.0", "'-", "a=b", ""]    # numbers untouched
+    # numbers the reports wrote as text stay numbers; anything more is text
+    assert parsed[3] == ["-13.7", "-1e-05", "-inf", "'-1+1", "'-2-cmd", "-.5"]
 
 
 # --------------------------------------------------------------------- Markdown
