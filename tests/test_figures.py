@@ -1,9 +1,10 @@
 """A run's figures say what ran and how they are seen, share one colour scale per row, and
 have colorbars and axes in metres."""
 
-import dataclasses
+
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -100,7 +101,7 @@ def test_run_title_names_a_capture_file():
     assert run_title(info, capture) == ("capture bike.hdf5 (format ytal) · model siren_torch · "
                                         "imager rsd")
     # model=none: the capture and the imager, the format not mistaken for the imager
-    alone = dataclasses.replace(info, model="none", imager="fft")
+    alone = msgspec.structs.replace(info, model="none", imager="fft")
     assert run_title(alone, capture) == "capture bike.hdf5 (format ytal) · imager fft"
 
 
