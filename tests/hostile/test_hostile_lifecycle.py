@@ -71,7 +71,8 @@ def test_an_unexpected_failure_in_a_stage_is_recorded_and_one_line(workdir, tool
     result = tools.run(*CAPTURE_ONLY, "stop_after=transform", f"hydra.run.dir={run}")
     assert result.returncode == 1, result.stderr
     line = tools.one_error_line(result)
-    assert line.startswith("error: TypeError: a bug in a stage (an unexpected failure")
+    assert line.startswith("error: TypeError: a bug in a stage (an unexpected failure in "
+                           "stage transform;")
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["status"] == "failed"
     assert metrics["error"]["stage"] == "transform"
