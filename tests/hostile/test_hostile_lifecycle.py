@@ -88,12 +88,12 @@ def test_an_unexpected_failure_shows_its_traceback_with_debug(workdir, tools, mo
         raise KeyError("deep inside")
 
     monkeypatch.setattr(commands, "_dispatch", broken)
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    monkeypatch.setenv("NLOSFW_DEBUG", "0")    # restored (unset) after the test: --debug sets it
     plain = tools.run("anything")
     assert plain.returncode == 1
     assert tools.one_error_line(plain).startswith("error: KeyError: 'deep inside'")
-    monkeypatch.delenv("NLOSFW_DEBUG", raising=False)
     debug = tools.run("--debug", "anything")
-    monkeypatch.delenv("NLOSFW_DEBUG", raising=False)
     assert debug.returncode == 1 and "Traceback" in debug.stderr
 
 
