@@ -165,6 +165,7 @@ def _task(cfg: DictConfig) -> float | None:
 
     logging.captureWarnings(True)  # library warnings go to run.log, not the console
     hydra = HydraConfig.get()
+    pipeline: Pipeline | None = None
     try:
         plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
         if not isinstance(plain, dict):
@@ -172,8 +173,9 @@ def _task(cfg: DictConfig) -> float | None:
         host = load_plugins()
         plan = make_plan({str(k): v for k, v in plain.items()}, host)
         host.manager.register(ConsoleReporter(host, plan.settings))
-        return Pipeline(plan, Path(hydra.runtime.output_dir), host,
-                        resume=hydra.mode == RunMode.MULTIRUN).run()
+        pipeline = Pipeline(plan, Path(hydra.runtime.output_dir), host,
+                            resume=hydra.mode == RunMode.MULTIRUN)
+        return pipeline.run()
     except NlosfwError as err:
         report_user_error(err)
         raise SystemExit(err.exit_status) from None
@@ -183,7 +185,8 @@ def _task(cfg: DictConfig) -> float | None:
         raise SystemExit(1) from None
     except Exception as err:  # any other failure: one line, the traceback in run.log
         log.error("the run failed:", exc_info=err, extra=FILE_ONLY)
-        report_user_error(unexpected_error(err))
+        stage = None if pipeline is None else pipeline.stage_reached
+        report_user_error(unexpected_error(err, stage))
         raise SystemExit(1) from None
 
 

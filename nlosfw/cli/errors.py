@@ -22,12 +22,13 @@ def report_user_error(err: BaseException) -> None:
     console.print(f"[bold red]error:[/] {escape(one_line(err, whole=True))}")
 
 
-def unexpected_error(err: BaseException) -> NlosfwError:
+def unexpected_error(err: BaseException, stage: str | None = None) -> NlosfwError:
     """An unexpected exception (a bug, a library's failure) as a one-line error with exit
-    status 1, naming its type and where the traceback is."""
+    status 1, naming its type, the stage it ended (if known) and where the traceback is."""
+    where = f" in stage {stage}" if stage else ""
     failure = NlosfwError(f"{type(err).__name__}: {one_line(err, whole=True)} (an unexpected "
-                          "failure; the traceback is in run.log, or on the console with "
-                          "--debug)")
+                          f"failure{where}; the traceback is in run.log, or on the console "
+                          "with --debug)")
     failure.exit_status = 1
     failure.__traceback__ = err.__traceback__
     return failure

@@ -71,7 +71,8 @@ def test_an_unexpected_failure_in_a_stage_is_recorded_and_one_line(workdir, tool
     result = tools.run(*CAPTURE_ONLY, "stop_after=transform", f"hydra.run.dir={run}")
     assert result.returncode == 1, result.stderr
     line = tools.one_error_line(result)
-    assert line.startswith("error: TypeError: a bug in a stage (an unexpected failure")
+    assert line.startswith("error: TypeError: a bug in a stage (an unexpected failure in "
+                           "stage transform;")
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["status"] == "failed"
     assert metrics["error"]["stage"] == "transform"
@@ -87,12 +88,12 @@ def test_an_unexpected_failure_shows_its_traceback_with_debug(workdir, tools, mo
         raise KeyError("deep inside")
 
     monkeypatch.setattr(commands, "_dispatch", broken)
+    monkeypatch.delenv("HYDRA_FULL_ERROR", raising=False)
+    monkeypatch.setenv("NLOSFW_DEBUG", "0")    # restored (unset) after the test: --debug sets it
     plain = tools.run("anything")
     assert plain.returncode == 1
     assert tools.one_error_line(plain).startswith("error: KeyError: 'deep inside'")
-    monkeypatch.delenv("NLOSFW_DEBUG", raising=False)
     debug = tools.run("--debug", "anything")
-    monkeypatch.delenv("NLOSFW_DEBUG", raising=False)
     assert debug.returncode == 1 and "Traceback" in debug.stderr
 
 
