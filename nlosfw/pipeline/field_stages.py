@@ -6,6 +6,7 @@ half A's full field as the ceiling (count splitting) and every model's predictio
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Callable, Iterator, Mapping
@@ -16,11 +17,13 @@ from nlosfw.capture.data import Capture
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.hashing import cache_key
 from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
+from nlosfw.image.transient import measured_band_frequencies
 from nlosfw.model.interface import TrainingStep
 from nlosfw.model.protocol import split_field
 from nlosfw.pipeline.context import StageContext
 from nlosfw.pipeline.plan import PlannedModel
 from nlosfw.pipeline.results import (
+    CaptureResult,
     FitResult,
     FittedModel,
     ImagedFields,
@@ -30,38 +33,50 @@ from nlosfw.pipeline.results import (
 )
 from nlosfw.pipeline.settings import Artefact
 from nlosfw.transform import frequencies as frequencies_module
+from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 from nlosfw.transform.frequencies import warn_aliasing
 from nlosfw.transform.noise_floor import field_variance
+from nlosfw.transform.interface import PhasorTransform
 
+log = logging.getLogger(__name__)
 
 def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
     """The capture's phasor field (cached), and the noise-free capture's; write it."""
     capture = required(done.capture, "capture")
     planned = run.plan.transform
     task = f"phasor field ({planned.name})"
-    canonical = config_to_dict(planned.plugin.config)
+    transform = _transform_for(run, capture)
+    canonical = config_to_dict(transform.config)
+    time_domain = run.plan.imager.plugin.full_grid_only     # no band-aliasing warning
 
     def cached_field(source: Capture, source_key: str) -> tuple[PhasorField, bool]:
         key = cache_key({"capture": source_key, "transform": planned.name,
                          "options": canonical, "plugin": planned.version})
         return run.cache.get_or_compute(
-            "fields", key, lambda: planned.plugin.transform(source),
+            "fields", key, lambda: transform.transform(source),
             lambda p, f: write_phasor_field(p, f), read_phasor_field)
 
     run.events.progress(task, 0)
-    with _once_per_message(logging.getLogger(frequencies_module.__name__)):
-        field, hit = cached_field(capture.capture, capture.key)
-        clean = None
-        if capture.clean is not None and capture.clean_key is not None:
-            clean = cached_field(capture.clean, capture.clean_key)[0]
-        if not run.plan.imager.plugin.full_grid_only:   # time-domain imagers: no aliasing
-            _warn_aliasing(field)
-        score = variance = None
-        if capture.thinning is not None and capture.score_key is not None:
-            score = cached_field(capture.thinning.b, capture.score_key)[0]
-            variance = field_variance(planned.plugin, capture.thinning.b, planned.name)
+    frequencies_log = logging.getLogger(frequencies_module.__name__)
+    quiet = _NoAliasWarning()
+    if time_domain:
+        frequencies_log.addFilter(quiet)
+    try:
+        with _once_per_message(frequencies_log):
+            field, hit = cached_field(capture.capture, capture.key)
+            clean = None
+            if capture.clean is not None and capture.clean_key is not None:
+                clean = cached_field(capture.clean, capture.clean_key)[0]
+            if not time_domain:
+                _warn_aliasing(field)
+            score = variance = None
+            if capture.thinning is not None and capture.score_key is not None:
+                score = cached_field(capture.thinning.b, capture.score_key)[0]
+                variance = field_variance(transform, capture.thinning.b, planned.name)
+    finally:
+        frequencies_log.removeFilter(quiet)
     run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
                         + (" (cached)" if hit else ""))
     run.files.write("phasor_field", lambda p: write_phasor_field(p, field),
@@ -137,6 +152,33 @@ def _warn_aliasing(field: PhasorField) -> None:
     if isinstance(band, Mapping) and band.get("aliases") and band.get("grid_spacing") is not None:
         warn_aliasing(float(field.frequencies.max()), float(band["grid_spacing"]),
                       field.geometry.kind, str(band.get("option", "transform")))
+
+
+def _transform_for(run: StageContext, capture: CaptureResult) -> PhasorTransform:
+    """The run's transform; for a capture file imaged by a time-domain imager (lct, fk,
+    fbp) with the ``fft`` transform's default band, the measured-capture band instead
+    (:func:`nlosfw.image.transient.measured_band_frequencies`; ``transform.f_min``,
+    ``f_max`` or ``frequencies`` choose another)."""
+    plugin = run.plan.transform.plugin
+    cfg = plugin.config
+    if (capture.source != "file" or not run.plan.imager.plugin.full_grid_only
+            or not isinstance(plugin, FFTTransform) or cfg.frequencies
+            or cfg.f_min is not None or cfg.f_max is not None):
+        return plugin
+    c = capture.capture
+    freqs = measured_band_frequencies(c.n_bins, c.delta_t)
+    log.info("a measured capture imaged by %s: the band %.3g-%.3g cycles/m (%d DFT bins); "
+             "transform.f_min/f_max choose another", run.plan.imager.name, freqs[0], freqs[-1],
+             freqs.size)
+    return FFTTransform(dataclasses.replace(cfg, frequencies=tuple(float(f) for f in freqs)))
+
+
+class _NoAliasWarning(logging.Filter):
+    """Drops the band-aliasing warnings (time-domain imagers do not image the band's
+    wall field)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "alias" not in record.getMessage()
 
 
 class _OnceFilter(logging.Filter):
