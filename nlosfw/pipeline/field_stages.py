@@ -37,8 +37,8 @@ from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 from nlosfw.transform.frequencies import warn_aliasing
-from nlosfw.transform.noise_floor import field_variance
 from nlosfw.transform.interface import PhasorTransform
+from nlosfw.transform.noise_floor import field_variance
 
 log = logging.getLogger(__name__)
 
