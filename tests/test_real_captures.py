@@ -117,7 +117,7 @@ def test_a_file_run_is_labelled_with_its_file_and_format(workdir, letter_counts,
     assert metrics["run"]["capture_file"] == str(mat)
     assert metrics["run"]["capture_format"] == "lct"
     assert len(titles) == 1 and titles[0].startswith(
-        "capture data_l.mat (lct format) · model interp · imager fft\nall ")
+        "capture data_l.mat (format lct) · model interp · imager fft\nall ")
     assert "(format lct)" in stdout and "gate (format default)" in stdout
     config = yaml.safe_load((out / "config.yaml").read_text())
     assert "scene" not in config and "simulator" not in config

@@ -40,10 +40,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as err:  # a Hydra job's exit status (its error already reported)
         return err.code if isinstance(err.code, int) else (0 if err.code is None else 1)
     except RecursionError:  # a config or override nested past Python's limit
+        from nlosfw.cli.errors import report_user_error
+
         report_user_error(NlosfwError("the configuration is nested too deeply"))
         return 2
     except Exception as err:  # anything else: one line (the traceback with --debug)
-        from nlosfw.cli.errors import unexpected_error
+        from nlosfw.cli.errors import report_user_error, unexpected_error
 
         report_user_error(unexpected_error(err))
         return 1

@@ -23,8 +23,8 @@ SUBCOMMANDS = (
                                         "report"),
     ("python -m nlosfw -m OVERRIDE ...", "a sweep: every combination of comma-separated "
                                          "values"),
-    ("python -m nlosfw image FILE ...", "reconstruct one capture (no field model): volume, "
-                                        "views, report.html"),
+    ("python -m nlosfw image FILE ...", "image one capture, no field model (views, "
+                                        "report.html)"),
     ("python -m nlosfw plugins [NAME]", "installed plugins; NAME: its options, capabilities, "
                                         "checks"),
     ("python -m nlosfw plugins --check", "import every plugin; broken ones say why"),
@@ -51,14 +51,13 @@ SELECTOR_DOCS = {
                       "(capture.format=NAME forces one)",
     "acquisition": "how a study captures its scenes (clean: analytic, noise-free; noisy: "
                    "embree with Poisson noise)",
-    "sampling": "the scan pattern of a sparse scan (grid; random: drawn with "
-                "split.thinning_seed)",
+    "sampling": "the scan pattern of a sparse scan",
     "experiment": "a preset (thesis figures, the noise and sparsity studies)",
 }
 
 #: Five commands a new user can run as they are (the tests compose each one).
 EXAMPLES = (
-    ("python -m nlosfw", "the default run: two planes, SIREN vs interp, about a minute"),
+    ("python -m nlosfw", "the default run: two planes, SIREN vs interp, minutes on a CPU"),
     ("python -m nlosfw scene=thesis_occluded simulator=embree model=siren_jax",
      "a ray-traced scene with shadows, the JAX SIREN"),
     ("python -m nlosfw model=interp +compare.siren={name:siren_torch,steps:500}",

@@ -28,6 +28,7 @@ from nlosfw.capture.data import Capture
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.scores import amplitude, normalise
 from nlosfw.pipeline.files import RunFiles
+from nlosfw.report.plain_text import literal_text
 
 #: The depth map is blank where a column's brightest voxel is below this fraction of the
 #: volume's brightest (intensity; 0.1 is about a third of the amplitude).
@@ -116,7 +117,7 @@ def write_views(files: RunFiles, recons: Mapping[str, Reconstruction],
 
 def _saver(make: Callable[[], Figure], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        make().savefig(path, dpi=dpi, format="png")
+        literal_text(make()).savefig(path, dpi=dpi, format="png")
 
     return save
 

@@ -40,4 +40,4 @@ def test_the_kit_runs_on_this_package_in_one_command(tmp_path):
                            "--plan"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert plan.returncode == 0, plan.stderr
     assert plan.stdout.startswith("imager:example_backprojection from nlosfw-example-imager\n")
-    assert "16 to run, 0 skipped" in plan.stdout   # rsd, progress declared: their checks run
+    assert "18 to run, 0 skipped" in plan.stdout   # rsd, progress declared: their checks run
