@@ -21,6 +21,7 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+from matplotlib.colors import Colormap
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
@@ -139,16 +140,9 @@ def _range_text(recon: Reconstruction) -> str:
 
 def front_figure(recon: Reconstruction, name: str, title: str) -> Figure:
     """The front view (:func:`front_view`) of one source."""
-    fig = Figure(figsize=(5.4, 5.0), layout="constrained")
-    ax = fig.subplots()
-    image = ax.imshow(front_view(recon), origin="lower", extent=_extent(recon), cmap="hot",
-                      vmin=0, vmax=1)
-    ax.set_title(f"{name}: front view, max over {_range_text(recon)}", fontsize=9)
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    fig.colorbar(image, ax=ax, shrink=0.85, label="amplitude (√intensity) / its maximum")
-    fig.suptitle(f"{title}\n{_VIEW}", fontsize=8)
-    return fig
+    return _map_figure(recon, front_view(recon), title,
+                       f"{name}: front view, max over {_range_text(recon)}",
+                       "amplitude (√intensity) / its maximum", ("hot", 0.0, 1.0))
 
 
 def depth_figure(recon: Reconstruction, name: str, title: str,
@@ -156,18 +150,28 @@ def depth_figure(recon: Reconstruction, name: str, title: str,
     """The depth map (:func:`masked_depth_map`) of one source; no signal is grey."""
     from matplotlib import colormaps
 
-    fig = Figure(figsize=(5.4, 5.0), layout="constrained")
-    ax = fig.subplots()
-    cmap = colormaps["viridis"].with_extremes(bad="0.85")
     depth = masked_depth_map(recon, fraction)
     low, high = depth_scale(depth, recon.depths)
-    image = ax.imshow(depth, origin="lower", extent=_extent(recon), cmap=cmap, vmin=low,
-                      vmax=high)
-    ax.set_title(f"{name}: depth of the brightest voxel\n(grey: below {fraction:.0%} of the "
-                 "brightest intensity, no signal)", fontsize=9)
+    return _map_figure(recon, depth, title,
+                       f"{name}: depth of the brightest voxel\n(grey: below {fraction:.0%} of "
+                       "the brightest intensity, no signal)",
+                       "depth z (m), scaled to the depths with signal",
+                       (colormaps["viridis"].with_extremes(bad="0.85"), low, high))
+
+
+def _map_figure(recon: Reconstruction, values: np.ndarray, title: str, map_title: str,
+                colour_label: str, scale: tuple[str | Colormap, float, float]) -> Figure:
+    """One (y, x) map over the wall's extent, with its colour bar and the run's title;
+    ``scale``: the colour map and the values at its ends."""
+    cmap, vmin, vmax = scale
+    fig = Figure(figsize=(5.4, 5.0), layout="constrained")
+    ax = fig.subplots()
+    image = ax.imshow(values, origin="lower", extent=_extent(recon), cmap=cmap, vmin=vmin,
+                      vmax=vmax)
+    ax.set_title(map_title, fontsize=9)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    fig.colorbar(image, ax=ax, shrink=0.85, label="depth z (m), scaled to the depths with signal")
+    fig.colorbar(image, ax=ax, shrink=0.85, label=colour_label)
     fig.suptitle(f"{title}\n{_VIEW}", fontsize=8)
     return fig
 

@@ -238,30 +238,24 @@ def release(pause: Path) -> None:
     (pause / "release").touch()
 
 
-def finish(proc: subprocess.Popen, timeout: float = 600.0) -> tuple[int, str, str]:
+def finish(proc: subprocess.Popen, timeout: float = 600.0,
+           waited_for: str = "end") -> tuple[int, str, str]:
     """Wait for the run to end; its exit status and output (killed, failing, after
-    ``timeout`` seconds)."""
+    ``timeout`` seconds, saying what it ``waited_for``)."""
     try:
         out, err = proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)
         out, err = proc.communicate()
-        raise AssertionError(f"the run did not end within {timeout:.0f} s:\n{out}\n{err}"
-                             ) from None
+        raise AssertionError(f"the run did not {waited_for} within {timeout:.0f} s:\n{out}\n"
+                             f"{err}") from None
     return proc.returncode, out, err
 
 
 def stop(proc: subprocess.Popen, sig: int) -> tuple[int, str, str]:
     """Send ``sig`` to the run; its exit status and output."""
     proc.send_signal(sig)
-    try:
-        out, err = proc.communicate(timeout=600)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        out, err = proc.communicate()
-        raise AssertionError(f"the run did not stop within 600 s of {sig}:\n{out}\n{err}"
-                             ) from None
-    return proc.returncode, out, err
+    return finish(proc, 600.0, f"stop after signal {sig}")
 
 
 class Tools:
