@@ -6,6 +6,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from nlosfw.cli import main
 
 
@@ -58,3 +60,44 @@ def test_run_from_python_hands_only_warnings_to_the_callers_handlers(tmp_path, m
     assert mine and all(r.levelno >= logging.WARNING for r in mine)
     assert "INFO" in (out.dir / "run.log").read_text()
     assert logging.getLogger("nlosfw").propagate
+
+
+@pytest.mark.parametrize("first_to_end", [0, 1])
+def test_runs_in_two_threads_leave_the_loggers_settings_as_they_were(tmp_path, first_to_end):
+    """Two overlapping runs' log routing, ended in either order: the nlosfw logger propagates
+    again with its old level, and each run.log holds only its own thread's records."""
+    import logging
+    import threading
+
+    from nlosfw.compose.inprocess import _run_log
+
+    logger = logging.getLogger("nlosfw")
+    before = (logger.level, logger.propagate, list(logger.handlers))
+    inside = [threading.Event(), threading.Event()]
+    leave = [threading.Event(), threading.Event()]
+    errors: list[BaseException] = []
+
+    def run(i: int) -> None:
+        try:
+            with _run_log(tmp_path / f"run{i}.log"):
+                logging.getLogger("nlosfw.test").info("record of run %d", i)
+                inside[i].set()
+                if not leave[i].wait(60):
+                    raise TimeoutError(f"run {i} was not told to end within 60 s")
+        except BaseException as err:  # handed to the main thread's assertion below
+            errors.append(err)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(2)]
+    for i, thread in enumerate(threads):
+        thread.start()
+        assert inside[i].wait(60), f"run {i} did not start logging within 60 s"
+    order = [first_to_end, 1 - first_to_end]
+    for i in order:
+        leave[i].set()
+        threads[i].join(60)
+        assert not threads[i].is_alive(), f"run {i} did not end within 60 s"
+    assert not errors, errors
+    assert (logger.level, logger.propagate, list(logger.handlers)) == before
+    for i in range(2):
+        text = (tmp_path / f"run{i}.log").read_text()
+        assert f"record of run {i}" in text and f"record of run {1 - i}" not in text

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import tempfile
+import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -114,36 +115,76 @@ def _new_run_dir(output_dir: str | Path | None) -> Path:
 @contextmanager
 def _run_log(path: Path) -> Iterator[None]:
     """nlosfw's log records at INFO and above into the run's ``run.log`` while it runs; only
-    warnings and errors reach the caller's handlers (a notebook's), not every INFO line."""
+    warnings and errors reach the caller's handlers (a notebook's), not every INFO line.
+
+    Runs in several threads at once share one routing (counted under a lock), so the logger's
+    own settings come back when the last run ends, whatever order they end in; each run.log
+    keeps its own thread's records and its workers', not another run's."""
     handler = logging.FileHandler(path, encoding="utf-8")
     handler.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] %(message)s"))
-    logger = logging.getLogger("nlosfw")
-    level, propagate = logger.level, logger.propagate
-    logger.addHandler(handler)
-    forward = _Forward(logging.WARNING)
-    if propagate:
-        logger.addHandler(forward)
-        logger.propagate = False
-    if logger.getEffectiveLevel() > logging.INFO:
-        logger.setLevel(logging.INFO)
+    me = threading.get_ident()
+    with _ROUTING_LOCK:
+        routing = _Routing.enter(logging.getLogger("nlosfw"), me)
+    handler.addFilter(lambda record: routing.belongs_to(record, me))
+    routing.logger.addHandler(handler)
     try:
         yield
     finally:
-        logger.removeHandler(handler)
-        logger.removeHandler(forward)
-        logger.setLevel(level)
-        logger.propagate = propagate
+        routing.logger.removeHandler(handler)
         handler.close()
+        with _ROUTING_LOCK:
+            routing.leave(me)
 
 
-class _Forward(logging.Handler):
-    """Hands records at its level and above to the parent loggers' handlers (as propagation
-    would), or to logging's last resort when they have none."""
+_ROUTING_LOCK = threading.Lock()  # guards _Routing.enter/leave; holds no data itself
+
+
+class _Routing(logging.Handler):
+    """Installed on the ``nlosfw`` logger while at least one run is in progress: stops
+    propagation and hands records at WARNING and above to the parent loggers' handlers (as
+    propagation would), or to logging's last resort when they have none. It remembers the
+    logger's level and propagation from before the first run and restores them after the
+    last one."""
+
+    def __init__(self, logger: logging.Logger) -> None:
+        super().__init__(logging.WARNING)
+        self.logger = logger
+        self.saved_level, self.saved_propagate = logger.level, logger.propagate
+        self.run_threads: set[int] = set()
+
+    @classmethod
+    def enter(cls, logger: logging.Logger, thread: int) -> _Routing:
+        """The routing in place on ``logger`` (installed if none is), with ``thread`` added."""
+        routing = next((h for h in logger.handlers if isinstance(h, cls)), None)
+        if routing is None:
+            routing = cls(logger)
+            logger.addHandler(routing)
+            if routing.saved_propagate:
+                logger.propagate = False
+            else:  # the caller already keeps nlosfw's records to itself: forward nothing
+                routing.setLevel(logging.CRITICAL + 1)
+            if logger.getEffectiveLevel() > logging.INFO:
+                logger.setLevel(logging.INFO)
+        routing.run_threads.add(thread)
+        return routing
+
+    def leave(self, thread: int) -> None:
+        """``thread``'s run has ended; after the last one the logger is as it was."""
+        self.run_threads.discard(thread)
+        if not self.run_threads:
+            self.logger.removeHandler(self)
+            self.logger.setLevel(self.saved_level)
+            self.logger.propagate = self.saved_propagate
+
+    def belongs_to(self, record: logging.LogRecord, thread: int) -> bool:
+        """Whether ``record`` goes to the run.log of the run in ``thread``: its own records
+        and those of threads that run no other run (its workers)."""
+        return record.thread == thread or record.thread not in self.run_threads
 
     def handle(self, record: logging.LogRecord) -> bool:
         if record.levelno < self.level:
             return False
-        parent = logging.getLogger("nlosfw").parent
+        parent = self.logger.parent
         if parent is not None and parent.hasHandlers():
             parent.handle(record)
         elif logging.lastResort is not None and record.levelno >= logging.lastResort.level:
