@@ -291,6 +291,16 @@ def test_a_name_two_kinds_use_shows_both(capsys):
     assert "kind          imager" in out and "kind          capture_format" in out
 
 
+@pytest.mark.parametrize("name", ["none", "model:none"])
+def test_model_none_is_explained_not_unknown(capsys, name):
+    """model=none is a valid choice the README shows; `plugins none` says what it is."""
+    from nlosfw.cli import main
+
+    assert main(["plugins", name]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "model=none is not a plugin" in out and "python -m nlosfw image FILE" in out
+
+
 def test_an_unknown_plugin_name_is_one_line(capsys):
     from nlosfw.cli import main
 

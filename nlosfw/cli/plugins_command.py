@@ -161,6 +161,11 @@ def _show_one(host: PluginHost, name: str, console: Console) -> int:
         console.print(f"[bold]{escape(name)}[/]: [red]broken: entry point failed to load: "
                       f"{escape(host.broken[name])}[/]")
         return BROKEN_EXIT_STATUS
+    if name in ("none", "model:none") and not any(s.name == "none" for s in host.registry.specs()):
+        console.print("[bold]model=none[/] is not a plugin: it runs no field model and images "
+                      "only the capture (no split; shorthand: python -m nlosfw image FILE)",
+                      highlight=False)
+        return 0
     # a bare name several kinds use (lct: a capture format and an imager) shows each of them
     specs = ([s for s in host.registry.specs() if s.name == name] if ":" not in name
              else []) or [host.registry.find(name)]
