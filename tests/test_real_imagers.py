@@ -48,17 +48,8 @@ def ncc(a: np.ndarray, b: np.ndarray) -> float:
     return float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
 
 
-#: The one cell that misses the issue's target, and why (issue 21 stays open for it).
-FBP_ON_THE_DIFFUSE_S = pytest.mark.xfail(
-    reason="fbp's depth Laplacian turns the measured band's photon noise, grown by the t^3 "
-           "falloff gain, into the brightest voxels at the far end (issue 21, open)",
-    strict=True)
-
-
 @pytest.mark.parametrize(("name", "imager"), [
-    pytest.param(name, imager, marks=FBP_ON_THE_DIFFUSE_S
-                 if (name, imager) == ("data_diffuse_s", "fbp") else ())
-    for name in LCT_CAPTURES for imager in ("lct", "fk", "fft", "fbp")])
+    (name, imager) for name in LCT_CAPTURES for imager in ("lct", "fk", "fft", "fbp")])
 def test_imager_finds_the_object_as_the_authors_lct_does(name, imager):
     reference, their_depth = authors_view(name)
     capture = load_capture(real_capture(name), bin=2)

@@ -15,7 +15,13 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.image.fft import FFTImager, FFTImagerConfig
     from nlosfw.image.fk import FKImager
     from nlosfw.image.interface import Imager, ImagerConfig
-    from nlosfw.image.lct import FBPImager, LCTImager, LCTImagerConfig, LightConeConfig
+    from nlosfw.image.lct import (
+        FBPImager,
+        FBPImagerConfig,
+        LCTImager,
+        LCTImagerConfig,
+        LightConeConfig,
+    )
     from nlosfw.image.propagation import PropagationConfig, PropagationImager
     from nlosfw.image.reconstruction import (
         Reconstruction,
@@ -52,6 +58,7 @@ __all__ = [
     "depth_rmse",
     "depth_span",
     "FBPImager",
+    "FBPImagerConfig",
     "FFTImager",
     "FFTImagerConfig",
     "FKImager",

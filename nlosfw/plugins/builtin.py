@@ -113,7 +113,7 @@ def register_imagers(register: Registrar) -> None:
     register(
         "fbp",
         "nlosfw.image.lct:FBPImager",
-        config="nlosfw.image.lct:LightConeConfig",
+        config="nlosfw.image.lct:FBPImagerConfig",
         description="Backprojection with a Laplacian filter along depth, confocal",
         capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
     )
