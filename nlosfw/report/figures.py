@@ -71,7 +71,8 @@ def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
     write_views(files, recons.by_source, labels, results.capture.capture, title, dpi)
     if recons.reference is not None:
         write_source_views(files, {REFERENCE: recons.reference},
-                           {REFERENCE: reference_label(recons.reference)}, title, dpi,
+                           {REFERENCE: "reference (native bins)"},
+                           f"{title}\n{reference_caption(recons.reference)}", dpi,
                            views=("front", "depth"))
     if results.fields is None or results.fit is None:
         return  # model=none: the capture imaged alone, nothing to compare
@@ -127,11 +128,12 @@ def source_labels(results: RunResults) -> dict[str, str]:
     return {"true": _SOURCE_TITLES["true"], "raw": _SOURCE_TITLES["raw"], **labels}
 
 
-def reference_label(recon: Reconstruction) -> str:
-    """How the views name the reference picture: what it is, its band, not scored."""
+def reference_caption(recon: Reconstruction) -> str:
+    """What the reference picture's views show (under the run's title): what it is, its
+    band, not scored."""
     freqs = np.asarray(recon.metadata.get("frequencies") or [], dtype=float)
-    band = (f"{freqs.size} DFT bins to {freqs.max():.4g} cycles/m, " if freqs.size else "")
-    return f"{REFERENCE_TITLE}\n({band}not scored)"
+    band = f"\n({freqs.size} DFT bins to {freqs.max():.4g} cycles/m)" if freqs.size else ""
+    return f"{REFERENCE_TITLE}, not scored{band}"
 
 
 def field_figure(fields: Mapping[str, PhasorField], index: int, title: str,
