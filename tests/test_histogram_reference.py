@@ -10,6 +10,7 @@ differ, and the point's depth is known: the reference picture must put it there.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import tracemalloc
 from pathlib import Path
@@ -19,13 +20,15 @@ import pytest
 
 import nlosfw
 from nlosfw.capture.hdf5 import write_capture
+from nlosfw.capture.thinning import ThinnedCapture
 from nlosfw.cli import main
 from nlosfw.image.depths import depth_span
 from nlosfw.image.measured import histogram_field
 from nlosfw.image.reconstruction_io import read_reconstruction
 from nlosfw.image.transient import MEASURED_BAND
 from nlosfw.pipeline.image_stage import run_depth_range
-from nlosfw.pipeline.reference import REFERENCE, reference_bytes
+from nlosfw.pipeline.reference import REFERENCE, reference_bytes, reference_capture
+from nlosfw.pipeline.results import CaptureResult
 from nlosfw.pipeline.settings import ReconstructionSettings
 from nlosfw.plugins import load_plugins
 from tests.real_data import real_capture
@@ -164,6 +167,17 @@ def test_asking_for_it_with_a_band_imager_is_one_line_exit_2(workdir, point_capt
     assert status == 2 and err.strip().count("\n") == 0, err
     assert "error: reconstruction.histogram_reference: true images the histograms" in err
     assert not (workdir / "run").exists()
+
+
+def test_with_count_splitting_the_histograms_are_both_halves_added(point_capture):
+    _, capture = point_capture
+    a, b = capture.replace(H=capture.H * 0.25), capture.replace(H=capture.H * 0.75)
+    result = CaptureResult(capture=a, key="a", source="file", label="x", path=Path("x"),
+                           format="nlosfw", thinning=ThinnedCapture(a, b, 0, 1.0, 1, 3),
+                           score_key="b")
+    np.testing.assert_allclose(reference_capture(result).H, capture.H, rtol=1e-6)
+    assert reference_capture(dataclasses.replace(result, thinning=None,
+                                                 score_key=None)) is a
 
 
 @pytest.mark.parametrize("imager", ["lct", "fk"])
