@@ -20,6 +20,7 @@ import scipy.fft
 from nlosfw.capture.data import Capture
 from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.files import format_bytes
+from nlosfw.common.logs import FILE_ONLY
 from nlosfw.image.measured import histogram_field
 from nlosfw.image.transient import full_band_frequencies
 from nlosfw.pipeline.budget import available_memory
@@ -99,13 +100,16 @@ def reference_field(run: StageContext, result: CaptureResult,
                     voxels: np.ndarray) -> PhasorField | None:
     """The field of the capture's histograms at their native bin width (every positive DFT
     bin, the run's ``fft`` transform options kept), carrying the capture's imaging hints;
-    None, with the reason in the log, when the run makes no reference picture (a warning
-    when ``reconstruction.histogram_reference`` asked for one)."""
+    None, with the reason in the log, when the run makes no reference picture (run.log
+    only where it does not apply, a warning when ``reconstruction.histogram_reference``
+    asked for one)."""
     settings = run.plan.settings
-    say = log.warning if settings.reconstruction.histogram_reference is True else log.info
+    asked = settings.reconstruction.histogram_reference is True
+    say = log.warning if asked else log.info
     reason = reference_reason(run, result)
-    if reason is not None:
-        say("no reference picture: %s", reason)
+    if reason is not None:   # the console hears of it only when it was asked for
+        log.log(logging.WARNING if asked else logging.INFO, "no reference picture: %s",
+                reason, extra=None if asked else FILE_ONLY)
         return None
     capture = reference_capture(result)
     depths = np.unique(np.asarray(voxels, dtype=float)[..., 2])
