@@ -271,6 +271,7 @@ def test_hook_specifications_keep_their_signatures():
         "on_training_step": ["source", "model", "step", "total_steps", "loss", "val_loss"],
         "on_artefact_written": ["path", "kind"],
         "write_run_report": ["files", "results", "metrics", "settings"],
+        "write_capture_report": ["files", "capture", "depth_range", "metrics", "settings"],
         "write_run_page": ["files", "metrics", "config"],
     }
     found = {name: list(inspect.signature(fn).parameters)

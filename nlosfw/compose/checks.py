@@ -24,7 +24,7 @@ from nlosfw.common.schema import is_schema_node, problem
 from nlosfw.compose.output_dirs import check_output_dirs
 from nlosfw.compose.store import hydra_session
 from nlosfw.pipeline.budget import check_memory
-from nlosfw.pipeline.plan import check_model_choice
+from nlosfw.pipeline.plan import check_model_choice, check_reference_choice
 from nlosfw.pipeline.settings import NO_MODEL, OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
 from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
 from nlosfw.simulate.geometry import validate_scene
@@ -162,6 +162,9 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         spec = host.registry.get(group, str(node.get("name")))
         _check_plugin(spec, f"{group} plugin")
         spec.make_config(_plugin_options(node, spec.config_class()))
+        if group == PluginKind.IMAGER.value:
+            check_reference_choice(settings, spec.name,
+                                   bool(getattr(spec.load(), "full_grid_only", False)))
     for label, options in settings.compare.items():
         rest = dict(options)
         spec = host.registry.get(PluginKind.FIELD_MODEL, str(rest.pop("name")))

@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from nlosfw.capture.data import Capture
 from nlosfw.image.transient import (
     MEASURED_BAND,
@@ -27,8 +29,10 @@ def measured_field(capture: Capture, band: tuple[float, float] = MEASURED_BAND) 
                         ).transform(capture)
 
 
-def histogram_field(capture: Capture) -> PhasorField:
-    """The capture's phasor field at every positive DFT bin: its histograms as measured."""
-    freqs = full_band_frequencies(capture.n_bins, capture.delta_t)
-    return FFTTransform(FFTTransformConfig(frequencies=tuple(float(f) for f in freqs))
-                        ).transform(capture)
+def histogram_field(capture: Capture, config: FFTTransformConfig | None = None) -> PhasorField:
+    """The capture's phasor field at every positive DFT bin: its histograms as measured
+    (``config``: the ``fft`` transform's other options, e.g. a run's)."""
+    freqs = tuple(float(f) for f in full_band_frequencies(capture.n_bins, capture.delta_t))
+    base = FFTTransformConfig() if config is None else config
+    return FFTTransform(dataclasses.replace(base, frequencies=freqs, f_min=None, f_max=None)
+                         ).transform(capture)

@@ -8,7 +8,7 @@ scored against the one from the true field.
 
 :class:`Pipeline` runs the table :data:`STAGES` up to ``stop_after`` (the stages that
 apply to the plan: ``model=none`` images the capture alone, without fit and predict; a
-run stopped after ``reconstruct`` still draws its figures). It draws and prints
+stopped run still draws the figures of what it computed). It draws and prints
 nothing: every step is a hook call (:class:`~nlosfw.pipeline.events.RunEvents`), the
 metrics are recorded by a subscriber to those hooks
 (:class:`~nlosfw.pipeline.recorder.MetricsRecorder`), the report files by the report
@@ -154,12 +154,13 @@ class Pipeline:
 
     def _performs(self, stage: Stage) -> bool:
         """Whether the run performs ``stage``: the plan has it and ``stop_after`` reaches it;
-        a run stopped after ``reconstruct`` still draws the figures of what it computed."""
+        a stopped run still draws the figures of what it computed (after ``reconstruct``
+        its images, before it the capture's time profile)."""
         if not stage.applies(self.plan):
             return False
         if self.plan.settings.runs(stage.name):
             return True
-        return stage.name == "report" and self.stage_results.reconstructions is not None
+        return stage.name == "report" and self.stage_results.capture is not None
 
     def _record_end(self, err: BaseException, seconds: float) -> None:
         """metrics.json with status failed or interrupted, the stage and the one-line reason,

@@ -16,7 +16,7 @@ import pluggy
 if TYPE_CHECKING:
     from nlosfw.pipeline.files import RunFiles
     from nlosfw.pipeline.metrics import RunMetrics
-    from nlosfw.pipeline.results import RunResults
+    from nlosfw.pipeline.results import CaptureResult, RunResults
     from nlosfw.pipeline.settings import RunSettings
 
 #: ``on_progress(done, total)``, as imagers and simulators take it.
@@ -64,6 +64,12 @@ class RunEvents:
                      settings: RunSettings) -> None:
         self._hook.write_run_report(files=files, results=results, metrics=metrics,
                                     settings=settings)
+
+    def write_capture_report(self, files: RunFiles, capture: CaptureResult,
+                             depth_range: tuple[float, float], metrics: RunMetrics,
+                             settings: RunSettings) -> None:
+        self._hook.write_capture_report(files=files, capture=capture, depth_range=depth_range,
+                                        metrics=metrics, settings=settings)
 
     def write_page(self, files: RunFiles, metrics: RunMetrics,
                    config: dict[str, object]) -> None:

@@ -11,7 +11,8 @@ Names (relative to the run directory; see the README):
 ``phasor_field.hdf5``     the full phasor field of the capture
 ``field_model.npz``       the trained field model (its plugin's format)
 ``fields/<source>.hdf5``  the fields imaged: true, raw, model, interp
-``reconstructions/<source>.hdf5``  their reconstructions
+``reconstructions/<source>.hdf5``  their reconstructions (``native-bins.hdf5``: the
+                          reference picture, :mod:`nlosfw.pipeline.reference`)
 ``figures/*.png``         figures
 ``report.html``           all of it in one self-contained page
 ========================  ================================================

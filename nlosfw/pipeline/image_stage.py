@@ -19,7 +19,9 @@ from nlosfw.image.reconstruction import Reconstruction, wall_voxels
 from nlosfw.image.reconstruction_io import write_reconstruction
 from nlosfw.model.protocol import FieldSplit
 from nlosfw.pipeline.context import StageContext
+from nlosfw.pipeline.reference import REFERENCE, reference_field
 from nlosfw.pipeline.results import (
+    CaptureResult,
     FrequencySplit,
     Reconstructions,
     SingleFrequencyImages,
@@ -65,20 +67,39 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
         by_source[source] = _image(run, imager.plugin, field, voxels, f"image {source}")
         seconds[source] = round(time.perf_counter() - start, 4)
     singles = _single_frequency_images(run, imager.plugin, sources, voxels, chosen)
-    for source, recon in by_source.items():
+    reference = _reference(run, required(done.capture, "capture"), voxels)
+    written = {**by_source, **({} if reference is None else {REFERENCE: reference})}
+    for source, recon in written.items():
         run.files.write(f"reconstructions/{source}.hdf5",
                         partial(write_reconstruction, recon=recon),
                         kind="reconstruction", keep_as=Artefact.reconstructions)
     return Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds,
-                           single_frequency=tuple(singles), imager=imager.name)
+                           single_frequency=tuple(singles), imager=imager.name,
+                           reference=reference)
 
 
 def report_stage(run: StageContext, done: StageResults) -> None:
-    """The report files of a complete run (figures, tables), by the report subscribers."""
+    """The report files of a complete run (figures, tables), or of a run stopped before it
+    imaged (the capture's figures), by the report subscribers."""
     results = done.complete()
-    if results is None:  # the report stage runs only after all the others
+    settings = run.plan.settings
+    if results is not None:
+        run.events.write_report(run.files, results, run.recorder.metrics, settings)
+    elif done.capture is not None and done.reconstructions is None:
+        span = run_depth_range(settings.reconstruction, done.capture.capture)
+        run.events.write_capture_report(run.files, done.capture, span, run.recorder.metrics,
+                                        settings)
+    else:  # the report stage runs only after all the others, or after a stop
         raise ValueError("the report stage needs every stage's results")
-    run.events.write_report(run.files, results, run.recorder.metrics, run.plan.settings)
+
+
+def run_depth_range(settings: ReconstructionSettings, capture: Capture) -> tuple[float, float]:
+    """[m] The nearest and farthest plane a run images: of ``depths``, else
+    ``depth_range``, else the depths that hold signal (:func:`depth_span`)."""
+    if settings.depths:
+        return min(settings.depths), max(settings.depths)
+    near, far = settings.depth_range or depth_span(capture)
+    return float(near), float(far)
 
 
 def run_voxels(settings: ReconstructionSettings, capture: Capture,
@@ -89,7 +110,7 @@ def run_voxels(settings: ReconstructionSettings, capture: Capture,
     if settings.depths:
         depths = np.asarray(settings.depths, dtype=float)
     else:
-        span = settings.depth_range or depth_span(capture)
+        span = run_depth_range(settings, capture)
         depths = (np.linspace(span[0], span[1], settings.n_depths)
                   if settings.n_depths is not None
                   else automatic_depths(span, float(field.frequencies.max()),
@@ -134,6 +155,20 @@ def _image(run: StageContext, imager: Imager, field: PhasorField, voxels: np.nda
         return imager.reconstruct(field, voxels, on_progress=run.events.progress_callback(task))
     recon = imager.reconstruct(field, voxels)
     run.events.progress(task, 1, 1)
+    return recon
+
+
+def _reference(run: StageContext, capture: CaptureResult,
+               voxels: np.ndarray) -> Reconstruction | None:
+    """The reference picture (:mod:`nlosfw.pipeline.reference`), or None (the log says why)."""
+    field = reference_field(run, capture, voxels)
+    if field is None:
+        return None
+    start = time.perf_counter()
+    recon = _image(run, run.plan.imager.plugin, field, voxels,
+                   "image the histograms (reference)")
+    log.info("reference picture imaged by %s in %.3g s", run.plan.imager.name,
+             time.perf_counter() - start)
     return recon
 
 

@@ -130,12 +130,13 @@ def make_plan(config: PlainConfig, host: PluginHost) -> RunPlan:
         scene = scene_from_config(config["scene"])
     formats = {name: plugin_version(host, PluginKind.CAPTURE_FORMAT, name)
                for name in registry.names(PluginKind.CAPTURE_FORMAT)}
+    imager = registry.create(PluginKind.IMAGER, i_name, i_options)
+    check_reference_choice(settings, i_name, imager.full_grid_only)
     return RunPlan(
         config=config, settings=settings,
         transform=Planned(t_name, registry.create(PluginKind.PHASOR_TRANSFORM, t_name,
                                                   t_options), t_version),
-        imager=Planned(i_name, registry.create(PluginKind.IMAGER, i_name, i_options),
-                       i_version),
+        imager=Planned(i_name, imager, i_version),
         models=models, formats=host.capture_formats(), simulator=simulator, scene=scene,
         format_versions=formats)
 
@@ -157,6 +158,15 @@ def check_model_choice(config: PlainConfig, settings: RunSettings) -> None:
     if settings.stop_after in (StopAfter.fit, StopAfter.predict):
         raise ConfigError("stop_after", f"model=none fits and predicts nothing; stop after "
                           f"capture, transform or reconstruct, not {settings.stop_after}")
+
+
+def check_reference_choice(settings: RunSettings, imager: str, time_domain: bool) -> None:
+    """A one-line ConfigError for ``reconstruction.histogram_reference=true`` with an imager
+    that images a band (``time_domain``: its ``full_grid_only``, as lct, fk and fbp)."""
+    if settings.reconstruction.histogram_reference and not time_domain:
+        raise ConfigError("reconstruction.histogram_reference", f"true images the histograms "
+                          f"with a time-domain imager (lct, fk or fbp), and imager {imager} "
+                          "images a band of frequencies; select one or leave it null")
 
 
 def field_models(config: PlainConfig, settings: RunSettings

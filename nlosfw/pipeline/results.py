@@ -200,6 +200,10 @@ class Reconstructions:
     single_frequency: tuple[SingleFrequencyImages, ...] = ()
     imager: str = ""
     """The imager plugin that made them."""
+    reference: Reconstruction | None = None
+    """The capture's histograms at their native bin width, imaged by the same imager on the
+    same voxels (``reconstruction.histogram_reference``, :mod:`nlosfw.pipeline.reference`):
+    the reference picture shown beside the sources, never scored."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "by_source", _frozen_mapping(self.by_source))

@@ -104,6 +104,13 @@ class ReconstructionSettings:
     apart in the volume, 1/(4 m f_max) with m = 2 for confocal captures, else 1."""
     single_frequency_images: int = 2
     """How many single-frequency images (as in the thesis figures) to add per field."""
+    histogram_reference: bool | None = None
+    """Also image the capture's histograms at their native bin width (every DFT bin, as the
+    authors' code images them) with the run's time-domain imager on the same planes: the
+    reference picture beside the sources in report.html, never scored. null: for a capture
+    file imaged by lct, fk or fbp; true: also for a simulated capture (needs such an
+    imager); false: never. Skipped, with the reason in the log, when its estimated memory
+    exceeds what is available (limits.allow_large: made anyway)."""
 
     def __post_init__(self) -> None:
         require(all(d > 0 for d in self.depths), "depths", "every depth must be > 0 (in front "

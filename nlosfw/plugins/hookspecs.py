@@ -17,7 +17,7 @@ import pluggy
 if TYPE_CHECKING:  # the run's types, for the run hooks' annotations only
     from nlosfw.pipeline.files import RunFiles
     from nlosfw.pipeline.metrics import RunMetrics
-    from nlosfw.pipeline.results import RunResults
+    from nlosfw.pipeline.results import CaptureResult, RunResults
     from nlosfw.pipeline.settings import RunSettings
     from nlosfw.plugins.networks import NetworkRegistrar
     from nlosfw.plugins.registry import Registrar
@@ -127,6 +127,15 @@ def write_run_report(files: RunFiles, results: RunResults, metrics: RunMetrics,
                      settings: RunSettings) -> None:
     """The report stage of a complete run: write figures and tables into the run directory
     through ``files`` (which claims and writes each file atomically)."""
+
+
+@hookspec
+def write_capture_report(files: RunFiles, capture: CaptureResult,
+                         depth_range: tuple[float, float], metrics: RunMetrics,
+                         settings: RunSettings) -> None:
+    """The report stage of a run stopped before it imaged (``stop_after`` capture,
+    transform, fit or predict): figures of the ``capture`` it read or simulated (nlosfw's:
+    its time profile with the planes' ``depth_range`` (m) shaded), through ``files``."""
 
 
 @hookspec

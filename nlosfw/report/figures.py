@@ -8,8 +8,11 @@
 ``reconstructions_f<k>.png``  the same from frequency k alone (thesis figs. 5.1-5.5)
 ``loss.png``         training (and validation) loss of each field model
 
-and the views of every source and the capture's time profile (:mod:`nlosfw.report.views`);
-a ``model=none`` run (the capture imaged alone) has only those.
+and the views of every source and the capture's time profile (:mod:`nlosfw.report.views`),
+with the front view and depth map of the reference picture (``front_native-bins.png``,
+``depth_native-bins.png``: the measured histograms at their native bin width, not scored)
+when the run made one; a ``model=none``
+run (the capture imaged alone) has only those.
 """
 
 from __future__ import annotations
@@ -26,10 +29,11 @@ from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.scores import amplitude, normalise
 from nlosfw.pipeline.files import RunFiles
 from nlosfw.pipeline.metrics import ImageScores, ReconstructionMetrics, RunInfo
+from nlosfw.pipeline.reference import REFERENCE, REFERENCE_TITLE
 from nlosfw.pipeline.results import RunResults
 from nlosfw.report.plain_text import literal_text
 from nlosfw.report.titles import run_title
-from nlosfw.report.views import write_views
+from nlosfw.report.views import write_source_views, write_views
 from nlosfw.transform.field import PhasorField
 
 if TYPE_CHECKING:
@@ -65,6 +69,11 @@ def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
     labels = source_labels(results)
     recons = results.reconstructions
     write_views(files, recons.by_source, labels, results.capture.capture, title, dpi)
+    if recons.reference is not None:
+        write_source_views(files, {REFERENCE: recons.reference},
+                           {REFERENCE: "reference (native bins)"},
+                           f"{title}\n{reference_caption(recons.reference)}", dpi,
+                           views=("front", "depth"))
     if results.fields is None or results.fit is None:
         return  # model=none: the capture imaged alone, nothing to compare
     fields = results.fields.by_source()
@@ -117,6 +126,14 @@ def source_labels(results: RunResults) -> dict[str, str]:
                          _SOURCE_TITLES.get(m.source, f"{m.source} ({m.plugin})"))
               for m in results.fit.models}
     return {"true": _SOURCE_TITLES["true"], "raw": _SOURCE_TITLES["raw"], **labels}
+
+
+def reference_caption(recon: Reconstruction) -> str:
+    """What the reference picture's views show (under the run's title): what it is, its
+    band, not scored."""
+    freqs = np.asarray(recon.metadata.get("frequencies") or [], dtype=float)
+    band = f"\n({freqs.size} DFT bins to {freqs.max():.4g} cycles/m)" if freqs.size else ""
+    return f"{REFERENCE_TITLE}, not scored{band}"
 
 
 def field_figure(fields: Mapping[str, PhasorField], index: int, title: str,

@@ -2,7 +2,8 @@
 
 Registered through nlosfw's own entry point (``report`` in the ``nlosfw`` group), like any
 third-party plugin: at the report stage of a complete run, the thesis comparison (for
-thesis presets) and the figures; after ``metrics.json``, the run's ``report.html``.
+thesis presets) and the figures (of a run stopped before it imaged: the capture's time
+profile); after ``metrics.json``, the run's ``report.html``.
 matplotlib is imported only when a figure is drawn.
 """
 
@@ -13,7 +14,7 @@ from typing import TYPE_CHECKING
 from nlosfw.plugins import hookimpl
 
 if TYPE_CHECKING:
-    from nlosfw.pipeline import RunFiles, RunMetrics, RunResults, RunSettings
+    from nlosfw.pipeline import CaptureResult, RunFiles, RunMetrics, RunResults, RunSettings
 
 
 @hookimpl
@@ -33,6 +34,19 @@ def write_run_report(files: RunFiles, results: RunResults, metrics: RunMetrics,
 
         write_figures(files, results, metrics.run, metrics.reconstruction,
                       settings.figures.dpi)
+
+
+@hookimpl
+def write_capture_report(files: RunFiles, capture: CaptureResult,
+                         depth_range: tuple[float, float], metrics: RunMetrics,
+                         settings: RunSettings) -> None:
+    """A run stopped before it imaged: the capture's time profile, ``depth_range`` shaded."""
+    if settings.figures.enabled:
+        from nlosfw.report.titles import run_title
+        from nlosfw.report.views import write_time_profile
+
+        write_time_profile(files, capture.capture, depth_range,
+                           run_title(metrics.run, capture), settings.figures.dpi)
 
 
 @hookimpl

@@ -21,6 +21,7 @@ from nlosfw.common import yaml_safe
 from nlosfw.common.config import Scalar
 from nlosfw.common.text import href, html_text
 from nlosfw.pipeline.metrics import RunMetrics
+from nlosfw.pipeline.reference import REFERENCE, REFERENCE_TITLE
 from nlosfw.report.quality import QualityTable, parse_overrides
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import format_cell
@@ -160,29 +161,44 @@ def _run_metrics(metrics: RunMetrics) -> list[str]:
 
 def _run_views(run_dir: Path, metrics: RunMetrics) -> str:
     """The views of every imaged source side by side (front view, depth map, depth slices),
-    then the capture's time profile with the depth range marked; nothing without them."""
+    the reference picture's (the measured histograms at native bins, when the run made
+    one), then the capture's time profile with the depth range marked; nothing without
+    them."""
     folder = run_dir / "figures"
     imager = metrics.run.imager or "?"
     sources = list(metrics.reconstruction.sources) if metrics.reconstruction else []
     rows = []
     for source in sources:
-        shown = [(folder / f"{view}_{source}.png", caption) for view, caption in (
-            ("front", "front view over the planes' depths"),
-            ("depth", "depth map (grey: no signal)"),
-            ("slices", "depth slices"))]
-        figures = [png_figure(path.read_bytes(), f"{path.name}: {caption}",
-                              wide=path.name.startswith("slices_"))
-                   for path, caption in shown if path.is_file()]
+        figures = _view_figures(folder, source)
         if figures:
             name = "the capture" if sources == ["true"] else source
             rows.append(f"<h3>{html.escape(name)} · imager {html.escape(imager)}</h3>"
                         f"<div class=\"views\">{''.join(figures)}</div>")
+    reference = _view_figures(folder, REFERENCE)
+    if reference:
+        rows.append(f"<h3>{html.escape(REFERENCE_TITLE)} · imager {html.escape(imager)}</h3>"
+                    "<p class=\"muted\">The whole capture's histograms at their native bin "
+                    "width (every DFT bin), imaged as the authors' code images them, on the "
+                    "same planes: the picture to compare the sources with. Not scored: every "
+                    "scored source is imaged from the same band.</p>"
+                    f"<div class=\"views\">{''.join(reference)}</div>")
     profile = folder / "time_profile.png"
     if profile.is_file():
         rows.append(png_figure(profile.read_bytes(), "time_profile.png: the capture's "
                                "histograms summed over the wall, the planes' depth range "
                                "shaded"))
     return _section("Views", *rows) if rows else ""
+
+
+def _view_figures(folder: Path, source: str) -> list[str]:
+    """The front view, depth map and depth slices of ``source`` that ``folder`` holds."""
+    shown = [(folder / f"{view}_{source}.png", caption) for view, caption in (
+        ("front", "front view over the planes' depths"),
+        ("depth", "depth map (grey: no signal)"),
+        ("slices", "depth slices"))]
+    return [png_figure(path.read_bytes(), f"{path.name}: {caption}",
+                       wide=path.name.startswith("slices_"))
+            for path, caption in shown if path.is_file()]
 
 
 def _run_figures(run_dir: Path) -> str:

@@ -99,20 +99,36 @@ def slice_indices(n_planes: int, count: int = MAX_SLICES) -> np.ndarray:
 
 def write_views(files: RunFiles, recons: Mapping[str, Reconstruction],
                 labels: Mapping[str, str], capture: Capture, title: str, dpi: int) -> None:
-    """Every view of every source (``front_``, ``depth_``, ``slices_<source>.png``) and the
-    capture's ``time_profile.png`` into ``figures/``."""
+    """Every view of every source (:func:`write_source_views`) and the capture's
+    ``time_profile.png`` (:func:`write_time_profile`) into ``figures/``."""
+    write_source_views(files, recons, labels, title, dpi)
+    first = next(iter(recons.values()), None)
+    if first is not None:
+        write_time_profile(files, capture, (float(first.depths.min()),
+                                            float(first.depths.max())), title, dpi)
+
+
+def write_source_views(files: RunFiles, recons: Mapping[str, Reconstruction],
+                       labels: Mapping[str, str], title: str, dpi: int,
+                       views: tuple[str, ...] = ("front", "depth", "slices")) -> None:
+    """``<view>_<source>.png`` of every source into ``figures/`` for each of ``views``
+    (``front``, ``depth``, ``slices``), each named by its label (else the source's name)."""
+    draws = {"front": front_figure, "depth": depth_figure, "slices": slices_figure}
     for source, recon in recons.items():
         name = labels.get(source, source)
-        for view, draw in (("front", front_figure), ("depth", depth_figure),
-                           ("slices", slices_figure)):
+        for view in views:
             files.write(f"figures/{view}_{source}.png",
-                        _saver(partial(draw, recon, name, title), dpi), kind="figure")
-    first = next(iter(recons.values()), None)
+                        _saver(partial(draws[view], recon, name, title), dpi), kind="figure")
+
+
+def write_time_profile(files: RunFiles, capture: Capture, depth_range: tuple[float, float],
+                       title: str, dpi: int) -> None:
+    """``figures/time_profile.png`` with ``depth_range`` (m) shaded; nothing for a capture
+    stored in frequency (it has no time profile)."""
     path, _ = time_profile(capture)
-    if first is not None and path.size:
-        span = (float(first.depths.min()), float(first.depths.max()))
+    if path.size:
         files.write("figures/time_profile.png",
-                    _saver(partial(time_profile_figure, capture, span, title), dpi),
+                    _saver(partial(time_profile_figure, capture, depth_range, title), dpi),
                     kind="figure")
 
 
