@@ -34,7 +34,12 @@ What happens instead, from :func:`forwarding` (the parent, around Hydra) and :fu
   after the sweep was interrupted (the worker received a signal, or
   ``<folder>/interrupted`` exists) stops before it writes anything of its own. An
   interrupted worker then waits to be killed instead of taking the next job (at most
-  :data:`HOLD_SECONDS`, less when the parent is gone), so no further job is started.
+  :data:`HOLD_SECONDS`, less when the parent is gone), so no further job is started, and
+  its interruption never reaches joblib in the parent (which would kill the other
+  workers at once). When the parent has not marked the sweep interrupted, the worker
+  sends it the signal it got: a job interrupted is the sweep interrupted (as in a
+  sequential sweep), whether the signal came to the parent, to the whole group, or to
+  one worker alone.
 * **Twice the same signal** (a terminal's Ctrl-C or SLURM's ``scancel`` signal the whole
   group: each worker gets it from there and again from the parent) is harmless: a signal
   raises once, later ones are recorded (:mod:`nlosfw.pipeline.interrupts`).
@@ -42,9 +47,8 @@ What happens instead, from :func:`forwarding` (the parent, around Hydra) and :fu
 Limits: a worker that has never run a job still has the default handlers, so when a whole
 process group is signalled at the very start of a sweep (or with fewer jobs than workers)
 it dies, and loky kills the others; a job a worker had already taken from loky's queue
-when the signal came has Hydra's directory (``.hydra/``) and nothing else; a worker
-signalled alone (not through the parent) ends its job as interrupted and the sweep stops
-as before (joblib kills the other workers).
+when the signal came has Hydra's directory (``.hydra/``) and nothing else; SIGKILL (the
+out-of-memory killer's) cannot be handled: loky then kills the other workers as before.
 """
 
 from __future__ import annotations
@@ -142,9 +146,11 @@ def job() -> Iterator[None]:
             finally:
                 if entry is not None:
                     entry.unlink(missing_ok=True)
-    except RunInterrupted:
-        if _marker(folder):
-            hold(parent)
+    except RunInterrupted as err:
+        if not _marker(folder):        # the parent has not handled it (yet): it must
+            with contextlib.suppress(OSError):
+                os.kill(parent, err.signum)
+        hold(parent)
         raise
 
 
