@@ -139,7 +139,7 @@ def job() -> Iterator[None]:
         with interrupts.signals_raise():
             entry = _register(folder)
             try:
-                stop = interrupts.received() or _marker(folder)
+                stop = _marker(folder) or interrupts.received()
                 if stop:
                     raise RunInterrupted(stop)   # the sweep was interrupted: do not start
                 yield
