@@ -103,11 +103,14 @@ def forwarding() -> Iterator[None]:
 def stop_workers(folder: Path, signum: int, wait_seconds: float = WAIT_SECONDS) -> None:
     """Mark the sweep interrupted, send ``signum`` once to each worker running a job and
     wait (up to ``wait_seconds``) until each has finished it or is gone."""
-    if not folder.is_dir():
-        return                         # no worker ever ran a job: a run, a sequential sweep
-    partial_marker = folder / f".{MARKER}.{os.getpid()}"
-    partial_marker.write_text(f"{signum}\n")
-    partial_marker.replace(folder / MARKER)
+    try:   # made even when no worker has registered yet: one about to sees it and stops
+        folder.mkdir(mode=0o700, exist_ok=True)
+        partial_marker = folder / f".{MARKER}.{os.getpid()}"
+        partial_marker.write_text(f"{signum}\n")
+        partial_marker.replace(folder / MARKER)
+    except OSError as err:             # then no worker could register either
+        log.debug("cannot mark the sweep interrupted in %s: %s", folder, err)
+        return
     running = [pid for pid in _registered(folder) if _is_child(pid)]
     for pid in running:
         with contextlib.suppress(ProcessLookupError):

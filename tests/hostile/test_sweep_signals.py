@@ -185,5 +185,5 @@ def test_outside_a_sweep_a_job_is_left_alone(tmp_path, monkeypatch):
         with workers.job():
             assert signal.getsignal(signal.SIGTERM) is before
     assert list(tmp_path.iterdir()) == []
-    workers.stop_workers(tmp_path / "never-made", signal.SIGTERM)
-    assert not (tmp_path / "never-made").exists()
+    workers.stop_workers(tmp_path / "sweep", signal.SIGTERM)     # no worker: no wait
+    assert [p.name for p in (tmp_path / "sweep").iterdir()] == [workers.MARKER]
