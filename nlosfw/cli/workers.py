@@ -15,7 +15,8 @@ What happens instead, from :func:`forwarding` (the parent, around Hydra) and :fu
   in its environment, which the workers inherit when loky starts them. A process whose
   parent is ``<pid>`` (so not the parent itself, which runs the jobs of a sequential sweep;
   not a job on another machine) is a worker: while it runs a job it keeps a file named
-  by its process id in ``<folder>`` (a new temporary folder). On a signal the parent
+  by its process id in ``<folder>`` (a new temporary folder, made when first needed,
+  removed when the command ends). On a signal the parent
   signals exactly those processes, and only once it has checked that each is still its own
   direct child and alive (``/proc/<pid>/stat`` on Linux, ``ps -o ppid=`` elsewhere): it
   never signals its process group (which it may share with the user's shell or script),
