@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 from hydra.experimental.callback import Callback
 
+from nlosfw.cli import workers
 from nlosfw.cli.errors import report_user_error, unexpected_error
 from nlosfw.cli.reporter import ConsoleReporter
 from nlosfw.common.errors import ConfigError, NlosfwError, one_line
@@ -70,7 +71,7 @@ def main(argv: Sequence[str]) -> int:
     decorated = hydra.main(config_path=str(config_dir()), config_name="config",
                            version_base="1.3")(_task)
     try:
-        with _hydra_argv(argv), _hydra_full_error():
+        with _hydra_argv(argv), _hydra_full_error(), workers.forwarding():
             decorated()
     except (HydraException, OmegaConfBaseException) as err:
         raise composition_error(err, host) from None
@@ -156,7 +157,14 @@ def _check(config: DictConfig, multirun: bool) -> None:
 
 
 def _task(cfg: DictConfig) -> float | None:
-    """One Hydra job: the whole pipeline in its run directory, drawn on the console."""
+    """One Hydra job: the whole pipeline in its run directory, drawn on the console (in a
+    worker of a parallel sweep, ended with its status when the sweep is interrupted:
+    :mod:`nlosfw.cli.workers`)."""
+    with workers.job():
+        return _job(cfg)
+
+
+def _job(cfg: DictConfig) -> float | None:
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
     from omegaconf import OmegaConf

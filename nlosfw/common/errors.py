@@ -89,6 +89,10 @@ class RunInterrupted(BaseException):
         self.signal_name = signal.Signals(self.signum).name
         super().__init__(f"interrupted by {self.signal_name}")
 
+    def __reduce__(self) -> tuple[type[RunInterrupted], tuple[int]]:
+        """Pickled by its signal number: a sweep's worker process sends it to its parent."""
+        return (RunInterrupted, (self.signum,))
+
     @property
     def exit_status(self) -> int:
         """128 + the signal number (130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP), as shells

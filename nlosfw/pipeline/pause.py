@@ -3,8 +3,10 @@
 Tests that need a run alive, at a given stage, or interrupted in the middle of one hold it
 there instead of making it slow and hoping. With the environment variable
 ``NLOSFW_TEST_PAUSE=<point>:<dir>`` set, a run that reaches ``<point>`` writes
-``<dir>/reached`` (its process id), then waits until ``<dir>/release`` exists; a signal
-(SIGINT, SIGTERM) interrupts the wait as it would the stage. Without the variable, or for
+``<dir>/reached`` and ``<dir>/reached-<pid>`` (its process id), then waits until
+``<dir>/release`` exists; a signal (SIGINT, SIGTERM, SIGHUP) interrupts the wait as it
+would the stage. ``reached-<pid>`` tells the jobs of a parallel sweep apart: each worker
+process held at the point has its own. Without the variable, or for
 any other point, :func:`pause_point` returns at once: one lookup in ``os.environ``.
 
 The points:
@@ -60,9 +62,10 @@ def _hold(point: str, folder: Path) -> None:
     if release.exists():
         return
     folder.mkdir(parents=True, exist_ok=True)
-    partial = folder / f".reached.{os.getpid()}"
-    partial.write_text(f"{os.getpid()}\n")
-    partial.replace(folder / "reached")      # whole, so a test never reads it half-written
+    for name in (f"reached-{os.getpid()}", "reached"):
+        partial = folder / f".{name}.{os.getpid()}"
+        partial.write_text(f"{os.getpid()}\n")
+        partial.replace(folder / name)       # whole, so a test never reads it half-written
     log.info("%s: held at %s until %s exists", ENV, point, release)
     deadline = monotonic() + TIMEOUT_SECONDS
     while not release.exists():
