@@ -25,6 +25,7 @@ from nlosfw.plugins.networks import (
     network_model,
     register_field_networks,
     register_thesis_networks,
+    registered_network,
     thesis_network_model,
 )
 from nlosfw.plugins.registry import (
@@ -64,5 +65,6 @@ __all__ = [
     "network_model",
     "register_field_networks",
     "register_thesis_networks",
+    "registered_network",
     "thesis_network_model",
 ]
