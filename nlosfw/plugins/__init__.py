@@ -14,7 +14,13 @@ from nlosfw.plugins.capabilities import VOCABULARY as CAPABILITIES
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.hookspecs import hookimpl, hookspec
 from nlosfw.plugins.kinds import INTERFACES, RUN_KINDS, PluginKind
-from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_plugins
+from nlosfw.plugins.manager import (
+    ENTRY_POINT_GROUP,
+    ENV_VAR,
+    PluginHost,
+    load_plugins,
+    registered_network,
+)
 from nlosfw.plugins.networks import (
     ENGINES,
     NetworkEngine,
@@ -26,7 +32,6 @@ from nlosfw.plugins.networks import (
     register_field_networks,
     register_rsd_residual,
     register_thesis_networks,
-    registered_network,
     thesis_network_model,
 )
 from nlosfw.plugins.registry import (

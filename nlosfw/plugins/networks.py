@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import TYPE_CHECKING, Any, TypedDict
 
-from nlosfw.common.errors import ConfigError, PluginError
+from nlosfw.common.errors import PluginError
 from nlosfw.model.inr_networks import FIELD_NETWORKS
 from nlosfw.model.neural_config import NeuralFieldConfig, Preset
 from nlosfw.model.thesis_networks import THESIS_NETWORKS, THESIS_TEST_CONFIG, presets_of
@@ -224,21 +224,6 @@ def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFie
     return NetworkSpec(name, NetworkEngine(engine), factory, network.config,
                        f"{network.description}, {_ENGINE_TITLES[engine]}",
                        presets_of(name)).load()
-
-
-def registered_network(name: str, engine: str) -> type[NeuralFieldModel]:
-    """The field-model class of the network ``name`` registered through ``register_networks``
-    for ``engine`` (``siren`` and ``torch``: ``siren_torch``'s class). A one-line
-    ConfigError on ``model.network`` lists the valid names."""
-    from nlosfw.plugins.manager import load_plugins  # the manager imports this module
-
-    networks = {spec.factory.name: spec for spec in load_plugins().registry.specs("model")
-                if isinstance(spec.factory, NetworkSpec) and spec.factory.engine.value == engine}
-    if name not in networks:
-        raise ConfigError("model.network", f"{name!r} is not a network registered for "
-                          f"{engine}; valid: {', '.join(sorted(networks)) or 'none'}")
-    model: type[NeuralFieldModel] = networks[name].load()
-    return model
 
 
 #: Small, fast options of ``rsd_residual_<engine>`` for the conformance kit: a short physics

@@ -10,9 +10,9 @@ import pytest
 
 pytest.importorskip("torch")
 
-from nlosfw.common import ConfigError  # noqa: E402
-from nlosfw.plugins import load_plugins  # noqa: E402
-from nlosfw.testing import fixtures  # noqa: E402
+from nlosfw.common import ConfigError
+from nlosfw.plugins import load_plugins
+from nlosfw.testing import fixtures
 
 HAS_JAX = bool(importlib.util.find_spec("jax") and importlib.util.find_spec("optax")
                and importlib.util.find_spec("equinox"))
