@@ -229,9 +229,9 @@ def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFie
 #: Small, fast options of ``rsd_residual_<engine>`` for the conformance kit: a short physics
 #: fit (the kit's plane-wave field is no hidden scene's) and a small network for the rest.
 RSD_RESIDUAL_TEST_CONFIG: Mapping[str, object] = {
-    "iterations": 20, "amplitude": "point", "l1_weight": 0.2, "workers": 1,
+    "iterations": 10, "amplitude": "point", "l1_weight": 0.2, "workers": 1,
     "depth_range": [0.3, 0.7], "depth_step": 0.1, "fit_frequencies": 0, "power_iterations": 5,
-    "residual_weight": 0.0, "network_steps": 300, "network_lr": 2e-3, "network_batch_size": 0,
+    "residual_weight": 0.0, "network_steps": 150, "network_lr": 2e-3, "network_batch_size": 0,
     "network_validation_fraction": 0.0}
 
 
