@@ -16,7 +16,10 @@ The fit runs in two stages on the kept wall samples P (every training frequency)
    |r - R|^2 + w |r|^2 = (1 + w) |r - R / (1 + w)|^2 + const). So the network is trained by
    the shared trainer on P - Q (normalised, well conditioned at any weight) and its output
    is scaled: the prediction is Q + r_0 / (1 + residual_weight). A very large weight gives
-   ``rsd_prior``'s field; 0 lets the network fit everything the physics misses.
+   ``rsd_prior``'s field; 0 lets the network fit everything the physics misses. The
+   network's training length is chosen on held-out whole wall points
+   (``network_validation_fraction``, early stopping with ``network_patience``), since
+   predicting unseen wall points is its job.
 
 The backend is the subclass's (``nlosfw-torch``: ``rsd_residual_torch``, ``nlosfw-jax``:
 ``rsd_residual_jax``): it names the engine and finds the network class in the registry.
@@ -75,9 +78,14 @@ class RSDResidualConfig(RSDPriorConfig):
     """Peak learning rate of the residual network."""
     network_batch_size: int = 8192
     """Training samples per step of the residual network (0: full batch)."""
-    network_validation_fraction: float = 0.05
-    """Fraction of the kept samples held out for the residual network's early stopping
-    (0: none; a validation field, when the run gives one, replaces it)."""
+    network_validation_fraction: float = 0.1
+    """Fraction of the kept wall points (every frequency of each) held out to choose the
+    residual network's training length (0: none; a validation field, when the run gives
+    one, replaces it). Whole wall points, not random samples: what the residual must do is
+    predict wall points it has not seen."""
+    network_patience: int = 4
+    """Validation evaluations without improvement before the network stops (0: never; the
+    weights of the best evaluation are kept)."""
     network_threads: int = 1
     """CPU threads of the residual network's training (0: the backend's default)."""
 
@@ -96,6 +104,8 @@ class RSDResidualConfig(RSDPriorConfig):
                 f"must be >= 0 (0: full batch), got {self.network_batch_size}")
         require(0 <= self.network_validation_fraction < 1, "network_validation_fraction",
                 f"must be in [0, 1), got {self.network_validation_fraction}")
+        require(self.network_patience >= 0, "network_patience",
+                f"must be >= 0, got {self.network_patience}")
         require(self.network_threads >= 0, "network_threads",
                 f"must be >= 0, got {self.network_threads}")
 
@@ -109,8 +119,8 @@ class RSDResidualConfig(RSDPriorConfig):
         return {"seed": self.seed, "device": self.device, "hidden": list(self.network_hidden),
                 "steps": self.network_steps, "lr": self.network_lr,
                 "batch_size": self.network_batch_size,
-                "validation_fraction": self.network_validation_fraction,
-                "eval_every": max(1, min(100, self.network_steps // 10)),
+                "validation_fraction": 0.0, "patience": self.network_patience,
+                "eval_every": max(1, min(50, self.network_steps // 10)),
                 "threads": self.network_threads}
 
 
@@ -160,6 +170,9 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
         if not np.any(residual.values != 0):
             raise FitError(f"{who}: rsd_prior fits the field exactly; nothing is left for "
                            "the residual network (use model=rsd_prior)")
+        if val_residual is None and self.config.network_validation_fraction > 0:
+            residual, val_residual = _hold_out_points(
+                residual, self.config.network_validation_fraction, self.config.seed)
         report = network.fit(residual, val_residual, on_step)
         self._prior, self._network = prior, network
         history = [{"stage": 0.0, **h} for h in prior_report.history]
@@ -241,3 +254,21 @@ def _residual(prior: RSDPriorFieldModel, field: PhasorField) -> PhasorField:
     """``field`` minus the physics' field at its samples."""
     physics = prior.predict(field.wall_xyz[..., :2], field.frequencies)
     return field.replace(values=(field.values - physics).astype(field.values.dtype))
+
+
+def _hold_out_points(field: PhasorField, fraction: float, seed: int
+                     ) -> tuple[PhasorField, PhasorField | None]:
+    """(training, validation): ``fraction`` of ``field``'s wall points, drawn by ``seed``,
+    with every frequency, as a (F, 1, N) validation field; no validation when fewer than
+    10 points would remain to train on."""
+    n_f, n_y, n_x = field.values.shape
+    n = n_y * n_x
+    n_val = max(1, round(fraction * n))
+    if n - n_val < 10:
+        return field, None
+    order = np.random.default_rng([seed, 0x76616C]).permutation(n)   # "val" stream
+    values = field.values.reshape(n_f, 1, n)
+    wall = field.wall_xyz.reshape(1, n, 3)
+    val, train = np.sort(order[:n_val]), np.sort(order[n_val:])
+    return (field.replace(values=values[:, :, train], wall_xyz=wall[:, train]),
+            field.replace(values=values[:, :, val], wall_xyz=wall[:, val]))
