@@ -53,6 +53,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         parameter_data_ratio,
         split_field,
     )
+    from nlosfw.model.rsd_residual import RSDResidualConfig, RSDResidualFieldModel
     from nlosfw.model.thesis_networks import (
         Architecture,
         ThesisNetwork,
@@ -101,6 +102,8 @@ __all__ = [
     "preset_config",
     "read_model_file",
     "reference_state",
+    "RSDResidualConfig",
+    "RSDResidualFieldModel",
     "SmoothnessBatch",
     "SpatialSampling",
     "split_field",

@@ -14,7 +14,13 @@ from nlosfw.plugins.capabilities import VOCABULARY as CAPABILITIES
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.hookspecs import hookimpl, hookspec
 from nlosfw.plugins.kinds import INTERFACES, RUN_KINDS, PluginKind
-from nlosfw.plugins.manager import ENTRY_POINT_GROUP, ENV_VAR, PluginHost, load_plugins
+from nlosfw.plugins.manager import (
+    ENTRY_POINT_GROUP,
+    ENV_VAR,
+    PluginHost,
+    load_plugins,
+    registered_network,
+)
 from nlosfw.plugins.networks import (
     ENGINES,
     NetworkEngine,
@@ -24,6 +30,7 @@ from nlosfw.plugins.networks import (
     NetworkSpec,
     network_model,
     register_field_networks,
+    register_rsd_residual,
     register_thesis_networks,
     thesis_network_model,
 )
@@ -63,6 +70,8 @@ __all__ = [
     "load_plugins",
     "network_model",
     "register_field_networks",
+    "register_rsd_residual",
     "register_thesis_networks",
+    "registered_network",
     "thesis_network_model",
 ]

@@ -9,14 +9,19 @@ from dataclasses import dataclass, field
 from functools import partial
 from importlib.metadata import entry_points
 from types import ModuleType
+from typing import TYPE_CHECKING
 
 import pluggy
 
 from nlosfw.capture.source import FormatCatalogue
+from nlosfw.common.errors import ConfigError
 from nlosfw.plugins import hookspecs
 from nlosfw.plugins.kinds import PluginKind
-from nlosfw.plugins.networks import NetworkRegistrar
+from nlosfw.plugins.networks import NetworkRegistrar, NetworkSpec
 from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
+
+if TYPE_CHECKING:
+    from nlosfw.model.trainer import NeuralFieldModel
 
 log = logging.getLogger(__name__)
 
@@ -135,3 +140,17 @@ def load_plugins(env: Mapping[str, str] | None = None,
             caller(register=NetworkRegistrar(register) if hook_name == _NETWORK_HOOK
                    else register)
     return PluginHost(manager=manager, registry=registry, broken=broken)
+
+
+def registered_network(name: str, engine: str) -> type[NeuralFieldModel]:
+    """The field-model class of the network ``name`` registered through ``register_networks``
+    for ``engine`` (``siren`` and ``torch``: ``siren_torch``'s class). A one-line
+    ConfigError on ``model.network`` lists the valid names."""
+    networks = {spec.factory.name: spec for spec in load_plugins().registry.specs("model")
+                if isinstance(spec.factory, NetworkSpec) and spec.factory.engine.value == engine}
+    if name not in networks:
+        raise ConfigError("model.network", f"{name!r} is not a network registered for "
+                          f"{engine}; valid: {', '.join(sorted(networks)) or 'none'}")
+    model: type[NeuralFieldModel] = networks[name].load()
+    return model
+

@@ -224,3 +224,27 @@ def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFie
     return NetworkSpec(name, NetworkEngine(engine), factory, network.config,
                        f"{network.description}, {_ENGINE_TITLES[engine]}",
                        presets_of(name)).load()
+
+
+#: Small, fast options of ``rsd_residual_<engine>`` for the conformance kit: a short physics
+#: fit (the kit's plane-wave field is no hidden scene's) and a small network for the rest.
+RSD_RESIDUAL_TEST_CONFIG: Mapping[str, object] = {
+    "iterations": 10, "amplitude": "point", "l1_weight": 0.2, "workers": 1,
+    "depth_range": [0.3, 0.7], "depth_step": 0.1, "fit_frequencies": 0, "power_iterations": 5,
+    "residual_weight": 0.0, "network_steps": 150, "network_lr": 2e-3, "network_batch_size": 0,
+    "network_validation_fraction": 0.0}
+
+
+def register_rsd_residual(register: Callable[..., None], engine: str, factory: str) -> None:
+    """Register ``rsd_residual_<engine>`` (``register`` is a ``register_field_models``
+    hook's): rsd_prior's field plus a penalised residual network, the class ``factory``
+    (a subclass of :class:`nlosfw.model.RSDResidualFieldModel` for ``engine``)."""
+    register(
+        f"rsd_residual_{engine}", factory,
+        config="nlosfw.model.rsd_residual:RSDResidualConfig",
+        requires=dict(ENGINES[NetworkEngine(engine)][1]),
+        description=f"rsd_prior's field plus a small penalised residual network, "
+                    f"{_ENGINE_TITLES[engine]}",
+        test_config=dict(RSD_RESIDUAL_TEST_CONFIG),
+        # not physical_prior: the residual network represents fields no hidden scene makes
+        capabilities=NETWORK_CAPABILITIES)

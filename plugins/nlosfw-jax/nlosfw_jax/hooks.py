@@ -1,14 +1,16 @@
-"""Registration of the JAX networks (the ``jax`` entry point of ``nlosfw``).
+"""Registration of the JAX networks and models (the ``jax`` entry point of ``nlosfw``).
 
-Nothing here imports jax: the factory is named by import path.
+Nothing here imports jax: factories are named by import path.
 """
 
 from __future__ import annotations
 
 from nlosfw.plugins import (
     NetworkRegistrar,
+    Registrar,
     hookimpl,
     register_field_networks,
+    register_rsd_residual,
     register_thesis_networks,
 )
 
@@ -17,3 +19,8 @@ from nlosfw.plugins import (
 def register_networks(register: NetworkRegistrar) -> None:
     register_thesis_networks(register, engine="jax", factory="nlosfw_jax.networks:thesis_network")
     register_field_networks(register, engine="jax", factory="nlosfw_jax.networks:field_network")
+
+
+@hookimpl
+def register_field_models(register: Registrar) -> None:
+    register_rsd_residual(register, engine="jax", factory="nlosfw_jax.models:RSDResidualJax")

@@ -1,11 +1,14 @@
-"""The thesis networks on the JAX engine as field-model classes, for use from Python.
+"""The thesis networks on the JAX engine as field-model classes, for use from Python,
+and the physics field with a JAX residual network.
 
-They are the classes the registry holds as ``tanh_jax``, ``pe_jax`` and ``siren_jax``.
+They are the classes the registry holds as ``tanh_jax``, ``pe_jax``, ``siren_jax`` and
+``rsd_residual_jax``.
 """
 
 from __future__ import annotations
 
-from nlosfw.plugins import thesis_network_model
+from nlosfw.model import NeuralFieldModel, RSDResidualFieldModel
+from nlosfw.plugins import registered_network, thesis_network_model
 from nlosfw_jax.engine import JaxEngine
 
 _FACTORY = "nlosfw_jax.networks:thesis_network"
@@ -14,4 +17,17 @@ TanhJax = thesis_network_model("tanh", "jax", _FACTORY)
 PEJax = thesis_network_model("pe", "jax", _FACTORY)
 SirenJax = thesis_network_model("siren", "jax", _FACTORY)
 
-__all__ = ["JaxEngine", "PEJax", "SirenJax", "TanhJax"]
+
+class RSDResidualJax(RSDResidualFieldModel):
+    """rsd_prior's field plus a penalised residual network on the JAX engine
+    (:class:`nlosfw.model.RSDResidualFieldModel`); on a GPU when JAX sees one."""
+
+    backend = "jax"
+
+    @classmethod
+    def network_class(cls, name: str) -> type[NeuralFieldModel]:
+        """The registered JAX network ``name``'s field-model class."""
+        return registered_network(name, "jax")
+
+
+__all__ = ["JaxEngine", "PEJax", "RSDResidualJax", "SirenJax", "TanhJax"]

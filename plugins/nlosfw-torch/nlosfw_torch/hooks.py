@@ -1,14 +1,16 @@
-"""Registration of the PyTorch networks (the ``torch`` entry point of ``nlosfw``).
+"""Registration of the PyTorch networks and models (the ``torch`` entry point of ``nlosfw``).
 
-Nothing here imports torch: the factory is named by import path.
+Nothing here imports torch: factories are named by import path.
 """
 
 from __future__ import annotations
 
 from nlosfw.plugins import (
     NetworkRegistrar,
+    Registrar,
     hookimpl,
     register_field_networks,
+    register_rsd_residual,
     register_thesis_networks,
 )
 
@@ -18,3 +20,8 @@ def register_networks(register: NetworkRegistrar) -> None:
     register_thesis_networks(register, engine="torch",
                              factory="nlosfw_torch.networks:thesis_network")
     register_field_networks(register, engine="torch", factory="nlosfw_torch.networks:field_network")
+
+
+@hookimpl
+def register_field_models(register: Registrar) -> None:
+    register_rsd_residual(register, engine="torch", factory="nlosfw_torch.models:RSDResidualTorch")

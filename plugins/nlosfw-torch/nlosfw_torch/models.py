@@ -1,12 +1,14 @@
-"""The thesis networks on the torch engine as field-model classes, for use from Python.
+"""The thesis networks on the torch engine as field-model classes, for use from Python,
+and the physics field with a torch residual network.
 
-They are the classes the registry holds as ``tanh_torch``, ``pe_torch`` and
-``siren_torch``: ``SirenTorch({"steps": 3000}).fit(field)``.
+They are the classes the registry holds as ``tanh_torch``, ``pe_torch``,
+``siren_torch`` and ``rsd_residual_torch``: ``SirenTorch({"steps": 3000}).fit(field)``.
 """
 
 from __future__ import annotations
 
-from nlosfw.plugins import thesis_network_model
+from nlosfw.model import NeuralFieldModel, RSDResidualFieldModel
+from nlosfw.plugins import registered_network, thesis_network_model
 from nlosfw_torch.engine import TorchEngine
 
 _FACTORY = "nlosfw_torch.networks:thesis_network"
@@ -15,4 +17,17 @@ TanhTorch = thesis_network_model("tanh", "torch", _FACTORY)
 PETorch = thesis_network_model("pe", "torch", _FACTORY)
 SirenTorch = thesis_network_model("siren", "torch", _FACTORY)
 
-__all__ = ["PETorch", "SirenTorch", "TanhTorch", "TorchEngine"]
+
+class RSDResidualTorch(RSDResidualFieldModel):
+    """rsd_prior's field plus a penalised residual network on the torch engine
+    (:class:`nlosfw.model.RSDResidualFieldModel`); on a GPU when torch sees one."""
+
+    backend = "torch"
+
+    @classmethod
+    def network_class(cls, name: str) -> type[NeuralFieldModel]:
+        """The registered torch network ``name``'s field-model class."""
+        return registered_network(name, "torch")
+
+
+__all__ = ["PETorch", "RSDResidualTorch", "SirenTorch", "TanhTorch", "TorchEngine"]
