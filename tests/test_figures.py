@@ -18,8 +18,12 @@ from nlosfw.report.figures import (
     source_labels,
 )
 
+#: The run writes every kind of figure (test_run_writes_every_figure checks the names), at a
+#: small dpi and with one single-frequency pair: the tests that look inside a figure draw
+#: it again themselves, and drawing the files is most of the run's time.
 TINY = ["scene=tiny", "model=interp", "+compare.nn={name:nearest}",
-        "transform.n_frequencies=21", "reconstruction.n_depths=4"]
+        "transform.n_frequencies=21", "reconstruction.n_depths=4", "figures.dpi=40",
+        "reconstruction.single_frequency_images=1"]
 
 
 @pytest.fixture(scope="module")

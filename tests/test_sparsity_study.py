@@ -15,6 +15,9 @@ import numpy as np
 import pytest
 import yaml
 
+import nlosfw
+from nlosfw.cli import main
+
 ROOT = Path(__file__).resolve().parents[1]
 #: The study at its smallest: the tiny scene (16 x 16 wall), two sparsities, one neural model
 #: with two seeds and few steps, few frequencies and depth planes.
@@ -36,7 +39,8 @@ def tiny_study(tmp_path_factory) -> Path:
     tmp = tmp_path_factory.mktemp("study")
     sweep = tmp / "sweep"
     _run("-m", "nlosfw", "-m", *TINY_STUDY, f"hydra.sweep.dir={sweep}", cwd=tmp)
-    _run("-m", "nlosfw", "report", str(sweep), cwd=tmp)
+    # the report in-process (its command line is tests/test_cli.py's and the presets')
+    assert main(["report", str(sweep)]) == 0
     return sweep
 
 
@@ -118,25 +122,34 @@ def test_the_benchmark_script_collects_the_study(tiny_study, tmp_path):
     assert "| tiny, analytic" in result.stdout and "PSNR gain (dB)" in result.stdout
 
 
-def test_the_preset_declares_the_study_and_the_acquisitions_pair_simulator_and_noise(tmp_path):
-    job = yaml.safe_load(_run("-m", "nlosfw", "experiment=sparsity", "acquisition=noisy",
-                              "--cfg", "job", cwd=tmp_path).stdout)
+def printed_config(args: list[str], capsys: pytest.CaptureFixture[str]) -> dict:
+    """What ``nlosfw ARGS --cfg ...`` prints, read as YAML (the command run in-process)."""
+    capsys.readouterr()
+    assert main(args) == 0
+    return yaml.safe_load(capsys.readouterr().out)
+
+
+def test_the_preset_declares_the_study_and_the_acquisitions_pair_simulator_and_noise(
+        tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    job = printed_config(["experiment=sparsity", "acquisition=noisy", "--cfg", "job"], capsys)
     assert job["simulator"]["name"] == "embree" and job["scene"]["noise"]["model"] == "poisson"
     assert job["model"]["name"] == "siren_torch" and job["figures"]["enabled"] is False
-    job = yaml.safe_load(_run("-m", "nlosfw", "experiment=sparsity", "acquisition=clean",
-                              "scene.noise.photons=10", "--cfg", "job", cwd=tmp_path).stdout)
+    job = printed_config(["experiment=sparsity", "acquisition=clean", "scene.noise.photons=10",
+                          "--cfg", "job"], capsys)
     assert job["simulator"]["name"] == "analytic" and job["scene"]["noise"]["model"] == "none"
-    hydra = yaml.safe_load(_run("-m", "nlosfw", "experiment=sparsity", "--cfg", "hydra",
-                                cwd=tmp_path).stdout)["hydra"]
+    hydra = printed_config(["experiment=sparsity", "--cfg", "hydra"], capsys)["hydra"]
     assert hydra["sweeper"]["params"] == {
         "scene": "thesis_planes,thesis_concave,letter_t,thesis_two_planes,thesis_occluded",
         "acquisition": "clean,noisy", "split.spatial_step": "2,4,8",
         "model": "siren_torch,fourier_torch,rsd_prior", "model.seed": "0,1,2"}
 
 
-def test_the_study_on_a_capture_file_drops_the_scene_axes(tmp_path):
-    _run("-m", "nlosfw", "scene=tiny", "stop_after=capture", "hydra.run.dir=made", cwd=tmp_path)
-    capture = tmp_path / "made" / "capture.hdf5"
+def test_the_study_on_a_capture_file_drops_the_scene_axes(tmp_path, monkeypatch):
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    made = nlosfw.run(["scene=tiny", "stop_after=capture"], output_dir=tmp_path / "made")
+    capture = made.dir / "capture.hdf5"
     sweep, out = tmp_path / "sweep", tmp_path / "study.json"
     _run(str(ROOT / "benchmarks" / "sparsity_study.py"), "run", "--dir", str(sweep),
          "--capture", str(capture), "--out", str(out), "split.spatial_step=2", "model=siren_torch",

@@ -112,12 +112,16 @@ def test_json_safe_converts_yaml_only_types():
 
 
 # ------------------------------------------------------------------- end to end
+#: Every kind of figure a run draws (one single-frequency pair, not two), at a small dpi:
+#: the titles are laid out, and would be maths-parsed, whatever the dpi and the count, and
+#: drawing the figures is most of such a run's time.
+FIGURES = ("figures.enabled=true", "figures.dpi=40", "reconstruction.single_frequency_images=1")
 def test_a_hostile_capture_name_and_run_dir_on_the_command_line(workdir, tools):
     """``$...$``, ``[/]`` and an escape sequence in the capture's file name, ``[/]`` in
     hydra.run.dir: the run completes with its figures, and nothing raw reaches the console."""
     name = f"a$x^2$ [/] b{ESC}[31m.hdf5"
     path = write_capture(workdir / name, fixtures.tiny_capture())
-    result = tools.run(f"capture.path='{path}'", *tools.QUICK[1:], "figures.enabled=true",
+    result = tools.run(f"capture.path='{path}'", *tools.QUICK[1:], *FIGURES,
                        "hydra.run.dir='out/[/]run'")
     assert result.returncode == 0, result.stderr
     run_dir = workdir / "out" / "[" / "]run"
@@ -131,7 +135,7 @@ def test_a_hostile_capture_name_and_run_dir_on_the_command_line(workdir, tools):
 
 def test_maths_in_the_scene_name_does_not_break_figures(workdir, tools):
     result = tools.run("scene=tiny", "scene.name='tiny $\\frac{1}{$ [/]'", *tools.QUICK[1:],
-                       "figures.enabled=true", "hydra.run.dir=out")
+                       *FIGURES, "hydra.run.dir=out")
     assert result.returncode == 0, result.stderr
     assert json.loads((workdir / "out" / "metrics.json").read_text())["status"] == "completed"
     assert sorted(p.name for p in (workdir / "out" / "figures").glob("*.png"))

@@ -10,7 +10,9 @@ import yaml
 
 from nlosfw.pipeline.cache import cache_entries, file_digest
 
-JOBS = 12
+#: Three seeds x two models: the two jobs of a seed run at once on the two workers and want
+#: the same capture and field (three such races per sweep; the benchmark runs 200 jobs).
+JOBS = 6
 SWEEP = ("-m", "hydra/launcher=parallel", "scene=tiny", "scene.noise.model=poisson",
          "scene.noise.photons=1e5", "imager=fft", "figures.enabled=false",
          "transform.n_frequencies=21", "reconstruction.n_depths=4",
