@@ -123,8 +123,17 @@ def test_projection_removes_the_least_squares_offset():
 
 
 def test_offsets_between_frequencies_and_save_load(tmp_path):
-    bg = WallBackground(np.array([2.0, 3.0]), np.array([1 + 1j, 3 - 1j]))
-    np.testing.assert_allclose(bg.at(np.array([1.0, 2.5, 4.0])), [1 + 1j, 2, 3 - 1j])
+    # a delayed offset (phase -2 pi f d, magnitude linear in f) is interpolated exactly
+    known = np.linspace(2.0, 4.0, 5)
+    d, f = 0.4, np.array([1.5, 2.2, 2.9, 3.71, 4.5])
+
+    def delayed(x):
+        return (1.0 + 0.5 * x) * np.exp(-2j * np.pi * np.clip(x, 2.0, 4.0) * d)
+
+    bg = WallBackground(known, delayed(known))
+    expected = delayed(f)
+    expected[0], expected[-1] = delayed(2.0), delayed(4.0)           # the end values beyond
+    np.testing.assert_allclose(bg.at(f), expected, rtol=1e-12)
     field, values = _scene(False, False)
     offset = 0.2 * np.sqrt(np.mean(np.abs(values) ** 2))
     field = PhasorField(values=values + offset, frequencies=FREQS, wall_xyz=WALL,

@@ -24,8 +24,9 @@ b_f v_f(x) with v_f = exp(2 pi i f legs(x)) (|v_f| = 1), and the mean above is o
 conj(v_f) times the residual, i.e. of the raw residual: the same least squares.
 
 Offsets are fitted at every training frequency (after the albedo, each by the mean above);
-at other frequencies the prediction interpolates their real and imaginary parts linearly
-(the nearest end value beyond the band).
+at other frequencies the prediction interpolates their magnitude and unwrapped phase
+linearly (the nearest end value beyond the band): a tail delayed by a path d has a phase
+-2 pi f d, which real and imaginary parts interpolated would shrink between samples.
 """
 
 from __future__ import annotations
@@ -58,10 +59,12 @@ class WallBackground:
     """(F,) complex offsets."""
 
     def at(self, frequencies: np.ndarray) -> np.ndarray:
-        """b at ``frequencies`` (linear in real and imaginary parts, the end values beyond)."""
+        """b at ``frequencies``: magnitude and unwrapped phase linear in f between the
+        fitted ones (exact for a delayed offset), the end values beyond."""
         f = np.asarray(frequencies, dtype=float)
-        return (np.interp(f, self.frequencies, self.values.real)
-                + 1j * np.interp(f, self.frequencies, self.values.imag))
+        magnitude = np.interp(f, self.frequencies, np.abs(self.values))
+        phase = np.interp(f, self.frequencies, np.unwrap(np.angle(self.values)))
+        return magnitude * np.exp(1j * phase)
 
     def summary(self, field_rms: float) -> dict[str, float]:
         """The fitted offsets for the fit report: RMS and largest |b_f| over the training
