@@ -28,10 +28,11 @@ at other frequencies the prediction interpolates their magnitude and unwrapped p
 linearly (the nearest end value beyond the band): a tail delayed by a path d has a phase
 -2 pi f d, which real and imaginary parts interpolated would shrink between samples.
 
-Measured once on the shared diffuse S at 16x with count splitting (default options, seed
-0): held-out excess error -4.60 dB without, -4.78 dB with the offsets (their RMS 0.27 of
-the field's, the largest 0.87, at the band's low end). A plane per frequency over the wall
-(three coefficients) was tried and made it worse (-4.40 dB): not offered.
+Measured on the shared diffuse S at 16x with count splitting (default options): held-out
+excess error without / with the offsets -4.60 / -4.78 dB (thinning seed 0), -4.27 / -4.26
+(seed 1), -4.42 / -4.57 (seed 2), 0.11 dB better on average; the offsets' RMS is 0.27-0.28
+of the field's, the largest 0.87-1.03, at the band's low end. A plane per frequency over
+the wall (three coefficients) was tried and made seed 0 worse (-4.40 dB): not offered.
 """
 
 from __future__ import annotations
