@@ -51,6 +51,8 @@ class FitReport:
     best_val_loss: float | None = None
     stopped_early: bool = False
     history: list[dict[str, float]] = field(default_factory=list)
+    fitted: dict[str, float] = field(default_factory=dict)
+    """Numbers the fit estimated besides the model's parameters, by name (in metrics.json)."""
 
 
 ModelConfigT = TypeVar("ModelConfigT", bound=FieldModelConfig)

@@ -35,6 +35,10 @@ contribution ||A e_v|| a_v reaches ``depth_threshold`` of the largest; the fine 
 those within ``depth_margin`` (plus half a coarse step) of them. Separate objects thus cost
 separate clusters of planes, not the whole depth range between them.
 
+With ``background: constant`` one complex offset per frequency, constant over the wall, is
+fitted jointly (minimised out exactly: :mod:`nlosfw.model.rsd_background`) and added to
+predictions; the fit report gives its size relative to the field.
+
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
 simulated captures): judge it on noisy, occluded and mis-calibrated captures.
@@ -52,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.config import number, require
+from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.depths import field_depth_range
 from nlosfw.image.fft import Precision
@@ -68,6 +72,14 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.rsd_background import (
+    Background,
+    BackgroundProjection,
+    WallBackground,
+    background_projection,
+    fit_offsets,
+)
+from nlosfw.model.rsd_sampling import deepest_path, enough_frequencies, fit_frequency_indices
 from nlosfw.model.scene_operator import (
     Amplitude,
     OperatorOptions,
@@ -130,6 +142,9 @@ class RSDPriorConfig(FieldModelConfig):
     """Threads of scipy.fft (-1: all cores)."""
     cache_mb: float = 1024.0
     """[MiB] Memory for the kernels' spectra during the fit (recomputed when larger)."""
+    background: Background = Background.none
+    """Additive background fitted jointly: none, or constant (one complex offset per
+    frequency, the same over the wall: ambient light, dark counts, a late tail)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -170,6 +185,7 @@ class _Fitted:
     albedo: np.ndarray
     geometry: CaptureGeometry
     scale: float
+    background: WallBackground | None = None
 
 
 class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
@@ -181,6 +197,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
     def __init__(self, config: RSDPriorConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
         self._fitted: _Fitted | None = None
+        self._projection: BackgroundProjection | None = None
 
     # ------------------------------------------------------------------ fit
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
@@ -194,6 +211,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
         scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))
         values = values / scale
+        self._projection = background_projection(cfg.background, field, wall)
         shortest = 1.0 / float(field.frequencies.max())
         depth_step = cfg.depth_step or shortest / 5
         if cfg.depth_range:
@@ -203,7 +221,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             depths = self._depth_planes(values, wall, field, depth_step)
         span = float(depths.max() - depths.min())
         chosen = fit_frequency_indices(field.frequencies,
-                                       _enough_frequencies(field.frequencies, cfg.fit_frequencies,
+                                       enough_frequencies(field.frequencies, cfg.fit_frequencies,
                                                            span))
         freqs = field.frequencies[chosen]
         lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
@@ -222,10 +240,16 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                                      seconds=time.perf_counter() - start))
 
         albedo, result = self._solve(op, values[chosen], cfg.iterations, report)
-        self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale)
+        background = None if self._projection is None else fit_offsets(
+            self._projection, lambda f: SceneOperator(lattice, wall, field.geometry, f,
+                                                      self._options()).forward(albedo),
+            field.frequencies, values, scale)
+        self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale,
+                               background)
         return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
                          final_loss=result.residual,
-                         stopped_early=result.iterations < cfg.iterations, history=history)
+                         stopped_early=result.iterations < cfg.iterations, history=history,
+                         fitted={} if background is None else background.summary(scale))
 
     def _solve(self, op: SceneOperator, data: np.ndarray, iterations: int,
                report: Callable[[int, float, float], None] | None = None
@@ -233,12 +257,15 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         """The albedo fitted to ``data`` by FISTA on the column-normalised operator."""
         cfg = self.config
         norms = op.column_norms()
+        proj = self._projection
+        project = (lambda p: p) if proj is None else proj.projector(op.frequencies)
+        data = project(data)
 
         def forward(x: np.ndarray) -> np.ndarray:
-            return op.forward(x / norms)
+            return project(op.forward(x / norms))
 
         def adjoint(p: np.ndarray) -> np.ndarray:
-            return op.adjoint(p) / norms
+            return op.adjoint(project(p)) / norms
 
         shape = op.lattice.volume_shape
         lip = lipschitz(forward, adjoint, shape, cfg.power_iterations, cfg.seed)
@@ -259,10 +286,10 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         """Planes ``step`` apart within ``depth_margin`` of the planes where a quick fit on a
         coarse lattice finds the scene (see the module docstring)."""
         cfg = self.config
-        deepest = _deepest(field)
+        deepest = deepest_path(field)
         f = field.frequencies
         lower = np.flatnonzero(f <= f.min() + (f.max() - f.min()) / 2)
-        chosen = lower[fit_frequency_indices(f[lower], _enough_frequencies(
+        chosen = lower[fit_frequency_indices(f[lower], enough_frequencies(
             f[lower], cfg.fit_frequencies, deepest))]
         freqs = f[chosen]
         coarse = 1.0 / (4.0 * float(freqs.max()))
@@ -314,6 +341,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             points3 = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], axis=-1)
             legs = fitted.geometry.device_path(points3)
             out *= unit_phasor(-f.reshape((-1,) + (1,) * legs.ndim) * legs[None])
+        if fitted.background is not None:
+            out += fitted.background.at(f).reshape((-1,) + (1,) * (out.ndim - 1))
         return out
 
     def _predict_grid(self, lattice: VoxelLattice, albedo: np.ndarray, layout: GridLayout,
@@ -338,6 +367,11 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         return self._stored().albedo
 
     @property
+    def background(self) -> WallBackground | None:
+        """The fitted offsets b_f (``background: constant``; None otherwise)."""
+        return self._stored().background
+
+    @property
     def lattice(self) -> VoxelLattice:
         """The voxel lattice of the fitted albedo."""
         return self._stored().lattice
@@ -353,8 +387,11 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
     def save(self, path: str | Path) -> None:
         fitted = self._stored()
         lat = fitted.lattice
+        bg = fitted.background
+        extra = {} if bg is None else {"background": bg.values,
+                                       "background_frequencies": bg.frequencies}
         write_model_file(path, MODEL_NAME, self.config,
-                         {"albedo": fitted.albedo, "depths": lat.depths},
+                         {"albedo": fitted.albedo, "depths": lat.depths, **extra},
                          {"origin": list(lat.origin), "step": list(lat.step),
                           "shape": list(lat.shape), "geometry": fitted.geometry.to_dict(),
                           "scale": fitted.scale})
@@ -372,13 +409,16 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             albedo = np.asarray(arrays["albedo"], dtype=np.float32)
             geometry = CaptureGeometry.from_dict(header["geometry"])
             scale = float(header["scale"])
+            background = None if model.config.background == Background.none else WallBackground(
+                np.asarray(arrays["background_frequencies"], float),
+                np.asarray(arrays["background"], np.complex128))
         except (KeyError, TypeError, ValueError, IndexError, ConfigError, DataError) as err:
             raise DataError(f"model file {path}: invalid {MODEL_NAME} file "
                             f"({type(err).__name__})") from None
         if albedo.shape != lattice.volume_shape or not np.all(np.isfinite(albedo)):
             raise DataError(f"model file {path}: albedo of shape {albedo.shape} does not match "
                             f"the lattice {lattice.volume_shape}")
-        model._fitted = _Fitted(lattice, albedo, geometry, scale)
+        model._fitted = _Fitted(lattice, albedo, geometry, scale, background)
         return model
 
 
@@ -395,17 +435,6 @@ def _training_grid(field: PhasorField) -> GridLayout:
     return layout
 
 
-def fit_frequency_indices(frequencies: np.ndarray, count: int) -> np.ndarray:
-    """Indices of ``count`` frequencies evenly spread over the sorted ``frequencies`` (the
-    first and the last included; all of them for count 0 or count >= F)."""
-    order = np.argsort(frequencies, kind="stable")
-    n = order.size
-    if count == 0 or count >= n:
-        return order
-    picks = np.unique(np.round(np.linspace(0, n - 1, count)).astype(int))
-    return order[picks]
-
-
 def voxel_lattice(wall: GridLayout, lateral_step: float, depths: np.ndarray) -> VoxelLattice:
     """Voxel planes at ``depths`` whose spacing divides the training spacing (at most
     ``lateral_step``) and covering the training grid plus half a training spacing."""
@@ -419,32 +448,3 @@ def voxel_lattice(wall: GridLayout, lateral_step: float, depths: np.ndarray) -> 
         shape.append(k * (n - 1) + 1 + 2 * pad)
     return VoxelLattice(np.asarray(depths, dtype=float), (origin[0], origin[1]),
                         (step[0], step[1]), (shape[0], shape[1]))
-
-
-def _enough_frequencies(frequencies: np.ndarray, count: int, depth_span: float) -> int:
-    """At least ``count`` (0: all), and enough evenly spread frequencies that paths over
-    twice ``depth_span`` (m) do not alias in time (spacing <= 1 / (2.2 depth_span))."""
-    if count == 0:
-        return 0
-    f = np.asarray(frequencies, dtype=float)
-    band = float(f.max() - f.min())
-    needed = int(math.ceil(band * 2.2 * depth_span)) + 1
-    return max(count, needed)
-
-
-def _deepest(field: PhasorField) -> float:
-    """Half the longest path the field can hold: the capture's time span (from the
-    transform's metadata) or the unambiguous range 1/df of the frequency spacing."""
-    meta = field.metadata
-    try:
-        t_start, n_bins, delta_t = (number(meta[k]) for k in ("t_start", "n_bins", "delta_t"))
-        end = t_start + int(n_bins) * delta_t
-        if end > 0:
-            return end / 2
-    except (KeyError, TypeError, ValueError):
-        pass
-    f = np.sort(np.unique(field.frequencies))
-    if f.size < 2:
-        raise ConfigError("model.depth_range", "give [near, far] (m): one frequency and no "
-                          "capture time span in the field's metadata cannot place the scene")
-    return 1.0 / (2.0 * float(np.min(np.diff(f))))

@@ -180,7 +180,8 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
         return FitReport(steps=prior_report.steps + report.steps,
                          seconds=time.perf_counter() - start, final_loss=report.final_loss,
                          best_val_loss=report.best_val_loss,
-                         stopped_early=report.stopped_early, history=history)
+                         stopped_early=report.stopped_early, history=history,
+                         fitted=prior_report.fitted)
 
     # ------------------------------------------------------------------ predict
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:

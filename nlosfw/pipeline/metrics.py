@@ -35,14 +35,15 @@ from nlosfw.common.typed_json import (
 )
 from nlosfw.model.interface import FitReport
 
-SchemaVersion = Literal[6]
+SchemaVersion = Literal[7]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 6
+SCHEMA_VERSION: Final[SchemaVersion] = 7
 
 #: Older versions :meth:`RunMetrics.from_json` still reads: each later version only added
 #: optional keys (6: count splitting, ``capture.thinning`` and
-#: ``field.*.splits.heldout_measurement``), so such a file reads as this version.
-READABLE_VERSIONS: Final = (5, 6)
+#: ``field.*.splits.heldout_measurement``; 7: ``field.*.fit.fitted``), so such a file reads
+#: as this version.
+READABLE_VERSIONS: Final = (5, 6, 7)
 
 Status = Literal["running", "completed", "stopped", "failed", "interrupted"]
 """``running`` only while the run is in progress: metrics.json is written when it ends.
@@ -159,12 +160,17 @@ class FitMetrics(Document, frozen=True, kw_only=True):
     final_loss: float | None
     best_val_loss: float | None
     stopped_early: bool
+    fitted: Annotated[Absent[dict[str, float]], doc(
+        "numbers the fit estimated besides the model's parameters, by name (rsd_prior with "
+        "background=constant: background_rms_ratio and background_max_ratio, the RMS and "
+        "largest offset |b_f| over the training frequencies / the field's RMS)")] = None
 
     @classmethod
     def of(cls, report: FitReport) -> "FitMetrics":
         return cls(steps=int(report.steps), seconds=round(report.seconds, 3),
                    final_loss=report.final_loss, best_val_loss=report.best_val_loss,
-                   stopped_early=bool(report.stopped_early))
+                   stopped_early=bool(report.stopped_early),
+                   fitted={k: float(v) for k, v in report.fitted.items()} or None)
 
 
 class ErrorMetrics(Document, frozen=True, kw_only=True):
