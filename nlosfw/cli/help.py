@@ -74,9 +74,7 @@ MORE = (
     ("python -m nlosfw --hydra-help", "Hydra's own help (flags, --info, shell completion)"),
 )
 
-DOCS = ("README.md (install, runs, outputs, metrics, thesis presets), CONTRIBUTING.md "
-        "(writing plugins and networks), docs/architecture.md (the stages) in the source "
-        "repository")
+DOCS = "README.md, CONTRIBUTING.md (plugins), docs/architecture.md in the source repository"
 
 
 def help_text(host: PluginHost, conf: Path) -> str:
