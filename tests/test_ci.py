@@ -64,8 +64,13 @@ def test_the_install_block_installs_every_distribution_of_the_repository():
 
 def test_the_tests_block_lints_type_checks_and_runs_the_whole_suite():
     commands = _commands(_block("Tests"))
-    assert commands == [["pip", "install", ".[test]"], ["ruff", "check", "."], ["mypy"],
-                        ["pytest"]]
+    assert commands[:3] == [["pip", "install", ".[test]"], ["ruff", "check", "."], ["mypy"]]
+    pytest_command = commands[3]
+    assert len(commands) == 4 and pytest_command[0] == "pytest"
+    # the whole suite: no paths, no -k/-m selection; only pytest-xdist's process options
+    assert all(arg.startswith("-") or arg.isdigit() or arg in ("auto", "loadfile")
+               for arg in pytest_command[1:]), pytest_command
+    assert not {"-k", "-m", "-x"} & set(pytest_command)
 
 
 def test_ci_runs_the_readme_blocks_and_no_install_or_test_command_of_its_own():

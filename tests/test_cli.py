@@ -351,9 +351,18 @@ def test_sweep_report_and_resume(workdir, capsys):
 def test_non_editable_install_runs_from_any_directory(tmp_path):
     """A plain ``pip install .`` (no editable finder, no source tree) finds its configs."""
     repo = Path(__file__).resolve().parents[1]
+    # a copy of what the distribution is built from: building in the checkout would write
+    # build/ and nlosfw.egg-info into it while other test processes read its entry points
+    source = tmp_path / "source"
+    source.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy2(repo / name, source / name)
+    for name in ("nlosfw", "conf"):
+        shutil.copytree(repo / name, source / name,
+                        ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
     target = tmp_path / "site"
     subprocess.run([sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-cache-dir",
-                    "--target", str(target), str(repo)], check=True, timeout=600,
+                    "--target", str(target), str(source)], check=True, timeout=600,
                    capture_output=True)
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
