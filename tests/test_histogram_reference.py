@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import tracemalloc
 from pathlib import Path
 
@@ -236,3 +237,32 @@ def test_the_diffuse_s_reference_is_where_the_authors_find_the_s(workdir):
     assert reference is not None
     assert len(reference.metadata["frequencies"]) == 1024              # 2048 bins of 4 ps
     assert abs(brightest(reference)[2] - 0.504) <= 0.03
+
+
+def test_the_histograms_field_is_every_dft_bin_without_an_aliasing_warning(point_capture,
+                                                                          caplog):
+    """The 16 x 16 wall (6.7 cm spacing) aliases above 3.75 cycles/m for a confocal scan,
+    far below the histograms' 125 cycles/m: the fft transform warns for that band, the
+    reference field must not (it leaves every logger's filters alone), and its values are
+    the plain DFT of the histograms, computed here independently."""
+    _, capture = point_capture
+    with caplog.at_level("WARNING"):
+        field = histogram_field(capture)
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]
+    assert not logging_filters()
+    n, dt = capture.n_bins, capture.delta_t
+    assert field.n_frequencies == n // 2
+    np.testing.assert_allclose(field.frequencies, np.arange(1, n // 2 + 1) / (n * dt))
+    h = np.asarray(capture.H, dtype=float)          # (t, x, y); the field is (f, y, x)
+    t = capture.t_start + (np.arange(n) + 0.5) * dt
+    for k in (0, 7, n // 2 - 1):
+        phase = np.exp(-2j * np.pi * field.frequencies[k] * t)
+        expected = np.einsum("txy,t->yx", h, phase) * dt
+        scale = np.abs(expected).max()
+        assert scale > 0
+        assert np.abs(np.asarray(field.values[k]) - expected).max() < 1e-9 * scale
+
+
+def logging_filters() -> list[object]:
+    """Filters on the logger of the transform's frequency checks (none are left behind)."""
+    return list(logging.getLogger("nlosfw.transform.frequencies").filters)

@@ -10,16 +10,20 @@
 
 from __future__ import annotations
 
-import dataclasses
-
 from nlosfw.capture.data import Capture
 from nlosfw.image.transient import (
     MEASURED_BAND,
     full_band_frequencies,
     measured_band_frequencies,
 )
+from nlosfw.transform.common import FieldOptions, check_capture, transform_capture
 from nlosfw.transform.fft import FFTTransform, FFTTransformConfig
 from nlosfw.transform.field import PhasorField
+from nlosfw.transform.frequencies import band_info
+
+#: The option a reference field's band metadata names (its band is every DFT bin, never
+#: checked against the wall grid: the transient imagers image no wall band).
+HISTOGRAM_BAND = "every DFT bin of the capture"
 
 
 def measured_field(capture: Capture, band: tuple[float, float] = MEASURED_BAND) -> PhasorField:
@@ -31,8 +35,11 @@ def measured_field(capture: Capture, band: tuple[float, float] = MEASURED_BAND) 
 
 def histogram_field(capture: Capture, config: FFTTransformConfig | None = None) -> PhasorField:
     """The capture's phasor field at every positive DFT bin: its histograms as measured
-    (``config``: the ``fft`` transform's other options, e.g. a run's)."""
-    freqs = tuple(float(f) for f in full_band_frequencies(capture.n_bins, capture.delta_t))
+    (``config``: the ``fft`` transform's other options, e.g. a run's). The band is the whole
+    DFT's, so no aliasing warning is logged: time-domain imagers image no wall band."""
+    check_capture(capture, "fft")
     base = FFTTransformConfig() if config is None else config
-    return FFTTransform(dataclasses.replace(base, frequencies=freqs, f_min=None, f_max=None)
-                         ).transform(capture)
+    freqs = full_band_frequencies(capture.n_bins, capture.delta_t)
+    return transform_capture(capture, freqs, FieldOptions(
+        transform="fft", method=base.method, remove_device_legs=base.remove_device_legs,
+        metadata={"band": band_info(freqs, None, capture.kind, HISTOGRAM_BAND)}))

@@ -26,7 +26,6 @@ from nlosfw.image.transient import full_band_frequencies
 from nlosfw.pipeline.budget import available_memory
 from nlosfw.pipeline.context import StageContext
 from nlosfw.pipeline.results import CaptureResult
-from nlosfw.transform import frequencies as frequencies_module
 from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
 
@@ -105,29 +104,22 @@ def reference_field(run: StageContext, result: CaptureResult,
     asked for one)."""
     settings = run.plan.settings
     asked = settings.reconstruction.histogram_reference is True
-    say = log.warning if asked else log.info
     reason = reference_reason(run, result)
-    if reason is not None:   # the console hears of it only when it was asked for
-        log.log(logging.WARNING if asked else logging.INFO, "no reference picture: %s",
-                reason, extra=None if asked else FILE_ONLY)
+    if reason is not None:
+        _no_reference(asked, "%s", reason)
         return None
     capture = reference_capture(result)
     depths = np.unique(np.asarray(voxels, dtype=float)[..., 2])
     needed = reference_bytes(capture, depths, run.plan.imager.plugin.config)
     room = available_memory()
     if room is not None and needed > room and not settings.limits.allow_large:
-        say("no reference picture: imaging the histograms at native bins needs about %s, "
-            "but %s are available (limits.allow_large=true makes it anyway)",
-            format_bytes(needed), format_bytes(room))
+        _no_reference(asked, "imaging the histograms at native bins needs about %s, but %s "
+                      "are available (limits.allow_large=true makes it anyway)",
+                      format_bytes(needed), format_bytes(room))
         return None
     transform = run.plan.transform.plugin
-    frequencies_log = logging.getLogger(frequencies_module.__name__)
-    frequencies_log.addFilter(_no_alias_warning)   # time-domain imagers image no wall band
-    try:
-        field = histogram_field(capture, transform.config
-                                if isinstance(transform, FFTTransform) else None)
-    finally:
-        frequencies_log.removeFilter(_no_alias_warning)
+    field = histogram_field(capture, transform.config
+                            if isinstance(transform, FFTTransform) else None)
     hints = result.capture.scene_info.get(HINTS_KEY)
     if hints is not None and HINTS_KEY not in field.metadata:
         field = field.replace(metadata={**field.metadata, HINTS_KEY: hints})
@@ -137,6 +129,8 @@ def reference_field(run: StageContext, result: CaptureResult,
     return field
 
 
-def _no_alias_warning(record: logging.LogRecord) -> bool:
-    """Drops the band-aliasing warnings (the histograms' band is the whole DFT's)."""
-    return "alias" not in record.getMessage()
+def _no_reference(asked: bool, reason: str, *args: object) -> None:
+    """Log why no reference picture is made: a console warning when
+    ``reconstruction.histogram_reference=true`` asked for one, else run.log only."""
+    log.log(logging.WARNING if asked else logging.INFO, "no reference picture: " + reason,
+            *args, extra=None if asked else FILE_ONLY)
