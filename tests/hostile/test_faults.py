@@ -183,7 +183,8 @@ def test_a_read_only_cache_disables_the_cache_with_a_warning(workdir, tools, rea
 
 
 # -------------------------------------------------------------------------- signals
-@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143),
+                                             (signal.SIGHUP, 129)])
 def test_a_signal_stops_the_run_cleanly(workdir, tools, sig, status):
     """The run is held with capture.hdf5 written at its temporary path, not yet published:
     the signal removes the temporary and records where the run stopped."""

@@ -123,6 +123,20 @@ def test_max_gb_inf_means_no_limit(tmp_path):
     assert len(cache_entries(tmp_path)) == 2
 
 
+def test_max_gb_inf_on_the_command_line_keeps_every_entry(workdir, tools):
+    """``cache.max_gb=inf`` (YAML's .inf) through Hydra: the run completes and evicts nothing
+    (its capture and field entries stay); ``cache clean --keep-gb inf`` keeps them too."""
+    cache = workdir / "cache"
+    result = tools.run(*tools.QUICK, "cache.max_gb=inf", "hydra.run.dir=run")
+    assert result.returncode == 0, result.stderr
+    assert json.loads((workdir / "run" / "metrics.json").read_text())["status"] == "completed"
+    entries = sorted(entry.path for entry in cache_entries(cache))
+    assert entries
+    cleaned = tools.run("cache", "clean", "--dir", str(cache), "--keep-gb", "inf")
+    assert cleaned.returncode == 0, cleaned.stderr
+    assert sorted(entry.path for entry in cache_entries(cache)) == entries
+
+
 @pytest.mark.parametrize("keep", ["nan", "-inf"])
 def test_keep_gb_not_a_size_is_one_line(workdir, tools, keep):
     result = tools.run("cache", "clean", f"--keep-gb={keep}")
