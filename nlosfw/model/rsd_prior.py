@@ -47,7 +47,6 @@ simulated captures): judge it on noisy, occluded and mis-calibrated captures.
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -79,7 +78,13 @@ from nlosfw.model.rsd_background import (
     background_projection,
     fit_offsets,
 )
-from nlosfw.model.rsd_sampling import deepest_path, enough_frequencies, fit_frequency_indices
+from nlosfw.model.rsd_sampling import (
+    deepest_path,
+    enough_frequencies,
+    fit_frequency_indices,
+    training_grid,
+    voxel_lattice,
+)
 from nlosfw.model.scene_operator import (
     Amplitude,
     OperatorOptions,
@@ -207,7 +212,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         cfg = self.config
         check_training_field(field, MODEL_NAME)
         check_geometry(field.geometry)
-        wall = _training_grid(field)
+        wall = training_grid(field, MODEL_NAME)
         values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
         scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))
         values = values / scale
@@ -366,6 +371,13 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         """The fitted albedo (Z, Y, X) (relative units) on :attr:`lattice`."""
         return self._stored().albedo
 
+    def with_albedo(self, albedo: np.ndarray) -> RSDPriorFieldModel:
+        """A copy of this fitted model with another albedo (Z, Y, X) on its lattice, in the
+        fit's normalised units (``neural_volume`` predicts through it)."""
+        model = type(self)(self.config)
+        model._fitted = replace(self._stored(), albedo=np.asarray(albedo, dtype=np.float32))
+        return model
+
     @property
     def background(self) -> WallBackground | None:
         """The fitted offsets b_f (``background: constant``; None otherwise)."""
@@ -424,27 +436,3 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
 
 def _pair(values: Sequence[float]) -> tuple[float, float]:
     return float(values[0]), float(values[1])
-
-
-def _training_grid(field: PhasorField) -> GridLayout:
-    layout = grid_layout(field.wall_xyz)
-    if layout is None or min(layout.shape) < 2:
-        raise DataError(f"{MODEL_NAME}: the training samples must form a regular axis-aligned "
-                        f"grid of at least 2 x 2 points in the wall plane z = 0, got wall_xyz "
-                        f"of shape {field.wall_xyz.shape}")
-    return layout
-
-
-def voxel_lattice(wall: GridLayout, lateral_step: float, depths: np.ndarray) -> VoxelLattice:
-    """Voxel planes at ``depths`` whose spacing divides the training spacing (at most
-    ``lateral_step``) and covering the training grid plus half a training spacing."""
-    origin, step, shape = [], [], []
-    for axis in (0, 1):
-        spacing, n = wall.spacing[axis], wall.shape[axis]
-        k = max(1, math.ceil(spacing / lateral_step - 1e-6))
-        pad = k // 2
-        step.append(spacing / k)
-        origin.append(wall.origin[axis] - pad * spacing / k)
-        shape.append(k * (n - 1) + 1 + 2 * pad)
-    return VoxelLattice(np.asarray(depths, dtype=float), (origin[0], origin[1]),
-                        (step[0], step[1]), (shape[0], shape[1]))
