@@ -45,6 +45,15 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         NeuralFieldConfig,
         Preset,
     )
+    from nlosfw.model.neural_volume import (
+        NeuralVolumeConfig,
+        NeuralVolumeFieldModel,
+        PlaneStack,
+        TrainedVolume,
+        VolumeProblem,
+        plane_stack,
+        volume_coordinates,
+    )
     from nlosfw.model.normalisation import FieldNormalisation
     from nlosfw.model.protocol import (
         FieldSplit,
@@ -97,6 +106,10 @@ __all__ = [
     "NetworkBuild",
     "NeuralFieldConfig",
     "NeuralFieldModel",
+    "NeuralVolumeConfig",
+    "NeuralVolumeFieldModel",
+    "PlaneStack",
+    "plane_stack",
     "parameter_data_ratio",
     "Preset",
     "preset_config",
@@ -109,7 +122,10 @@ __all__ = [
     "split_field",
     "thesis_architecture",
     "ThesisNetwork",
+    "TrainedVolume",
     "TrainingStep",
+    "volume_coordinates",
+    "VolumeProblem",
     "wire_widths",
     "WireFieldConfig",
     "write_model_file",
