@@ -63,6 +63,8 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         split_field,
     )
     from nlosfw.model.rsd_residual import RSDResidualConfig, RSDResidualFieldModel
+    from nlosfw.model.rsd_sampling import training_grid, voxel_lattice
+    from nlosfw.model.scene_operator import OperatorOptions, SceneOperator, VoxelLattice
     from nlosfw.model.thesis_networks import (
         Architecture,
         ThesisNetwork,
@@ -104,6 +106,7 @@ __all__ = [
     "InterpFieldModel",
     "LRSchedule",
     "NetworkBuild",
+    "OperatorOptions",
     "NeuralFieldConfig",
     "NeuralFieldModel",
     "NeuralVolumeConfig",
@@ -117,15 +120,19 @@ __all__ = [
     "reference_state",
     "RSDResidualConfig",
     "RSDResidualFieldModel",
+    "SceneOperator",
     "SmoothnessBatch",
     "SpatialSampling",
     "split_field",
     "thesis_architecture",
     "ThesisNetwork",
+    "training_grid",
     "TrainedVolume",
     "TrainingStep",
     "volume_coordinates",
     "VolumeProblem",
+    "VoxelLattice",
+    "voxel_lattice",
     "wire_widths",
     "WireFieldConfig",
     "write_model_file",

@@ -14,16 +14,20 @@ pytest.importorskip("torch")
 import torch
 from nlosfw_torch.neural_volume import TorchPlaneOperator
 
-from nlosfw.capture.enums import CaptureKind
-from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.common import ConfigError
-from nlosfw.image.plane_convolution import grid_layout
-from nlosfw.model import plane_stack
-from nlosfw.model.rsd_sampling import training_grid, voxel_lattice
-from nlosfw.model.scene_operator import OperatorOptions, SceneOperator, VoxelLattice
+from nlosfw.image import grid_layout
+from nlosfw.model import (
+    OperatorOptions,
+    SceneOperator,
+    VoxelLattice,
+    plane_stack,
+    training_grid,
+    voxel_lattice,
+)
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
-from nlosfw.transform.field import PhasorField
+from nlosfw.transform import PhasorField
 
 HAS_JAX = bool(importlib.util.find_spec("jax") and importlib.util.find_spec("optax")
                and importlib.util.find_spec("equinox"))
