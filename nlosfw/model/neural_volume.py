@@ -1,8 +1,9 @@
 """The neural hidden volume: a coordinate network's non-negative albedo, propagated by RSD.
 
 Like ``rsd_prior`` the field is explained by a hidden scene on voxel planes parallel to
-the wall (the same lattice, depth planes, frequencies, device legs and normalisation:
-:class:`~nlosfw.model.rsd_prior.RSDPriorFieldModel` sets them up), but the albedo is not
+the wall (the same lattice, depth planes, frequencies, device legs and normalisation, set up
+as :class:`~nlosfw.model.rsd_prior.RSDPriorFieldModel` does, its quick coarse fit finding
+the depth planes when ``depth_range`` is not given), but the albedo is not
 a free array: it is a registered network (``network``, any of the ``register_networks``
 API, on the subclass's backend) evaluated at the voxel centres,
 
@@ -22,7 +23,7 @@ with the operator A written once per backend (torch, JAX: differentiable, native
 from the numpy kernel spectra and laser legs of
 :class:`~nlosfw.model.scene_operator.SceneOperator` (:func:`plane_stack`). The network's
 smoothness is the prior: no L1 or TV term. The fitted albedo predicts the field anywhere
-``rsd_prior`` can (through :meth:`RSDPriorFieldModel.with_albedo`).
+``rsd_prior`` can (through :meth:`RSDPriorFieldModel.from_albedo`).
 
 The backend is the subclass's (``nlosfw-torch``: ``neural_volume_torch``, ``nlosfw-jax``:
 ``neural_volume_jax``): it finds the network class and implements :meth:`train`.
@@ -43,7 +44,7 @@ from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import to_canonical
-from nlosfw.image.rsd_kernel import wall_field
+from nlosfw.image.rsd_kernel import check_geometry, path_multiplier, wall_field
 from nlosfw.model.interface import (
     FieldModel,
     FieldModelConfig,
@@ -55,8 +56,13 @@ from nlosfw.model.interface import (
 from nlosfw.model.model_files import read_model_file, write_model_file
 from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import enough_frequencies, fit_frequency_indices, training_grid
-from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator
+from nlosfw.model.rsd_sampling import (
+    enough_frequencies,
+    fit_frequency_indices,
+    training_grid,
+    voxel_lattice,
+)
+from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.model.trainer import NeuralFieldModel, learning_rate
 from nlosfw.transform.field import PhasorField
 
@@ -123,10 +129,9 @@ class NeuralVolumeConfig(FieldModelConfig):
         self.prior_config()                 # the lattice options, checked by rsd_prior
 
     def prior_config(self) -> RSDPriorConfig:
-        """``rsd_prior``'s options that set up the lattice (one short iteration: only its
-        depth planes and lattice are used)."""
+        """``rsd_prior``'s options that find the depth planes and predict."""
         return RSDPriorConfig(
-            seed=self.seed, iterations=1, power_iterations=1, amplitude=self.amplitude,
+            seed=self.seed, amplitude=self.amplitude,
             fit_frequencies=self.fit_frequencies, depth_range=self.depth_range,
             depth_step=self.depth_step, lateral_step=self.lateral_step,
             depth_threshold=self.depth_threshold, depth_iterations=self.depth_iterations,
@@ -243,26 +248,38 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         who = self.model_name()
         check_training_field(field, who)
         network = self.network_class(self.config.network)   # a bad name fails first
-        problem, scene = self._problem(field, network)
+        problem, lattice, scale = self._problem(field, network)
         trained = self.train(problem, on_step)
         albedo = np.asarray(trained.albedo, dtype=np.float32)
         if albedo.shape != problem.gain.shape or not np.all(np.isfinite(albedo)):
             raise FitError(f"{who}: training diverged (non-finite albedo); lower model.lr")
-        self._scene, self._n_network = scene.with_albedo(albedo), trained.n_parameters
+        self._scene = RSDPriorFieldModel.from_albedo(self.config.prior_config(), lattice, albedo,
+                                                     field.geometry, scale)
+        self._n_network = trained.n_parameters
         return FitReport(steps=self.config.steps, seconds=time.perf_counter() - start,
                          final_loss=trained.final_loss, history=trained.history)
 
     def _problem(self, field: PhasorField, network: type[NeuralFieldModel]
-                 ) -> tuple[VolumeProblem, RSDPriorFieldModel]:
-        """The lattice (``rsd_prior``'s setup), the operator's constants and the data."""
+                 ) -> tuple[VolumeProblem, VoxelLattice, float]:
+        """(What the backend trains on, the lattice, the field's scale): ``rsd_prior``'s
+        setup (its depth planes, lattice, frequencies and normalisation)."""
         cfg, who = self.config, self.model_name()
-        scene = RSDPriorFieldModel(cfg.prior_config())
-        scene.fit(field)
-        lattice = scene.lattice
+        check_geometry(field.geometry)
         wall = training_grid(field, who)
         values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
-        values = values / float(np.sqrt(np.mean(np.abs(values) ** 2)))  # rsd_prior's scale
-        span = float(lattice.depths.max() - lattice.depths.min())
+        scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))      # rsd_prior's
+        values = values / scale
+        scene = RSDPriorFieldModel(cfg.prior_config())
+        shortest = 1.0 / float(field.frequencies.max())
+        depth_step = cfg.depth_step or shortest / 5
+        if cfg.depth_range:
+            near, far = (float(v) for v in cfg.depth_range)
+            depths = np.arange(near, far + depth_step / 2, depth_step)
+        else:
+            depths = scene.depth_planes(values, wall, field, depth_step)
+        lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
+        lattice = voxel_lattice(wall, lateral, depths)
+        span = float(depths.max() - depths.min())
         chosen = fit_frequency_indices(field.frequencies, enough_frequencies(
             field.frequencies, cfg.fit_frequencies, span))
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
@@ -283,7 +300,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
             coords=volume_coordinates(lattice.depths, ys, xs),
             gain=np.full(norms.shape, peak / float(np.mean(norms)), dtype=np.float32),
             shift=float(np.log(np.expm1(cfg.albedo_start))),
-            network=network, network_config=net_config, network_shape=shape), scene
+            network=network, network_config=net_config, network_shape=shape), lattice, scale
 
     def _network_options(self) -> dict[str, object]:
         cfg = self.config

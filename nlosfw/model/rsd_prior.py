@@ -223,7 +223,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             near, far = (float(v) for v in cfg.depth_range)
             depths = np.arange(near, far + depth_step / 2, depth_step)
         else:
-            depths = self._depth_planes(values, wall, field, depth_step)
+            depths = self.depth_planes(values, wall, field, depth_step)
         span = float(depths.max() - depths.min())
         chosen = fit_frequency_indices(field.frequencies,
                                        enough_frequencies(field.frequencies, cfg.fit_frequencies,
@@ -286,10 +286,11 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         result = solve(problem, cfg.step / smooth_l, iterations, report, cfg.tolerance)
         return result.x / norms, result
 
-    def _depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
-                      step: float) -> np.ndarray:
+    def depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
+                     step: float) -> np.ndarray:
         """Planes ``step`` apart within ``depth_margin`` of the planes where a quick fit on a
-        coarse lattice finds the scene (see the module docstring)."""
+        coarse lattice finds the scene (see the module docstring); ``values``: the field
+        without device legs, canonical order (``wall``), divided by its RMS."""
         cfg = self.config
         deepest = deepest_path(field)
         f = field.frequencies
@@ -371,11 +372,13 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         """The fitted albedo (Z, Y, X) (relative units) on :attr:`lattice`."""
         return self._stored().albedo
 
-    def with_albedo(self, albedo: np.ndarray) -> RSDPriorFieldModel:
-        """A copy of this fitted model with another albedo (Z, Y, X) on its lattice, in the
-        fit's normalised units (``neural_volume`` predicts through it)."""
-        model = type(self)(self.config)
-        model._fitted = replace(self._stored(), albedo=np.asarray(albedo, dtype=np.float32))
+    @classmethod
+    def from_albedo(cls, config: RSDPriorConfig, lattice: VoxelLattice, albedo: np.ndarray,
+                    geometry: CaptureGeometry, scale: float) -> RSDPriorFieldModel:
+        """A fitted model holding ``albedo`` (Z, Y, X) on ``lattice``, in units of the field
+        divided by ``scale`` (``neural_volume`` predicts through it)."""
+        model = cls(config)
+        model._fitted = _Fitted(lattice, np.asarray(albedo, dtype=np.float32), geometry, scale)
         return model
 
     @property
