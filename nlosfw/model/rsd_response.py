@@ -14,19 +14,25 @@ picoseconds (divided by c).
   P_f = sum_t H(t) exp(-2 pi i f t) delta_t. A positive tau: the signal arrives late.
 
 The model's field is g_f A_f a with g_f = m_f exp(-2 pi i f tau), the albedo a the same at
-every frequency (its overall scale absorbs any real scale of the gains). Fitting alternates
-(``response_rounds`` times): with the albedo fixed, sigma and tau are the least squares
+every frequency (its overall scale absorbs any real scale of the gains); the fit folds the
+gains, scaled to unit RMS, into the operator (G A, adjoint A^H G^H; |A_f e_v| does not
+depend on f, so the column normalisation is unchanged).
+
+Estimation. With the albedo fixed, sigma and tau have an exact least-squares form
 
     min_{s > 0, sigma, tau} sum_f ||s g_f A_f a - P_f||^2
     = max (sum_f m_f Re(exp(2 pi i f tau) z_f))^2 / sum_f m_f^2 e_f,
 
-z_f = <A_f a, P_f>, e_f = ||A_f a||^2 (the per-frequency least-squares gains
-z_f / e_f weighted by e_f), tau by a grid search over one period of the frequency
-spacing refined by a bounded scalar search, sigma by a bounded search; then the albedo is
-fitted again with the gains folded into the operator (G A, adjoint A^H G^H; |A_f e_v| does
-not depend on f, so the column normalisation only changes by a common factor).
-This exact least squares replaces a regression of log|z_f / e_f| on f^2 and of the
-unwrapped phase on f: it needs no unwrapping and weighs every frequency by what it holds.
+z_f = <A_f a, P_f>, e_f = ||A_f a||^2 (the per-frequency gains z_f / e_f weighted by e_f;
+tau by a grid over one period of the frequency spacing then a bounded search, sigma by a
+bounded search: no phase unwrapping). But alternating it with the albedo stalls: the
+albedo absorbs most of a shift by moving in depth and most of a blur by spreading over
+planes, and what is left barely moves the least-squares values (measured on a point
+scatterer 30 mm late and blurred by 20 mm: tau 0.03 mm and sigma 0 after three rounds).
+So the least-squares values only start :func:`search_response`, which minimises the fit's
+own objective over sigma and tau, the albedo fitted again (warm started, a quarter of the
+iterations) for every value tried: ``response_rounds`` rounds of a parabola per term, the
+steps halving.
 """
 
 from __future__ import annotations
