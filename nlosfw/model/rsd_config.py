@@ -64,7 +64,8 @@ class RSDPriorConfig(FieldModelConfig):
     """Fit the capture's time-origin offset tau jointly (the phase ramp exp(-2 pi i f tau))."""
     response_rounds: int = 5
     """Rounds of the response search (with a response term on): each tries every fitted term
-    either side of its value, the albedo fitted again each time, with steps halving."""
+    either side of its value, the albedo fitted again each time (a quarter of
+    ``iterations``), with steps halving; a round costs about one to two fits."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
