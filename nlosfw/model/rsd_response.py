@@ -33,6 +33,14 @@ So the least-squares values only start :func:`search_response`, which minimises 
 own objective over sigma and tau, the albedo fitted again (warm started, a quarter of the
 iterations) for every value tried: ``response_rounds`` rounds of a parabola per term, the
 steps halving.
+
+Measured. A simulated point scatterer (analytic simulator, 100 ps jitter, shifted 10 bins
+of 10 ps later), planes over 0.4-0.6 m, default rounds: sigma 82.6 ps, tau 92.1 ps (the
+albedo still absorbs part of both), held-out error -33.7 dB against -25.1 dB without the
+terms; with the single plane at the point's depth, 96 ps and 97.9 ps. The shared diffuse S
+at 16x with count splitting (thinning seed 0, one run with ``response_rounds: 1``): sigma
+2.0 ps, tau -2.1 ps, held-out excess -4.50 dB against -4.41 dB without the terms (the same
+split: interp's -1.91 dB in both); the fit took 278 s on two loaded cores.
 """
 
 from __future__ import annotations
