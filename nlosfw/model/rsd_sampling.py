@@ -1,5 +1,5 @@
-"""Which frequencies ``rsd_prior`` fits: evenly spread, and enough that the depth span does
-not alias in time."""
+"""What ``rsd_prior`` fits on: the training grid, the voxel lattice, and which frequencies
+(evenly spread, and enough that the depth span does not alias in time)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import math
 import numpy as np
 
 from nlosfw.common.config import number
-from nlosfw.common.errors import ConfigError
+from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.image.plane_convolution import GridLayout, grid_layout
+from nlosfw.model.scene_operator import VoxelLattice
 from nlosfw.transform.field import PhasorField
 
 
@@ -50,3 +52,28 @@ def deepest_path(field: PhasorField) -> float:
         raise ConfigError("model.depth_range", "give [near, far] (m): one frequency and no "
                           "capture time span in the field's metadata cannot place the scene")
     return 1.0 / (2.0 * float(np.min(np.diff(f))))
+
+
+def training_grid(field: PhasorField) -> GridLayout:
+    """The training samples' regular grid in the wall plane (DataError if they are not)."""
+    layout = grid_layout(field.wall_xyz)
+    if layout is None or min(layout.shape) < 2:
+        raise DataError(f"rsd_prior: the training samples must form a regular axis-aligned "
+                        f"grid of at least 2 x 2 points in the wall plane z = 0, got wall_xyz "
+                        f"of shape {field.wall_xyz.shape}")
+    return layout
+
+
+def voxel_lattice(wall: GridLayout, lateral_step: float, depths: np.ndarray) -> VoxelLattice:
+    """Voxel planes at ``depths`` whose spacing divides the training spacing (at most
+    ``lateral_step``) and covering the training grid plus half a training spacing."""
+    origin, step, shape = [], [], []
+    for axis in (0, 1):
+        spacing, n = wall.spacing[axis], wall.shape[axis]
+        k = max(1, math.ceil(spacing / lateral_step - 1e-6))
+        pad = k // 2
+        step.append(spacing / k)
+        origin.append(wall.origin[axis] - pad * spacing / k)
+        shape.append(k * (n - 1) + 1 + 2 * pad)
+    return VoxelLattice(np.asarray(depths, dtype=float), (origin[0], origin[1]),
+                        (step[0], step[1]), (shape[0], shape[1]))
