@@ -115,9 +115,9 @@ def main() -> int:
         rows.append({"name": name, "overrides": list(overrides), "estimate_bytes": est,
                      "peak_rss_bytes": peak, "ratio": ratio, "seconds": seconds,
                      "exit_status": status, "within_target": 1 / 1.5 <= ratio <= 1.5})
-    print(f"{'configuration':<24}{'estimate MB':>13}{'peak RSS MB':>13}{'ratio':>8}  ok")
+    print(f"{'configuration':<32}{'estimate MB':>13}{'peak RSS MB':>13}{'ratio':>8}  ok")
     for r in rows:
-        print(f"{r['name']:<24}{r['estimate_bytes'] / 1e6:>13.0f}"
+        print(f"{r['name']:<32}{r['estimate_bytes'] / 1e6:>13.0f}"
               f"{r['peak_rss_bytes'] / 1e6:>13.0f}{r['ratio']:>8.2f}  "
               f"{'yes' if r['within_target'] else 'NO'}")
     RESULTS.parent.mkdir(exist_ok=True)
