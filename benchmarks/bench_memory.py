@@ -45,6 +45,7 @@ CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
                               *FAST), False),
     "real-64x64x2048-siren_torch": ((f"capture.path={REAL}", *SIREN), True),
     "simulated-default-siren_torch": (SIREN, False),
+    "simulated-default-siren_jax": (("model=siren_jax", *SIREN[1:]), False),
 }
 
 
