@@ -232,10 +232,12 @@ def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None) ->
     if found.matlab_class in _NOT_NUMERIC:
         raise DataError(_not_numeric(path, name, found.matlab_class))
     nbytes = int(np.prod(found.shape, dtype=float)) * 16
-    if nbytes > dataset_limit():
+    limit = dataset_limit()
+    if nbytes > limit:
         raise DataError(f"{path}: variable '{name}' declares shape {list(found.shape)} "
                         f"({format_bytes(nbytes)} at most), more than the "
-                        f"{format_bytes(dataset_limit())} of memory this machine has")
+                        f"{format_bytes(limit)} of memory available; refused before "
+                        "reading it")
     try:
         value = scipy.io.loadmat(str(path), variable_names=[name])[name]
     except KeyError:

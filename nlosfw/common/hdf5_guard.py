@@ -5,8 +5,9 @@ files (``/etc/passwd``), virtual datasets mapping other files, external links, a
 links through them. A capture is untrusted input, so :func:`open_checked` walks every link
 of a file before anything is read and refuses, in one line naming the file and the
 dataset, any of those; :func:`read_dataset` sizes a dataset (shape × dtype) before
-reading it and refuses one larger than :func:`dataset_limit` (the memory of this machine,
-so a tiny file declaring an 800 GB dataset is refused instead of ending in MemoryError).
+reading it and refuses one larger than :func:`dataset_limit` (the memory this process can
+still allocate, so a tiny file declaring an 800 GB dataset, or a 4 GB one on a machine with
+less free, is refused in one line instead of ending in MemoryError or swapping).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import h5py
 import numpy as np
 import numpy.typing as npt
 
+from nlosfw.common import memory
 from nlosfw.common.errors import DataError, one_line
 from nlosfw.common.files import format_bytes
 
@@ -29,12 +31,14 @@ _MAX_SOFT_HOPS = 16
 
 
 def dataset_limit() -> int:
-    """Bytes a dataset of an input file may hold: the physical memory of this machine (a
-    larger one cannot be read; the run's memory estimate refuses smaller excesses)."""
+    """Bytes a dataset of an input file may hold: the memory available now (within the
+    physical memory of this machine); a larger one cannot be read."""
     try:
-        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+        physical = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
     except (OSError, ValueError):  # pragma: no cover - platforms without sysconf
-        return 1 << 40
+        physical = 1 << 40
+    room = memory.available_memory()
+    return physical if room is None else min(physical, room)
 
 
 @contextlib.contextmanager
@@ -161,7 +165,7 @@ def check_size(node: h5py.Dataset, path: Path, where: str,
     if nbytes > limit:
         raise DataError(f"{path}: dataset '{where}' declares {format_bytes(nbytes)} (shape "
                         f"{list(shape)} of {np.dtype(node.dtype)}), more than the "
-                        f"{format_bytes(limit)} of memory this machine has; refused before "
+                        f"{format_bytes(limit)} of memory available; refused before "
                         "reading it")
 
 

@@ -24,6 +24,7 @@ from nlosfw.common.schema import is_schema_node, problem
 from nlosfw.compose.output_dirs import check_output_dirs
 from nlosfw.compose.store import hydra_session
 from nlosfw.pipeline.budget import check_memory
+from nlosfw.pipeline.model_budget import plugin_requires
 from nlosfw.pipeline.plan import check_model_choice, check_reference_choice
 from nlosfw.pipeline.settings import NO_MODEL, OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
 from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
@@ -177,7 +178,7 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     formats = host.capture_formats()
     # before anything sized by the configuration is allocated
     check_memory(cfg, file_shape=lambda path: file_transient_shape(
-        path, settings.capture.format, formats))
+        path, settings.capture.format, formats), requires=plugin_requires(host))
     if settings.capture.path is None:
         scene = validate_scene(scene_from_config(cfg.get("scene"))).scene
         simulator_node = cfg.get("simulator")

@@ -95,8 +95,9 @@ def tv_lipschitz(n_axes: int, eps: float) -> float:
 
 def solve(problem: FistaProblem, step: float, iterations: int,
           on_iteration: Callable[[int, float, float], None] | None = None,
-          tolerance: float = 0.0) -> FistaResult:
-    """Monotone FISTA from x = 0 with step ``step`` (at most 1/L of the smooth part).
+          tolerance: float = 0.0, start: np.ndarray | None = None) -> FistaResult:
+    """Monotone FISTA from x = 0 (or a copy of ``start``, >= 0) with step ``step`` (at most
+    1/L of the smooth part).
 
     ``on_iteration(k, objective, relative_residual)`` is called after every iteration.
     Stops early when the objective's relative decrease over 10 iterations is below
@@ -104,8 +105,8 @@ def solve(problem: FistaProblem, step: float, iterations: int,
     """
     b = problem.data
     norm_b = float(np.linalg.norm(b)) or 1.0
-    x = np.zeros(problem.shape)
-    ax = np.zeros_like(b)
+    x = np.zeros(problem.shape) if start is None else np.maximum(start, 0.0)
+    ax = np.zeros_like(b) if start is None else problem.forward(x)
     y, ay = x, ax
     t = 1.0
     f_x = _objective(problem, x, ax)

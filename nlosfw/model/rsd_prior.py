@@ -37,7 +37,10 @@ separate clusters of planes, not the whole depth range between them.
 
 With ``background: constant`` one complex offset per frequency, constant over the wall, is
 fitted jointly (minimised out exactly: :mod:`nlosfw.model.rsd_background`) and added to
-predictions; the fit report gives its size relative to the field.
+predictions; the fit report gives its size relative to the field. With
+``temporal_response: gaussian`` and/or ``time_offset: true`` a gain per frequency (timing
+jitter, a time-origin offset) multiplies the model's field, fitted in turns with the albedo
+(:mod:`nlosfw.model.rsd_response`); the fit report gives the fitted values in ps.
 
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
@@ -47,6 +50,7 @@ simulated captures): judge it on noisy, occluded and mis-calibrated captures.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -55,7 +59,6 @@ from pathlib import Path
 import numpy as np
 
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.depths import field_depth_range
 from nlosfw.image.fft import Precision
@@ -64,7 +67,6 @@ from nlosfw.image.rsd_kernel import check_geometry, path_multiplier, wall_field
 from nlosfw.model.fista import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
 from nlosfw.model.interface import (
     FieldModel,
-    FieldModelConfig,
     FitReport,
     TrainingStep,
     check_query,
@@ -78,6 +80,13 @@ from nlosfw.model.rsd_background import (
     background_projection,
     fit_offsets,
 )
+from nlosfw.model.rsd_config import RSDPriorConfig
+from nlosfw.model.rsd_response import (
+    SystemResponse,
+    TemporalResponse,
+    estimate_response,
+    search_response,
+)
 from nlosfw.model.rsd_sampling import (
     deepest_path,
     enough_frequencies,
@@ -86,7 +95,6 @@ from nlosfw.model.rsd_sampling import (
     voxel_lattice,
 )
 from nlosfw.model.scene_operator import (
-    Amplitude,
     OperatorOptions,
     SceneOperator,
     VoxelLattice,
@@ -105,83 +113,6 @@ _PREDICT_CHUNK = 16
 _TV_EPS = 0.1
 
 
-@dataclass(frozen=True)
-class RSDPriorConfig(FieldModelConfig):
-    """Options of the ``rsd_prior`` field model (``seed``: the power iteration's start;
-    ``device`` is ignored: numpy on the CPU)."""
-
-    iterations: int = 150
-    """FISTA iterations."""
-    l1_weight: float = 0.02
-    """L1 weight relative to max Re(A^H P) (at 1 the fitted albedo is zero)."""
-    tv_weight: float = 0.0
-    """Smoothed total-variation weight, relative like ``l1_weight`` (0: none)."""
-    amplitude: Amplitude = Amplitude.lambertian
-    """Amplitude of each leg: lambertian (surfaces facing the wall, the simulators'),
-    point (point scatterers) or inverse_square (no cosines)."""
-    fit_frequencies: int = 32
-    """Frequencies used in the fit, evenly spread over the field's (0: all)."""
-    depth_range: tuple[float, ...] = ()
-    """[m] Near and far depth of the voxel planes; empty: estimated from the data."""
-    depth_step: float | None = None
-    """[m] Distance between voxel planes; default a fifth of the shortest wavelength."""
-    lateral_step: float | None = None
-    """[m] Largest lateral voxel spacing; default half the shortest wavelength (a quarter
-    for confocal scans). The training spacing is a whole multiple of the spacing used."""
-    depth_threshold: float = 0.1
-    """Automatic depth range: keep the planes where the coarse fit's largest contribution
-    reaches this fraction of the overall largest."""
-    depth_iterations: int = 40
-    """Automatic depth range: FISTA iterations of the coarse fit."""
-    depth_margin: float = 0.05
-    """Automatic depth range: metres added before and after the kept planes."""
-    power_iterations: int = 20
-    """Power iterations estimating the Lipschitz constant L."""
-    step: float = 0.9
-    """FISTA step as a fraction of 1/L (the power iteration estimates L from below)."""
-    tolerance: float = 0.0
-    """Stop when the objective falls by less than this fraction over 10 iterations (0: never)."""
-    precision: Precision = Precision.single
-    """FFT precision: complex64 (fast) or complex128."""
-    workers: int = -1
-    """Threads of scipy.fft (-1: all cores)."""
-    cache_mb: float = 1024.0
-    """[MiB] Memory for the kernels' spectra during the fit (recomputed when larger)."""
-    background: Background = Background.none
-    """Additive background fitted jointly: none, or constant (one complex offset per
-    frequency, the same over the wall: ambient light, dark counts, a late tail)."""
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require(self.iterations >= 1, "iterations", f"must be >= 1, got {self.iterations}")
-        require(0 <= self.l1_weight < 1, "l1_weight",
-                f"must be in [0, 1) (1 zeroes the albedo), got {self.l1_weight}")
-        require(self.tv_weight >= 0, "tv_weight", f"must be >= 0, got {self.tv_weight}")
-        require(self.fit_frequencies >= 0, "fit_frequencies",
-                f"must be >= 0 (0: all), got {self.fit_frequencies}")
-        require(len(self.depth_range) in (0, 2), "depth_range",
-                f"must be empty (automatic) or [near, far], got {list(self.depth_range)}")
-        if self.depth_range:
-            near, far = self.depth_range
-            require(0 < near <= far, "depth_range",
-                    f"must satisfy 0 < near <= far (m), got {list(self.depth_range)}")
-        for name in ("depth_step", "lateral_step"):
-            value = getattr(self, name)
-            require(value is None or value > 0, name, f"must be > 0 m or null, got {value}")
-        require(0 < self.depth_threshold <= 1, "depth_threshold",
-                f"must be in (0, 1], got {self.depth_threshold}")
-        require(self.depth_iterations >= 1, "depth_iterations",
-                f"must be >= 1, got {self.depth_iterations}")
-        require(self.depth_margin >= 0, "depth_margin", f"must be >= 0 m, got {self.depth_margin}")
-        require(self.power_iterations >= 1, "power_iterations",
-                f"must be >= 1, got {self.power_iterations}")
-        require(0 < self.step <= 1, "step", f"must be in (0, 1], got {self.step}")
-        require(0 <= self.tolerance < 1, "tolerance", f"must be in [0, 1), got {self.tolerance}")
-        require(self.workers == -1 or self.workers >= 1, "workers",
-                f"must be -1 (all cores) or >= 1, got {self.workers}")
-        require(self.cache_mb >= 0, "cache_mb", f"must be >= 0 MiB, got {self.cache_mb}")
-
-
 @dataclass(frozen=True, eq=False)
 class _Fitted:
     """What a fit leaves: the lattice, the albedo on it, and how to put the field back."""
@@ -191,6 +122,7 @@ class _Fitted:
     geometry: CaptureGeometry
     scale: float
     background: WallBackground | None = None
+    response: SystemResponse | None = None
 
 
 class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
@@ -212,7 +144,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         cfg = self.config
         check_training_field(field, MODEL_NAME)
         check_geometry(field.geometry)
-        wall = training_grid(field, MODEL_NAME)
+        wall = training_grid(field)
         values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
         scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))
         values = values / scale
@@ -244,33 +176,79 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                 on_step(TrainingStep(step=k, total_steps=cfg.iterations, loss=residual,
                                      seconds=time.perf_counter() - start))
 
-        albedo, result = self._solve(op, values[chosen], cfg.iterations, report)
+        albedo, response, result = self._fit_albedo(op, values[chosen], report)
         background = None if self._projection is None else fit_offsets(
-            self._projection, lambda f: SceneOperator(lattice, wall, field.geometry, f,
-                                                      self._options()).forward(albedo),
+            self._projection, lambda f: _gained(response, f, SceneOperator(
+                lattice, wall, field.geometry, f, self._options()).forward(albedo)),
             field.frequencies, values, scale)
         self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale,
-                               background)
+                               background, response)
+        fitted = {**({} if background is None else background.summary(scale)),
+                  **({} if response is None else response.summary())}
         return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
                          final_loss=result.residual,
                          stopped_early=result.iterations < cfg.iterations, history=history,
-                         fitted={} if background is None else background.summary(scale))
+                         fitted=fitted)
+
+    def _fit_albedo(self, op: SceneOperator, data: np.ndarray,
+                    report: Callable[[int, float, float], None]
+                    ) -> tuple[np.ndarray, SystemResponse | None, FistaResult]:
+        """The albedo, and the system response when a term of it is on: least squares with
+        the albedo fixed to start, then a search on the residual of albedos fitted again
+        (``iterations`` / 4 from the best so far; :func:`search_response`)."""
+        cfg = self.config
+        gaussian = cfg.temporal_response == TemporalResponse.gaussian
+        if not (gaussian or cfg.time_offset):
+            albedo, result = self._solve(op, data, cfg.iterations, report)
+            return albedo, None, result
+        project = self._projector(op.frequencies)
+        albedo, _ = self._solve(op, data, cfg.iterations)
+        start = estimate_response(project(op.forward(albedo)), project(data), op.frequencies,
+                                  gaussian, cfg.time_offset)
+        best: list[tuple[float, np.ndarray]] = [(math.inf, albedo)]   # the lowest residual
+
+        def residual(response: SystemResponse) -> float:
+            fitted, result = self._solve(op, data, max(1, cfg.iterations // 4), None,
+                                         response.gains(op.frequencies, True), best[0][1])
+            value = result.objective[-1]
+            if value < best[0][0]:
+                best[0] = (value, fitted)
+            log.debug("rsd_prior: response %s: objective %.6g, residual %.5f",
+                      response.summary(), value, result.residual)
+            return value
+
+        response = search_response(residual, start, float(np.abs(op.frequencies).max()),
+                                   cfg.response_rounds)
+        log.info("rsd_prior: system response %s", response.summary())
+        albedo, result = self._solve(op, data, cfg.iterations, report,
+                                     response.gains(op.frequencies, True), best[0][1])
+        rms = float(np.sqrt(np.mean(np.abs(response.gains(op.frequencies)) ** 2)))
+        return albedo / rms, response, result    # for the gains as they are, not unit RMS
+
+    def _projector(self, frequencies: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        proj = self._projection
+        return (lambda p: p) if proj is None else proj.projector(frequencies)
 
     def _solve(self, op: SceneOperator, data: np.ndarray, iterations: int,
-               report: Callable[[int, float, float], None] | None = None
+               report: Callable[[int, float, float], None] | None = None,
+               gains: np.ndarray | None = None, start: np.ndarray | None = None
                ) -> tuple[np.ndarray, FistaResult]:
-        """The albedo fitted to ``data`` by FISTA on the column-normalised operator."""
+        """The albedo fitted to ``data`` by FISTA on the column-normalised operator (times
+        the per-frequency ``gains`` of the system response, if any), from ``start``."""
         cfg = self.config
+
         norms = op.column_norms()
-        proj = self._projection
-        project = (lambda p: p) if proj is None else proj.projector(op.frequencies)
+        project = self._projector(op.frequencies)
         data = project(data)
+        g = None if gains is None else gains.astype(data.dtype)[:, None, None]
 
         def forward(x: np.ndarray) -> np.ndarray:
-            return project(op.forward(x / norms))
+            y = op.forward(x / norms)
+            return project(y if g is None else g * y)
 
         def adjoint(p: np.ndarray) -> np.ndarray:
-            return op.adjoint(project(p)) / norms
+            q = project(p)
+            return op.adjoint(q if g is None else np.conj(g) * q) / norms
 
         shape = op.lattice.volume_shape
         lip = lipschitz(forward, adjoint, shape, cfg.power_iterations, cfg.seed)
@@ -283,7 +261,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         smooth_l = lip + (tv * tv_lipschitz(2, eps) if tv > 0 else 0.0)
         problem = FistaProblem(forward, adjoint, data, shape, l1=cfg.l1_weight * peak, tv=tv,
                                tv_eps=eps, tv_axes=(1, 2))
-        result = solve(problem, cfg.step / smooth_l, iterations, report, cfg.tolerance)
+        result = solve(problem, cfg.step / smooth_l, iterations, report, cfg.tolerance,
+                       None if start is None else start * norms)
         return result.x / norms, result
 
     def depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
@@ -342,7 +321,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         if out is None:
             points = xy.reshape(-1, 2)
             out = direct_fields(lattice, albedo, points, fitted.geometry, f, options)
-        out = out.reshape((f.size,) + xy.shape[:-1]).astype(np.complex128) * fitted.scale
+        out = _gained(fitted.response, f, out.reshape((f.size,) + xy.shape[:-1]).astype(
+            np.complex128) * fitted.scale)
         if fitted.geometry.t_accounts_first_and_last_bounces:
             points3 = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], axis=-1)
             legs = fitted.geometry.device_path(points3)
@@ -387,6 +367,11 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         return self._stored().background
 
     @property
+    def response(self) -> SystemResponse | None:
+        """The fitted system response (None with both of its terms off)."""
+        return self._stored().response
+
+    @property
     def lattice(self) -> VoxelLattice:
         """The voxel lattice of the fitted albedo."""
         return self._stored().lattice
@@ -409,7 +394,9 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                          {"albedo": fitted.albedo, "depths": lat.depths, **extra},
                          {"origin": list(lat.origin), "step": list(lat.step),
                           "shape": list(lat.shape), "geometry": fitted.geometry.to_dict(),
-                          "scale": fitted.scale})
+                          "scale": fitted.scale,
+                          **({} if fitted.response is None
+                             else {"response": fitted.response.to_dict()})})
 
     @classmethod
     def load(cls, path: str | Path) -> RSDPriorFieldModel:
@@ -427,14 +414,23 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             background = None if model.config.background == Background.none else WallBackground(
                 np.asarray(arrays["background_frequencies"], float),
                 np.asarray(arrays["background"], np.complex128))
+            response = (SystemResponse.from_dict(header["response"]) if "response" in header
+                        else None)
         except (KeyError, TypeError, ValueError, IndexError, ConfigError, DataError) as err:
             raise DataError(f"model file {path}: invalid {MODEL_NAME} file "
                             f"({type(err).__name__})") from None
         if albedo.shape != lattice.volume_shape or not np.all(np.isfinite(albedo)):
             raise DataError(f"model file {path}: albedo of shape {albedo.shape} does not match "
                             f"the lattice {lattice.volume_shape}")
-        model._fitted = _Fitted(lattice, albedo, geometry, scale, background)
+        model._fitted = _Fitted(lattice, albedo, geometry, scale, background, response)
         return model
+
+
+def _gained(response: SystemResponse | None, f: np.ndarray, fields: np.ndarray) -> np.ndarray:
+    """Fields (F, ...) at frequencies f times the response's gains (unchanged for None)."""
+    if response is None:
+        return fields
+    return fields * response.gains(f).reshape((-1,) + (1,) * (fields.ndim - 1))
 
 
 def _pair(values: Sequence[float]) -> tuple[float, float]:

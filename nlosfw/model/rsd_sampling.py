@@ -1,6 +1,6 @@
-"""The setup of ``rsd_prior`` (and of the models built on its lattice, ``neural_volume``):
-the training grid, the voxel lattice, and which frequencies are fitted (evenly spread, and
-enough that the depth span does not alias in time)."""
+"""What ``rsd_prior`` (and ``neural_volume``, on its lattice) fits on: the training grid,
+the voxel lattice, and which frequencies (evenly spread, and enough that the depth span
+does not alias in time)."""
 
 from __future__ import annotations
 
@@ -55,9 +55,9 @@ def deepest_path(field: PhasorField) -> float:
     return 1.0 / (2.0 * float(np.min(np.diff(f))))
 
 
-def training_grid(field: PhasorField, who: str) -> GridLayout:
-    """The canonical layout of the training samples' wall; a one-line DataError (naming
-    model ``who``) unless they form a regular axis-aligned grid of at least 2 x 2 points."""
+def training_grid(field: PhasorField, who: str = "rsd_prior") -> GridLayout:
+    """The training samples' regular grid in the wall plane (a DataError naming model
+    ``who`` if they are not)."""
     layout = grid_layout(field.wall_xyz)
     if layout is None or min(layout.shape) < 2:
         raise DataError(f"{who}: the training samples must form a regular axis-aligned "

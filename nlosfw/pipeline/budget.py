@@ -15,6 +15,8 @@ the fields         16·F·S·(2 + M) (true, raw, each model's prediction)
 the voxels         8·D·S·(3 + (2 + M)·(1 + single-frequency images)); D, when it is
                    automatic, at most the time window over half a wall spacing
 training logs      400 bytes per evaluation (steps / eval_every) of neural models
+neural models      their runtime (PyTorch, JAX) and training memory, from figures measured
+                   per backend (:mod:`nlosfw.pipeline.model_budget`); given ``requires``
 the program        with ``program=True``: this process's resident memory now (Python,
                    numpy, h5py, Hydra and the plugins loaded), which the run keeps
 =================  ===========================================================
@@ -26,7 +28,6 @@ compares the estimate with a run's measured peak resident memory, count it.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 from collections.abc import Callable, Mapping
@@ -36,6 +37,13 @@ from typing import Any
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.files import format_bytes
+from nlosfw.common.memory import available_memory
+from nlosfw.pipeline.model_budget import (
+    ModelRequires,
+    backend_of,
+    runtime_bytes,
+    training_bytes,
+)
 from nlosfw.pipeline.settings import NO_MODEL
 
 #: Sizes a capture file from its header: (time bins, sensor points, laser points), or None.
@@ -126,15 +134,20 @@ def process_memory() -> int:
 
 
 def estimate_memory(config: Mapping[str, object], file_shape: FileShape | None = None,
-                    program: bool = False) -> list[MemoryPart]:
+                    program: bool = False, requires: ModelRequires | None = None
+                    ) -> list[MemoryPart]:
     """The parts of the memory a run of ``config`` (composed, validated) needs, in bytes;
     ``file_shape``: how to size a ``capture.path`` from its header (none: unknown, no
     estimate for such a run); ``program``: count this process's own resident memory too
-    (the interpreter and its libraries, as the run will hold them)."""
+    (the interpreter and its libraries, as the run will hold them); ``requires``: the
+    modules each field model needs (:func:`~nlosfw.pipeline.model_budget.plugin_requires`;
+    none: neural models' own memory is left out)."""
     shape = _capture_shape(config, file_shape)
     if shape is None:
         return []
     parts = _array_parts(config, shape)
+    if requires is not None:
+        parts.extend(_model_parts(config, shape, requires))
     if program:
         parts.append(MemoryPart("the program", "Python and the libraries loaded (resident "
                                 "memory now)", float(process_memory())))
@@ -172,49 +185,40 @@ def _array_parts(config: Any, shape: tuple[int, int, int, str]) -> list[MemoryPa
     ]
 
 
-def available_memory() -> int | None:
-    """Bytes of memory this process can still allocate (MemAvailable, within the cgroup's
-    limit when there is one), or None when unknown."""
-    found = []
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                found.append(int(line.split()[1]) * 1024)
-    except (OSError, ValueError, IndexError):
-        pass
-    cgroup = _cgroup_room()
-    if cgroup is not None:
-        found.append(cgroup)
-    if not found and hasattr(os, "sysconf"):
-        with contextlib.suppress(ValueError, OSError):
-            found.append(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    return min(found) if found else None
-
-
-def _cgroup_room() -> int | None:
-    """limit - usage of the cgroup (v2, else v1), or None without a limit."""
-    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
-                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
-                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
-        try:
-            limit = Path(limit_file).read_text().strip()
-            usage = int(Path(usage_file).read_text().strip())
-        except (OSError, ValueError):
+def _model_parts(config: Mapping[str, object], shape: tuple[int, int, int, str],
+                 requires: ModelRequires) -> list[MemoryPart]:
+    """The neural models' runtime and training memory (none for other models)."""
+    bins, sensors, lasers, _ = shape
+    samples = float(_n_frequencies(config, bins)) * sensors * lasers
+    model = _get(config, "model") or {}
+    compare = _get(config, "compare", {}) or {}
+    backends, data, activations = [], 0.0, 0.0
+    for options in (model, *compare.values()):
+        name = str(_get(options, "name"))
+        backend = None if name == NO_MODEL else backend_of(requires(name))
+        if backend is None:
             continue
-        if limit == "max" or int(limit) >= 1 << 60:
-            return None
-        return max(0, int(limit) - usage)
-    return None
+        backends.append(backend)
+        held, batch = training_bytes(options, backend, samples)
+        data, activations = data + held, activations + batch
+    if not backends:
+        return []
+    names = " and ".join(sorted(set(backends)))
+    return [MemoryPart("the model's runtime", f"{names} and its first training",
+                       runtime_bytes(backends)),
+            MemoryPart("the model's training", f"{samples:.0f} samples, model.batch_size × "
+                       "model.hidden", data + activations)]
 
 
 def check_memory(config: Mapping[str, object], available: int | None = None,
-                 file_shape: FileShape | None = None) -> None:
+                 file_shape: FileShape | None = None,
+                 requires: ModelRequires | None = None) -> None:
     """Refuse (one-line :class:`ConfigError`) a run whose estimated memory exceeds what is
     available, unless ``limits.allow_large`` is true. ``available``: bytes (default: this
-    machine's); ``file_shape``: see :func:`estimate_memory`."""
+    machine's); ``file_shape``, ``requires``: see :func:`estimate_memory`."""
     if bool(_get(config, "limits.allow_large", False)):
         return
-    parts = estimate_memory(config, file_shape)
+    parts = estimate_memory(config, file_shape, requires=requires)
     total = sum(p.nbytes for p in parts)
     room = available_memory() if available is None else available
     if room is None or total <= room:
@@ -226,9 +230,10 @@ def check_memory(config: Mapping[str, object], available: int | None = None,
                       "make it smaller, or set limits.allow_large=true to run anyway")
 
 
-def memory_summary(config: Mapping[str, object], file_shape: FileShape | None = None) -> str:
+def memory_summary(config: Mapping[str, object], file_shape: FileShape | None = None,
+                   requires: ModelRequires | None = None) -> str:
     """The estimate as one line (for the log), the program itself included."""
-    parts = estimate_memory(config, file_shape, program=True)
+    parts = estimate_memory(config, file_shape, program=True, requires=requires)
     total = sum(p.nbytes for p in parts)
     return f"estimated memory {format_bytes(total)}: " + ", ".join(
         f"{p.what} {format_bytes(p.nbytes)}" for p in parts if p.nbytes)

@@ -38,6 +38,7 @@ from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
 from nlosfw.pipeline.image_stage import reconstruct_stage, report_stage
 from nlosfw.pipeline.interrupts import as_interruption, signals_raise
 from nlosfw.pipeline.metrics import RunError, RunInfo, RunMetrics, Status
+from nlosfw.pipeline.model_budget import plugin_requires
 from nlosfw.pipeline.pause import pause_point
 from nlosfw.pipeline.plan import RunPlan
 from nlosfw.pipeline.recorder import MetricsRecorder
@@ -94,8 +95,9 @@ class Pipeline:
         def file_shape(path: Path) -> tuple[int, int, int] | None:
             return file_transient_shape(path, settings.capture.format, self.plan.formats)
 
-        check_memory(self.plan.config, file_shape=file_shape)
-        log.info(memory_summary(self.plan.config, file_shape))
+        requires = plugin_requires(self.host)
+        check_memory(self.plan.config, file_shape=file_shape, requires=requires)
+        log.info(memory_summary(self.plan.config, file_shape, requires))
         with signals_raise(), lifecycle.held(
                 self.run_dir, self.plan.config, PLANNED_NAMES,
                 overwrite=settings.output.overwrite, resume=self.resume) as hold:

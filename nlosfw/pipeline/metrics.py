@@ -163,7 +163,9 @@ class FitMetrics(Document, frozen=True, kw_only=True):
     fitted: Annotated[Absent[dict[str, float]], doc(
         "numbers the fit estimated besides the model's parameters, by name (rsd_prior with "
         "background=constant: background_rms_ratio and background_max_ratio, the RMS and "
-        "largest offset |b_f| over the training frequencies / the field's RMS)")] = None
+        "largest offset |b_f| over the training frequencies / the field's RMS; with "
+        "temporal_response=gaussian: response_sigma_ps, the fitted jitter's standard deviation; "
+        "with time_offset=true: time_offset_ps, how late the capture's signal is (ps))")] = None
 
     @classmethod
     def of(cls, report: FitReport) -> "FitMetrics":

@@ -187,7 +187,7 @@ def test_the_dataset_limit_is_the_one_named(tmp_path, monkeypatch):
     with pytest.raises(DataError) as caught:
         read_capture(path)
     assert str(caught.value).startswith(f"{path}: dataset '")
-    assert "more than the 999 B of memory this machine has; refused before reading it" in \
+    assert "more than the 999 B of memory available; refused before reading it" in \
         str(caught.value)
     monkeypatch.setattr(hdf5_guard, "dataset_limit", lambda: capture.H.nbytes - 1)
     with pytest.raises(DataError, match=r"dataset 'H' declares 65\.5 kB \(shape \[256, 8, 8\] "
