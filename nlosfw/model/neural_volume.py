@@ -31,7 +31,11 @@ The backend is the subclass's (``nlosfw-torch``: ``neural_volume_torch``, ``nlos
 Cost: every step propagates the whole volume at every training frequency. On the shared
 diffuse S at 16x (70 planes of 65 x 65 voxels, 135 frequencies) a torch step took about
 10 s on one shared CPU core (2.5 s with ``fit_frequencies`` 16 and a [32, 32] network):
-run it on a GPU, or lower ``fit_frequencies``.
+run it on a GPU, or lower ``fit_frequencies``. Measured once there (thinning seed 0, grid,
+``fit_frequencies`` 16, ``network_hidden`` [32, 32], 100 steps, 5.5 min on one shared CPU
+core): held-out measurement NMSE -0.63 dB, floor -0.92 dB, excess -12.6 dB (interp: +1.62,
+excess -1.9; a zero prediction's excess would be -7.2); fft reconstruction against B's
+full scan PSNR 18.5 dB / SSIM 0.59 (interp 19.3 / 0.52; A's full scan 24.0 / 0.67).
 """
 
 from __future__ import annotations
