@@ -13,8 +13,8 @@ rewrites it between its markers and writes its figure, ``docs/images/sparsity_re
 ``run`` sweeps every capture of ``--captures`` (default ``../shared/data/real``; ``--only``
 picks some by file stem) into ``DIR/<stem>``, then collects them. With no override it runs
 the whole study (4x, 16x, 64x; grid and random; rsd_prior, siren_torch, hashgrid_torch,
-rsd_residual_torch; three thinning seeds; interp in every run). ``--reduced`` runs the
-smallest useful part
+rsd_residual_torch, neural_volume_torch; three thinning seeds; interp in every run).
+``--reduced`` runs the smallest useful part
 (``model=rsd_prior split.spatial_step=4 sampling=grid split.thinning_seed=0``: interp and
 rsd_prior at 16x, one seed) and labels the README section as reduced; overrides narrow or
 extend either. The scores (:mod:`nlosfw.model.heldout`):
@@ -50,7 +50,7 @@ MARKERS = ("<!-- sparsity-real-results -->", "<!-- /sparsity-real-results -->")
 REDUCED = ("model=rsd_prior", "split.spatial_step=4", "sampling=grid", "split.thinning_seed=0")
 #: Issue 22's targets: the best model against interp, averaged over thinning seeds.
 TARGETS = {"excess_db": 3.0, "psnr_db": 1.0, "ssim": 0.02, "network_over_rsd_db": 0.5}
-NETWORK_PLUGINS = ("siren_torch", "hashgrid_torch", "rsd_residual_torch")
+NETWORK_PLUGINS = ("siren_torch", "hashgrid_torch", "rsd_residual_torch", "neural_volume_torch")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -22,6 +22,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         LCTImagerConfig,
         LightConeConfig,
     )
+    from nlosfw.image.plane_convolution import GridLayout, grid_layout
     from nlosfw.image.propagation import PropagationConfig, PropagationImager
     from nlosfw.image.reconstruction import (
         Reconstruction,
@@ -53,6 +54,8 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     )
 
 __all__ = [
+    "grid_layout",
+    "GridLayout",
     "amplitude",
     "automatic_depths",
     "depth_rmse",

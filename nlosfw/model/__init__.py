@@ -45,6 +45,15 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         NeuralFieldConfig,
         Preset,
     )
+    from nlosfw.model.neural_volume import (
+        NeuralVolumeConfig,
+        NeuralVolumeFieldModel,
+        PlaneStack,
+        TrainedVolume,
+        VolumeProblem,
+        plane_stack,
+        volume_coordinates,
+    )
     from nlosfw.model.normalisation import FieldNormalisation
     from nlosfw.model.protocol import (
         FieldSplit,
@@ -54,6 +63,8 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         split_field,
     )
     from nlosfw.model.rsd_residual import RSDResidualConfig, RSDResidualFieldModel
+    from nlosfw.model.rsd_sampling import training_grid, voxel_lattice
+    from nlosfw.model.scene_operator import OperatorOptions, SceneOperator, VoxelLattice
     from nlosfw.model.thesis_networks import (
         Architecture,
         ThesisNetwork,
@@ -95,8 +106,13 @@ __all__ = [
     "InterpFieldModel",
     "LRSchedule",
     "NetworkBuild",
+    "OperatorOptions",
     "NeuralFieldConfig",
     "NeuralFieldModel",
+    "NeuralVolumeConfig",
+    "NeuralVolumeFieldModel",
+    "PlaneStack",
+    "plane_stack",
     "parameter_data_ratio",
     "Preset",
     "preset_config",
@@ -104,12 +120,19 @@ __all__ = [
     "reference_state",
     "RSDResidualConfig",
     "RSDResidualFieldModel",
+    "SceneOperator",
     "SmoothnessBatch",
     "SpatialSampling",
     "split_field",
     "thesis_architecture",
     "ThesisNetwork",
+    "training_grid",
+    "TrainedVolume",
     "TrainingStep",
+    "volume_coordinates",
+    "VolumeProblem",
+    "VoxelLattice",
+    "voxel_lattice",
     "wire_widths",
     "WireFieldConfig",
     "write_model_file",

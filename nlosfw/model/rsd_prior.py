@@ -155,7 +155,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             near, far = (float(v) for v in cfg.depth_range)
             depths = np.arange(near, far + depth_step / 2, depth_step)
         else:
-            depths = self._depth_planes(values, wall, field, depth_step)
+            depths = self.depth_planes(values, wall, field, depth_step)
         span = float(depths.max() - depths.min())
         chosen = fit_frequency_indices(field.frequencies,
                                        enough_frequencies(field.frequencies, cfg.fit_frequencies,
@@ -265,10 +265,11 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                        None if start is None else start * norms)
         return result.x / norms, result
 
-    def _depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
-                      step: float) -> np.ndarray:
+    def depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
+                     step: float) -> np.ndarray:
         """Planes ``step`` apart within ``depth_margin`` of the planes where a quick fit on a
-        coarse lattice finds the scene (see the module docstring)."""
+        coarse lattice finds the scene (see the module docstring); ``values``: the field
+        without device legs, canonical order (``wall``), divided by its RMS."""
         cfg = self.config
         deepest = deepest_path(field)
         f = field.frequencies
@@ -350,6 +351,15 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
     def albedo(self) -> np.ndarray:
         """The fitted albedo (Z, Y, X) (relative units) on :attr:`lattice`."""
         return self._stored().albedo
+
+    @classmethod
+    def from_albedo(cls, config: RSDPriorConfig, lattice: VoxelLattice, albedo: np.ndarray,
+                    geometry: CaptureGeometry, scale: float) -> RSDPriorFieldModel:
+        """A fitted model holding ``albedo`` (Z, Y, X) on ``lattice``, in units of the field
+        divided by ``scale`` (``neural_volume`` predicts through it)."""
+        model = cls(config)
+        model._fitted = _Fitted(lattice, np.asarray(albedo, dtype=np.float32), geometry, scale)
+        return model
 
     @property
     def background(self) -> WallBackground | None:

@@ -1,5 +1,6 @@
-"""What ``rsd_prior`` fits on: the training grid, the voxel lattice, and which frequencies
-(evenly spread, and enough that the depth span does not alias in time)."""
+"""What ``rsd_prior`` (and ``neural_volume``, on its lattice) fits on: the training grid,
+the voxel lattice, and which frequencies (evenly spread, and enough that the depth span
+does not alias in time)."""
 
 from __future__ import annotations
 
@@ -54,11 +55,12 @@ def deepest_path(field: PhasorField) -> float:
     return 1.0 / (2.0 * float(np.min(np.diff(f))))
 
 
-def training_grid(field: PhasorField) -> GridLayout:
-    """The training samples' regular grid in the wall plane (DataError if they are not)."""
+def training_grid(field: PhasorField, who: str = "rsd_prior") -> GridLayout:
+    """The training samples' regular grid in the wall plane (a DataError naming model
+    ``who`` if they are not)."""
     layout = grid_layout(field.wall_xyz)
     if layout is None or min(layout.shape) < 2:
-        raise DataError(f"rsd_prior: the training samples must form a regular axis-aligned "
+        raise DataError(f"{who}: the training samples must form a regular axis-aligned "
                         f"grid of at least 2 x 2 points in the wall plane z = 0, got wall_xyz "
                         f"of shape {field.wall_xyz.shape}")
     return layout

@@ -248,3 +248,26 @@ def register_rsd_residual(register: Callable[..., None], engine: str, factory: s
         test_config=dict(RSD_RESIDUAL_TEST_CONFIG),
         # not physical_prior: the residual network represents fields no hidden scene makes
         capabilities=NETWORK_CAPABILITIES)
+
+
+#: Small, fast options of ``neural_volume_<engine>`` for the conformance kit (the kit's
+#: point scatterer at 0.5 m, amplitude "point"): a few planes, a small network.
+NEURAL_VOLUME_TEST_CONFIG: Mapping[str, object] = {
+    "amplitude": "point", "depth_range": [0.4, 0.6], "depth_step": 0.05, "workers": 1,
+    "network_hidden": [32, 32], "steps": 200, "device": "cpu"}
+
+
+def register_neural_volume(register: Callable[..., None], engine: str, factory: str) -> None:
+    """Register ``neural_volume_<engine>`` (``register`` is a ``register_field_models``
+    hook's): a registered network's non-negative albedo on rsd_prior's lattice, propagated
+    by RSD, the class ``factory`` (a subclass of :class:`nlosfw.model.NeuralVolumeFieldModel`
+    for ``engine``)."""
+    register(
+        f"neural_volume_{engine}", factory,
+        config="nlosfw.model.neural_volume:NeuralVolumeConfig",
+        requires=dict(ENGINES[NetworkEngine(engine)][1]),
+        description=f"a network's non-negative hidden albedo propagated to the wall by RSD, "
+                    f"{_ENGINE_TITLES[engine]}",
+        test_config=dict(NEURAL_VOLUME_TEST_CONFIG),
+        # physical_prior: like rsd_prior it makes only fields a hidden scene can produce
+        capabilities=(*NETWORK_CAPABILITIES, Capability.PHYSICAL_PRIOR))

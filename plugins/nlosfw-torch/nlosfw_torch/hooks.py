@@ -10,6 +10,7 @@ from nlosfw.plugins import (
     Registrar,
     hookimpl,
     register_field_networks,
+    register_neural_volume,
     register_rsd_residual,
     register_thesis_networks,
 )
@@ -25,3 +26,5 @@ def register_networks(register: NetworkRegistrar) -> None:
 @hookimpl
 def register_field_models(register: Registrar) -> None:
     register_rsd_residual(register, engine="torch", factory="nlosfw_torch.models:RSDResidualTorch")
+    register_neural_volume(register, engine="torch",
+                           factory="nlosfw_torch.neural_volume:NeuralVolumeTorch")

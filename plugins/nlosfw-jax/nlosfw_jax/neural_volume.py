@@ -1,0 +1,131 @@
+"""``neural_volume_jax``: a registered JAX network's non-negative albedo on rsd_prior's
+lattice, propagated to the wall by RSD in JAX (:class:`nlosfw.model.NeuralVolumeFieldModel`).
+
+:class:`JaxPlaneOperator` is ``SceneOperator.forward`` in JAX (differentiable,
+``jnp.fft``), from the numpy constants of :func:`nlosfw.model.plane_stack`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from nlosfw.common import FitError
+from nlosfw.model import (
+    NetworkBuild,
+    NeuralFieldModel,
+    NeuralVolumeFieldModel,
+    PlaneStack,
+    TrainedVolume,
+    TrainingStep,
+    VolumeProblem,
+)
+from nlosfw.plugins import registered_network
+from nlosfw_jax.engine import Fixed, JaxEngine
+
+#: Steps between entries of the fit history.
+HISTORY_EVERY = 10
+#: Adam as torch.optim.Adam with its defaults (the engine's).
+_ADAM = optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8)
+
+
+def _is_fixed(node: Any) -> bool:
+    return isinstance(node, Fixed)
+
+
+class JaxPlaneOperator:
+    """A a for an albedo a (Z, Y, X), real: the wall fields (F, ny, nx), complex, on
+    ``device`` (None: JAX's default; see :class:`nlosfw.model.PlaneStack`)."""
+
+    def __init__(self, stack: PlaneStack, device: Any = None) -> None:
+        self.spectra = jax.device_put(stack.spectra, device)
+        self.laser = None if stack.laser is None else jax.device_put(stack.laser, device)
+        shape, inputs, outputs = stack.shape, stack.inputs, stack.outputs
+
+        def forward(albedo: jax.Array, spectra: jax.Array, laser: jax.Array | None
+                    ) -> jax.Array:
+            a = albedo.astype(spectra.dtype)[:, None]                  # (Z, 1, Y, X)
+            source = a if laser is None else a * laser                 # (Z, 1 or F, Y, X)
+            work = jnp.zeros(source.shape[:2] + shape, source.dtype)
+            work = work.at[(..., inputs[0], inputs[1])].set(source)
+            total = jnp.sum(spectra * jnp.fft.fft2(work), axis=0)     # (F, Ly, Lx)
+            return jnp.fft.ifft2(total)[(..., outputs[0], outputs[1])]
+
+        self.forward = forward
+        self._jitted = jax.jit(forward)
+
+    def __call__(self, albedo: Any) -> jax.Array:
+        return self._jitted(jnp.asarray(albedo), self.spectra, self.laser)
+
+
+class NeuralVolumeJax(NeuralVolumeFieldModel):
+    """A JAX (equinox) network's albedo propagated by RSD; on a GPU when JAX sees one."""
+
+    backend = "jax"
+
+    @classmethod
+    def network_class(cls, name: str) -> type[NeuralFieldModel]:
+        """The registered JAX network ``name``'s field-model class."""
+        return registered_network(name, "jax")
+
+    def train(self, problem: VolumeProblem,
+              on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
+        """Adam on the relative squared error of the propagated albedo (full batch)."""
+        cfg, who = self.config, self.model_name()
+        start = time.perf_counter()
+        engine = JaxEngine(NetworkBuild(problem.network.network_factory,
+                                        problem.network_config, problem.network_shape,
+                                        who=who))
+        device = engine.device
+        op = JaxPlaneOperator(problem.stack, device)
+        coords, gain, data = (jax.device_put(a, device)
+                              for a in (problem.coords, problem.gain, problem.data))
+        power = float(np.mean(np.abs(problem.data) ** 2))
+        shift = problem.shift
+
+        def albedo(params: Any, rest: Any) -> jax.Array:
+            out = eqx.combine(params, rest, is_leaf=_is_fixed)(coords)
+            out = out.real if jnp.iscomplexobj(out) else out[..., 0]
+            return gain * jax.nn.softplus(out + shift).reshape(gain.shape)
+
+        def loss_of(params: Any, rest: Any) -> jax.Array:
+            residual = op.forward(albedo(params, rest), op.spectra, op.laser) - data
+            return jnp.mean(jnp.abs(residual) ** 2) / power
+
+        @jax.jit
+        def step(params: Any, rest: Any, opt_state: Any, lr: jax.Array
+                 ) -> tuple[Any, Any, jax.Array]:
+            loss, grads = jax.value_and_grad(loss_of)(params, rest)
+            updates, opt_state = _ADAM.update(grads, opt_state, params)
+            params = jax.tree.map(lambda p, u: p - lr * u, params, updates)
+            return params, opt_state, loss
+
+        params, rest = engine.params, engine.rest
+        opt_state = _ADAM.init(params)
+        history: list[dict[str, float]] = []
+        loss_value = math.nan
+        for k in range(cfg.steps):
+            params, opt_state, loss = step(params, rest, opt_state,
+                                           jnp.asarray(self.learning_rate(k), jnp.float32))
+            loss_value = float(loss)
+            if not math.isfinite(loss_value):
+                raise FitError(f"{who}: training diverged at step {k + 1} (loss "
+                               f"{loss_value}); lower model.lr")
+            if k == 0 or (k + 1) % HISTORY_EVERY == 0 or k + 1 == cfg.steps:
+                history.append({"step": k + 1, "loss": loss_value})
+            if on_step is not None:
+                on_step(TrainingStep(step=k + 1, total_steps=cfg.steps, loss=loss_value,
+                                     seconds=time.perf_counter() - start))
+        fitted = np.asarray(jax.device_get(jax.jit(albedo)(params, rest)))
+        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network)
+
+
+__all__ = ["JaxPlaneOperator", "NeuralVolumeJax"]

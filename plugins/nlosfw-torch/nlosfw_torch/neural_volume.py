@@ -1,0 +1,118 @@
+"""``neural_volume_torch``: a registered torch network's non-negative albedo on rsd_prior's
+lattice, propagated to the wall by RSD in torch (:class:`nlosfw.model.NeuralVolumeFieldModel`).
+
+:class:`TorchPlaneOperator` is ``SceneOperator.forward`` in torch (differentiable,
+``torch.fft``), from the numpy constants of :func:`nlosfw.model.plane_stack`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import torch
+
+from nlosfw.common import FitError
+from nlosfw.model import (
+    NetworkBuild,
+    NeuralFieldModel,
+    NeuralVolumeFieldModel,
+    PlaneStack,
+    TrainedVolume,
+    TrainingStep,
+    VolumeProblem,
+)
+from nlosfw.plugins import registered_network
+from nlosfw_torch.engine import TorchEngine
+
+#: Steps between entries of the fit history.
+HISTORY_EVERY = 10
+
+
+class TorchPlaneOperator:
+    """A a for an albedo a (Z, Y, X), real: the wall fields (F, ny, nx), complex, on
+    ``device`` (see :class:`nlosfw.model.PlaneStack`)."""
+
+    def __init__(self, stack: PlaneStack, device: torch.device | str = "cpu") -> None:
+        self.spectra = torch.from_numpy(stack.spectra).to(device)
+        self.laser = None if stack.laser is None else torch.from_numpy(stack.laser).to(device)
+        self.shape, self.inputs, self.outputs = stack.shape, stack.inputs, stack.outputs
+
+    def __call__(self, albedo: torch.Tensor) -> torch.Tensor:
+        a = albedo.to(self.spectra.dtype)[:, None]                  # (Z, 1, Y, X)
+        source = a if self.laser is None else a * self.laser        # (Z, 1 or F, Y, X)
+        work = torch.zeros(source.shape[:2] + self.shape, dtype=source.dtype,
+                           device=source.device)
+        work[(..., self.inputs[0], self.inputs[1])] = source
+        total = torch.sum(self.spectra * torch.fft.fft2(work), dim=0)   # (F, Ly, Lx)
+        return torch.fft.ifft2(total)[(..., self.outputs[0], self.outputs[1])]
+
+
+def _real_output(out: torch.Tensor) -> torch.Tensor:
+    """The network's first output channel (the real part of a complex output)."""
+    return out.real if out.is_complex() else out[..., 0]
+
+
+class NeuralVolumeTorch(NeuralVolumeFieldModel):
+    """A torch network's albedo propagated by RSD; on a GPU when torch sees one."""
+
+    backend = "torch"
+
+    @classmethod
+    def network_class(cls, name: str) -> type[NeuralFieldModel]:
+        """The registered torch network ``name``'s field-model class."""
+        return registered_network(name, "torch")
+
+    def train(self, problem: VolumeProblem,
+              on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
+        """Adam on the relative squared error of the propagated albedo (full batch)."""
+        cfg, who = self.config, self.model_name()
+        start = time.perf_counter()
+        engine = TorchEngine(NetworkBuild(problem.network.network_factory,
+                                          problem.network_config, problem.network_shape,
+                                          who=who))
+        device = engine.device
+        op = TorchPlaneOperator(problem.stack, device)
+        coords = torch.from_numpy(problem.coords).to(device)
+        gain = torch.from_numpy(problem.gain).to(device)
+        data = torch.from_numpy(problem.data).to(device)
+        power = float(torch.mean(torch.abs(data) ** 2).item())
+        state = {**engine.fixed, **engine.params}
+        opt = torch.optim.Adam(list(engine.params.values()), lr=cfg.lr)
+
+        def albedo() -> torch.Tensor:
+            out = torch.func.functional_call(engine.network, state, (coords,))
+            values = torch.nn.functional.softplus(_real_output(out) + problem.shift)
+            return gain * values.reshape(gain.shape)
+
+        history: list[dict[str, float]] = []
+        before = torch.get_num_threads()
+        if cfg.threads > 0:
+            torch.set_num_threads(cfg.threads)
+        try:
+            loss_value = math.nan
+            for k in range(cfg.steps):
+                for group in opt.param_groups:
+                    group["lr"] = self.learning_rate(k)
+                opt.zero_grad(set_to_none=True)
+                loss = torch.mean(torch.abs(op(albedo()) - data) ** 2) / power
+                loss.backward()
+                opt.step()
+                loss_value = float(loss.item())
+                if not math.isfinite(loss_value):
+                    raise FitError(f"{who}: training diverged at step {k + 1} (loss "
+                                   f"{loss_value}); lower model.lr")
+                if k == 0 or (k + 1) % HISTORY_EVERY == 0 or k + 1 == cfg.steps:
+                    history.append({"step": k + 1, "loss": loss_value})
+                if on_step is not None:
+                    on_step(TrainingStep(step=k + 1, total_steps=cfg.steps, loss=loss_value,
+                                         seconds=time.perf_counter() - start))
+            with torch.no_grad():
+                fitted = albedo().cpu().numpy()
+        finally:
+            torch.set_num_threads(before)
+        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network)
+
+
+__all__ = ["NeuralVolumeTorch", "TorchPlaneOperator"]

@@ -1,0 +1,175 @@
+"""neural_volume_torch (and neural_volume_jax when nlosfw-jax is installed): the RSD
+operator written in torch and JAX against numpy's SceneOperator, and the fitted volume
+against a known sparse scene and the interp baseline."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+import torch
+from nlosfw_torch.neural_volume import TorchPlaneOperator
+
+from nlosfw.capture import CaptureGeometry, CaptureKind
+from nlosfw.common import ConfigError
+from nlosfw.image import grid_layout
+from nlosfw.model import (
+    OperatorOptions,
+    SceneOperator,
+    VoxelLattice,
+    plane_stack,
+    training_grid,
+    voxel_lattice,
+)
+from nlosfw.plugins import load_plugins
+from nlosfw.testing import fixtures
+from nlosfw.transform import PhasorField
+
+HAS_JAX = bool(importlib.util.find_spec("jax") and importlib.util.find_spec("optax")
+               and importlib.util.find_spec("equinox"))
+NEEDS_JAX = pytest.mark.skipif(not HAS_JAX,
+                               reason="needs jax, optax and equinox (pip install nlosfw-jax)")
+BACKENDS = ["torch", pytest.param("jax", marks=NEEDS_JAX)]
+
+LASER = np.array([0.07, -0.04, 0.0])
+DEVICE = np.array([-0.6, 0.1, 0.3])
+
+
+def _geometry(confocal: bool) -> CaptureGeometry:
+    if confocal:
+        return CaptureGeometry(kind=CaptureKind.CONFOCAL, laser_xyz=DEVICE, sensor_xyz=DEVICE)
+    return CaptureGeometry(kind=CaptureKind.SINGLE_SPOT, laser_point=LASER, laser_xyz=DEVICE,
+                           sensor_xyz=DEVICE)
+
+
+def _operator(confocal: bool, wall_step: float, vox_step: float) -> SceneOperator:
+    wall = grid_layout(fixtures.rect_wall_grid((7, 6), wall_step, center=(0.02, -0.01)))
+    lattice = VoxelLattice(np.array([0.4, 0.47, 0.55]), (-0.23, -0.31), (vox_step, vox_step),
+                           (9, 11))
+    return SceneOperator(lattice, wall, _geometry(confocal), np.linspace(2.0, 5.0, 6),
+                         OperatorOptions(dtype=np.complex64, workers=1))
+
+
+def _relative(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+# (wall spacing, voxel spacing): equal, voxels finer than the wall, voxels coarser
+SPACINGS = [(0.06, 0.06), (0.08, 0.04), (0.05, 0.1)]
+
+
+@pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])
+@pytest.mark.parametrize("spacings", SPACINGS, ids=["same", "finer_voxels", "coarser_voxels"])
+def test_torch_and_jax_operators_match_numpy(confocal, spacings):
+    """A random albedo propagated by the torch (and JAX) operator equals numpy's
+    SceneOperator.forward to 1e-5 relative (complex64 everywhere); torch and JAX agree."""
+    op = _operator(confocal, *spacings)
+    albedo = np.random.default_rng(3).random(op.lattice.volume_shape).astype(np.float32)
+    expected = op.forward(albedo)
+    stack = plane_stack(op)
+    got = TorchPlaneOperator(stack)(torch.from_numpy(albedo)).numpy()
+    assert got.shape == expected.shape
+    assert _relative(got, expected) < 1e-5
+    if HAS_JAX:
+        from nlosfw_jax.neural_volume import JaxPlaneOperator
+
+        jax_got = np.asarray(JaxPlaneOperator(stack)(albedo))
+        assert _relative(jax_got, expected) < 1e-5
+        assert _relative(jax_got, got) < 1e-5
+
+
+def test_the_torch_operator_is_differentiable():
+    """The gradient of 1/2 ||A a - P||^2 by autograd equals Re(A^H (A a - P)) from numpy's
+    adjoint (an independent implementation: correlation with conjugate kernels)."""
+    op = _operator(False, 0.08, 0.04)
+    rng = np.random.default_rng(5)
+    albedo = rng.random(op.lattice.volume_shape).astype(np.float32)
+    target = (rng.normal(size=op.field_shape) + 1j * rng.normal(size=op.field_shape))
+    a = torch.from_numpy(albedo).requires_grad_(True)
+    residual = TorchPlaneOperator(plane_stack(op))(a) - torch.from_numpy(
+        target.astype(np.complex64))
+    (0.5 * torch.sum(torch.abs(residual) ** 2)).backward()
+    expected = op.adjoint(op.forward(albedo) - target.astype(np.complex64)).real
+    assert _relative(a.grad.numpy(), expected) < 1e-4
+
+
+# ------------------------------------------------------------------ a known sparse scene
+N = 32                                   # the full wall: 32 x 32 points, 1/32 m apart
+STEP = 4                                 # kept: every 4th point per axis (8 x 8)
+FREQUENCIES = np.linspace(3.0, 6.0, 10)
+DEPTHS = [0.4, 0.6]
+#: Bright voxels (row, column of the lattice) on the plane at 0.5 m; the first is brightest.
+BRIGHT = [((12, 20), 1.0), ((22, 9), 0.4), ((8, 8), 0.3)]
+OPTIONS = {"depth_range": DEPTHS, "depth_step": 0.05, "lateral_step": 1 / N,
+           "workers": 1, "device": "cpu"}
+
+
+@pytest.fixture(scope="module")
+def sparse_scene():
+    return _sparse_scene()
+
+
+def _sparse_scene():
+    """(full field, kept samples, held-out mask, lattice, the bright voxel's index): three
+    bright voxels on the plane at 0.5 m of the model's own lattice, propagated by numpy's
+    SceneOperator to every wall point, the kept samples every 4th one per axis."""
+    wall = fixtures.rect_wall_grid((N, N), 1 / N)
+    geometry = _geometry(False)
+    held = np.ones((N, N), bool)
+    held[1::STEP, 1::STEP] = False
+    kept = PhasorField(values=np.zeros((FREQUENCIES.size, N // STEP, N // STEP), complex),
+                       frequencies=FREQUENCIES, wall_xyz=wall[1::STEP, 1::STEP],
+                       geometry=geometry, metadata={})
+    depths = np.arange(DEPTHS[0], DEPTHS[1] + 0.025, 0.05)
+    lattice = voxel_lattice(training_grid(kept, "test"), 1 / N, depths)
+    albedo = np.zeros(lattice.volume_shape)
+    plane = int(np.argmin(np.abs(depths - 0.5)))
+    for (row, col), value in BRIGHT:
+        albedo[plane, row, col] = value
+    op = SceneOperator(lattice, grid_layout(wall), geometry, FREQUENCIES)
+    full = kept.replace(values=op.forward(albedo), wall_xyz=wall)
+    train = full.select(slice(None), slice(1, None, STEP), slice(1, None, STEP))
+    return full, train, held, lattice, (plane, *BRIGHT[0][0])
+
+
+def _heldout_nmse_db(full: PhasorField, held: np.ndarray, predicted: np.ndarray) -> float:
+    err = predicted[:, held] - full.values[:, held]
+    return float(10 * np.log10(np.sum(np.abs(err) ** 2)
+                               / np.sum(np.abs(full.values[:, held]) ** 2)))
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_fitted_volume_beats_interp_and_finds_the_bright_voxel(backend, sparse_scene):
+    """On 8 x 8 kept points of a 32 x 32 wall (16x fewer), the fitted volume predicts the
+    held-out wall points at least 10 dB better than interp (NMSE over every frequency,
+    measured: interp -11.8 dB, torch and JAX -30.9 dB; rsd_prior with l1_weight 0.01
+    -26.7 dB), its brightest voxel is the scene's brightest, and the loss fell ten-fold."""
+    full, train, held, lattice, brightest = sparse_scene
+    host = load_plugins()
+    interp = host.registry.create("model", "interp", {})
+    interp.fit(train)
+    pts = full.wall_xyz[..., :2]
+    interp_db = _heldout_nmse_db(full, held, interp.predict(pts, FREQUENCIES))
+    model = host.registry.create("model", f"neural_volume_{backend}", OPTIONS)
+    report = model.fit(train)
+    volume_db = _heldout_nmse_db(full, held, model.predict(pts, FREQUENCIES))
+    assert volume_db < interp_db - 10.0, (interp_db, volume_db)
+    assert model.albedo.shape == lattice.volume_shape
+    assert np.unravel_index(np.argmax(model.albedo), lattice.volume_shape) == brightest
+    assert report.history[-1]["loss"] < 0.1 * report.history[0]["loss"]
+
+
+def test_bad_options_are_one_line_errors_naming_the_option(sparse_scene):
+    _, train, _, _, _ = sparse_scene
+    model = load_plugins().registry.create("model", "neural_volume_torch",
+                                           {**OPTIONS, "network": "no_such_network"})
+    with pytest.raises(ConfigError, match=r"model\.network.*no_such_network.*valid: .*siren"):
+        model.fit(train)
+    for option, value in (("steps", 0), ("network_hidden", []), ("albedo_start", 1.5),
+                          ("depth_range", [0.5])):
+        with pytest.raises(ConfigError, match=option):
+            load_plugins().registry.create("model", "neural_volume_torch", {option: value})
