@@ -37,6 +37,9 @@ FAST = ("model=interp", "imager=fft", "figures.enabled=false")
 #: A neural field model, its training cut to 300 steps (its memory does not grow with them).
 SIREN = ("model=siren_torch", "model.steps=300", "imager=fft", "figures.enabled=false")
 
+#: The physics model on the real-data study's 16x grid (its kernel spectra cached).
+RSD_PRIOR = ("model=rsd_prior", "split.spatial_step=4", "imager=fft", "figures.enabled=false")
+
 #: name -> (overrides, needs the real capture)
 CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
     "real-64x64x2048": ((f"capture.path={REAL}", *FAST), True),
@@ -46,6 +49,7 @@ CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
     "real-64x64x2048-siren_torch": ((f"capture.path={REAL}", *SIREN), True),
     "simulated-default-siren_torch": (SIREN, False),
     "simulated-default-siren_jax": (("model=siren_jax", *SIREN[1:]), False),
+    "real-64x64x2048-rsd_prior-16x": ((f"capture.path={REAL}", *RSD_PRIOR), True),
 }
 
 
