@@ -160,3 +160,21 @@ def test_the_study_on_a_capture_file_drops_the_scene_axes(tmp_path, monkeypatch)
     assert {m["capture"]["source"] for m in runs} == {"file"}
     conditions = {row["condition"] for row in json.loads(out.read_text())["rows"]}
     assert conditions == {"capture.hdf5 reconstruction.n_depths=8 transform.n_frequencies=21"}
+
+
+def test_the_study_figure_legend_wraps_to_the_figure_width():
+    """Short labels take one row of up to six columns; labels carrying a model's options
+    (about 80 characters) take fewer columns, each row narrower than the figure."""
+    from nlosfw.report.study import legend_columns
+
+    short = ["interp", "raw", "rsd_prior", "ceiling", "siren_torch"]
+    assert legend_columns(short, 11.0) == 5
+    long = ["neural_volume_torch [fit_frequencies=16 network_hidden=[32,32] steps=100] "
+            "(mean, min-max over seeds)", "rsd_prior (mean, min-max over seeds)",
+            "rsd_residual_torch (mean, min-max over seeds)", "interp", "raw", "ceiling"]
+    columns = legend_columns(long, 11.0)
+    assert 1 <= columns < 6
+    widest_row = sum(sorted((0.6 + 0.075 * len(label) for label in long), reverse=True)
+                     [:columns])
+    assert widest_row <= 0.95 * 11.0
+    assert legend_columns([long[0]], 4.0) == 1

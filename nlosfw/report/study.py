@@ -308,12 +308,30 @@ def study_figure(rows: Sequence[StudyRow], path: Path, dpi: int = 110) -> None:
             if j == 0:
                 ax.set_title(condition, loc="left", fontsize=10)
     handles, labels = unique_legend(axes)
-    fig.legend(handles, labels, loc="upper center", ncol=min(6, max(1, len(labels))),
-               fontsize=9, frameon=False)
+    columns = legend_columns(labels, fig.get_figwidth())
+    legend_rows = math.ceil(len(labels) / columns) if labels else 0
+    fig.legend(handles, labels, loc="upper center", ncol=columns, fontsize=9, frameon=False)
     from nlosfw.report.plain_text import literal_text
 
-    literal_text(fig).tight_layout(rect=(0, 0, 1, 1 - 0.6 / fig.get_figheight()))
+    top = 0.35 + 0.25 * legend_rows  # inches the legend's rows take above the panels
+    literal_text(fig).tight_layout(rect=(0, 0, 1, 1 - top / fig.get_figheight()))
     fig.savefig(path, dpi=dpi, format="png")
+
+
+#: Inches a legend entry takes per character of its label at font size 9 (generous), and
+#: for its marker and the gap to the next entry.
+_LEGEND_CHAR_INCHES, _LEGEND_ENTRY_INCHES = 0.075, 0.6
+
+
+def legend_columns(labels: Sequence[str], width_inches: float, most: int = 6) -> int:
+    """How many legend columns fit ``width_inches``: the most (up to ``most``) whose widest
+    row, the longest labels side by side, is narrower than the figure."""
+    widths = sorted((_LEGEND_ENTRY_INCHES + _LEGEND_CHAR_INCHES * len(label)
+                     for label in labels), reverse=True)
+    for columns in range(min(most, len(widths)), 1, -1):
+        if sum(widths[:columns]) <= 0.95 * width_inches:
+            return columns
+    return 1
 
 
 def _plot_series(ax: Axes, line: Sequence[StudyRow], panel: tuple[str, float],
