@@ -53,7 +53,7 @@ from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import to_canonical
-from nlosfw.image.rsd_kernel import check_geometry, path_multiplier, wall_field
+from nlosfw.image.rsd_kernel import check_geometry, wall_field
 from nlosfw.model.interface import (
     FieldModel,
     FieldModelConfig,
@@ -66,10 +66,7 @@ from nlosfw.model.model_files import read_model_file, write_model_file
 from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
 from nlosfw.model.rsd_sampling import (
-    enough_frequencies,
-    fit_frequency_indices,
     training_grid,
-    voxel_lattice,
 )
 from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.model.trainer import NeuralFieldModel, learning_rate
@@ -278,19 +275,8 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
         scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))      # rsd_prior's
         values = values / scale
-        scene = RSDPriorFieldModel(cfg.prior_config())
-        shortest = 1.0 / float(field.frequencies.max())
-        depth_step = cfg.depth_step or shortest / 5
-        if cfg.depth_range:
-            near, far = (float(v) for v in cfg.depth_range)
-            depths = np.arange(near, far + depth_step / 2, depth_step)
-        else:
-            depths = scene.depth_planes(values, wall, field, depth_step)
-        lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
-        lattice = voxel_lattice(wall, lateral, depths)
-        span = float(depths.max() - depths.min())
-        chosen = fit_frequency_indices(field.frequencies, enough_frequencies(
-            field.frequencies, cfg.fit_frequencies, span))
+        lattice, chosen = RSDPriorFieldModel(cfg.prior_config()).plan_lattice(values, wall,
+                                                                              field)
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
         op = SceneOperator(lattice, wall, field.geometry, field.frequencies[chosen],
                            OperatorOptions(amplitude=cfg.amplitude, dtype=dtype,

@@ -149,20 +149,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))
         values = values / scale
         self._projection = background_projection(cfg.background, field, wall)
-        shortest = 1.0 / float(field.frequencies.max())
-        depth_step = cfg.depth_step or shortest / 5
-        if cfg.depth_range:
-            near, far = (float(v) for v in cfg.depth_range)
-            depths = np.arange(near, far + depth_step / 2, depth_step)
-        else:
-            depths = self.depth_planes(values, wall, field, depth_step)
-        span = float(depths.max() - depths.min())
-        chosen = fit_frequency_indices(field.frequencies,
-                                       enough_frequencies(field.frequencies, cfg.fit_frequencies,
-                                                           span))
-        freqs = field.frequencies[chosen]
-        lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
-        lattice = voxel_lattice(wall, lateral, depths)
+        lattice, chosen = self.plan_lattice(values, wall, field)
+        depths, freqs = lattice.depths, field.frequencies[chosen]
         op = SceneOperator(lattice, wall, field.geometry, freqs, self._options())
         log.info("rsd_prior: %d planes in %.3f-%.3f m, %d x %d voxels, %d frequencies",
                  depths.size, depths.min(), depths.max(), *lattice.shape, freqs.size)
@@ -264,6 +252,25 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         result = solve(problem, cfg.step / smooth_l, iterations, report, cfg.tolerance,
                        None if start is None else start * norms)
         return result.x / norms, result
+
+    def plan_lattice(self, values: np.ndarray, wall: GridLayout, field: PhasorField
+                     ) -> tuple[VoxelLattice, np.ndarray]:
+        """The voxel lattice a fit of ``field`` uses (planes over ``depth_range`` or from
+        :meth:`depth_planes`, ``depth_step`` apart; ``lateral_step``) and the indices of the
+        frequencies it fits; ``values`` as for :meth:`depth_planes`."""
+        cfg = self.config
+        shortest = 1.0 / float(field.frequencies.max())
+        depth_step = cfg.depth_step or shortest / 5
+        if cfg.depth_range:
+            near, far = (float(v) for v in cfg.depth_range)
+            depths = np.arange(near, far + depth_step / 2, depth_step)
+        else:
+            depths = self.depth_planes(values, wall, field, depth_step)
+        span = float(depths.max() - depths.min())
+        chosen = fit_frequency_indices(field.frequencies, enough_frequencies(
+            field.frequencies, cfg.fit_frequencies, span))
+        lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
+        return voxel_lattice(wall, lateral, depths), chosen
 
     def depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
                      step: float) -> np.ndarray:
