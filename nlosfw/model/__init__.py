@@ -46,12 +46,14 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         Preset,
     )
     from nlosfw.model.neural_volume import (
+        BestStep,
         NeuralVolumeConfig,
         NeuralVolumeFieldModel,
         PlaneStack,
         TrainedVolume,
         VolumeProblem,
         plane_stack,
+        validation_split,
         volume_coordinates,
     )
     from nlosfw.model.normalisation import FieldNormalisation
@@ -109,10 +111,12 @@ __all__ = [
     "OperatorOptions",
     "NeuralFieldConfig",
     "NeuralFieldModel",
+    "BestStep",
     "NeuralVolumeConfig",
     "NeuralVolumeFieldModel",
     "PlaneStack",
     "plane_stack",
+    "validation_split",
     "parameter_data_ratio",
     "Preset",
     "preset_config",

@@ -40,6 +40,7 @@ full scan PSNR 18.5 dB / SSIM 0.59 (interp 19.3 / 0.52; A's full scan 24.0 / 0.6
 
 from __future__ import annotations
 
+import math
 import tempfile
 import time
 from collections.abc import Callable, Mapping
@@ -88,7 +89,16 @@ class NeuralVolumeConfig(FieldModelConfig):
     network_hidden: tuple[int, ...] = (64, 64)
     """Widths of the network's hidden layers."""
     steps: int = 300
-    """Adam steps (full batch: every kept sample at every training frequency)."""
+    """Adam steps (full batch: every kept sample at every training frequency); an upper
+    bound when ``patience`` stops sooner."""
+    validation_fraction: float = 0.1
+    """Fraction of the kept wall points held out of the loss (chosen with ``seed``): the
+    albedo of the step with the lowest error there is kept, so the network stops before it
+    fits the noise of the points it trains on (0: none, the last step is kept). Needs 10 or
+    more kept points."""
+    patience: int = 50
+    """Steps without a lower validation error before training stops (0: run every step;
+    the best step's albedo is kept in every case)."""
     lr: float = 3e-3
     """Peak learning rate (cosine decay to ``lr * lr_final``)."""
     lr_final: float = 0.05
@@ -129,6 +139,9 @@ class NeuralVolumeConfig(FieldModelConfig):
         require(self.steps >= 1, "steps", f"must be >= 1, got {self.steps}")
         require(self.lr > 0, "lr", f"must be > 0, got {self.lr}")
         require(0 < self.lr_final <= 1, "lr_final", f"must be in (0, 1], got {self.lr_final}")
+        require(0 <= self.validation_fraction < 0.5, "validation_fraction",
+                f"must be in [0, 0.5), got {self.validation_fraction}")
+        require(self.patience >= 0, "patience", f"must be >= 0, got {self.patience}")
         require(0 < self.albedo_start < 1, "albedo_start",
                 f"must be in (0, 1), got {self.albedo_start}")
         require(self.threads >= 0, "threads", f"must be >= 0, got {self.threads}")
@@ -174,7 +187,9 @@ class VolumeProblem:
     """What a backend trains on: the operator's constants, the normalised kept samples
     ``data`` (F, ny, nx) (canonical order), the network's inputs ``coords`` (V, 3) at the
     voxel centres (V = Z * Y * X, C order), ``gain`` = s / mean(n) (Z, Y, X) and ``shift`` = c
-    (the albedo is gain * softplus(out + shift)), and the network to build."""
+    (the albedo is gain * softplus(out + shift)), the network to build, and which wall
+    points (ny, nx) the loss uses (``train``, 1 or 0) and which choose the kept step
+    (``validation``; None: no validation, the last step is kept)."""
 
     stack: PlaneStack
     data: np.ndarray
@@ -184,6 +199,50 @@ class VolumeProblem:
     network: type[NeuralFieldModel]
     network_config: NeuralFieldConfig
     network_shape: FieldShape
+    train: np.ndarray
+    validation: np.ndarray | None
+
+
+def validation_split(shape: tuple[int, int], fraction: float, seed: int
+                     ) -> tuple[np.ndarray, np.ndarray | None]:
+    """(train, validation) weights (ny, nx), float32 0/1: ``fraction`` of the wall points,
+    chosen at random with ``seed``, are validation points (none below 10 points or at 0)."""
+    n = shape[0] * shape[1]
+    n_val = int(round(fraction * n))
+    if fraction <= 0 or n < 10 or n_val < 1:
+        return np.ones(shape, np.float32), None
+    chosen = np.random.default_rng(seed).permutation(n)[:n_val]
+    flat = np.zeros(n, np.float32)
+    flat[chosen] = 1
+    validation = flat.reshape(shape)
+    return 1 - validation, validation
+
+
+@dataclass
+class BestStep:
+    """The step with the lowest validation error so far (no validation: the latest) and its
+    albedo (a backend array), for :meth:`NeuralVolumeFieldModel.train`'s loops."""
+
+    patience: int
+    step: int = 0
+    error: float = float("inf")
+    albedo: object = None
+
+    def offer(self, step: int, error: float | None, albedo: object) -> None:
+        """Keep ``albedo`` (the state before step ``step``'s update) if it is the best."""
+        if error is None or error < self.error:
+            self.step, self.error, self.albedo = step, math.inf if error is None else error, \
+                albedo
+
+    @property
+    def validation(self) -> float | None:
+        """The kept step's validation error (None: no validation)."""
+        return self.error if math.isfinite(self.error) else None
+
+    def stop(self, step: int) -> bool:
+        """Whether ``patience`` steps passed without a better validation error."""
+        return self.patience > 0 and math.isfinite(self.error) and \
+            step - self.step >= self.patience
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,6 +254,10 @@ class TrainedVolume:
     history: list[dict[str, float]]
     final_loss: float
     n_parameters: int
+    steps: int = 0
+    """Steps taken (fewer than ``steps`` when ``patience`` stopped the training)."""
+    best_validation: float | None = None
+    """The kept step's validation error (relative, as the loss); None: no validation."""
 
 
 def volume_coordinates(depths: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
@@ -249,7 +312,8 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
     # ------------------------------------------------------------------ fit
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Callable[[TrainingStep], None] | None = None) -> FitReport:
-        """Train the network's albedo on ``field`` (``validation`` is unused)."""
+        """Train the network's albedo on ``field`` (``validation`` is unused: the held-out
+        points are ``validation_fraction`` of the field's)."""
         start = time.perf_counter()
         who = self.model_name()
         check_training_field(field, who)
@@ -262,8 +326,11 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         self._scene = RSDPriorFieldModel.from_albedo(self.config.prior_config(), lattice, albedo,
                                                      field.geometry, scale)
         self._n_network = trained.n_parameters
-        return FitReport(steps=self.config.steps, seconds=time.perf_counter() - start,
-                         final_loss=trained.final_loss, history=trained.history)
+        steps = trained.steps or self.config.steps
+        return FitReport(steps=steps, seconds=time.perf_counter() - start,
+                         final_loss=trained.final_loss, history=trained.history,
+                         best_val_loss=trained.best_validation,
+                         stopped_early=steps < self.config.steps)
 
     def _problem(self, field: PhasorField, network: type[NeuralFieldModel]
                  ) -> tuple[VolumeProblem, VoxelLattice, float]:
@@ -290,12 +357,14 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         net_config = network.config_class(**self._network_options())
         shape = FieldShape(FieldMode.multi, lattice.shape, int(lattice.depths.size))
         ys, xs = lattice.axes()
+        train, validation = validation_split(data.shape[1:], cfg.validation_fraction, cfg.seed)
         return VolumeProblem(
             stack=plane_stack(op), data=data,
             coords=volume_coordinates(lattice.depths, ys, xs),
             gain=np.full(norms.shape, peak / float(np.mean(norms)), dtype=np.float32),
             shift=float(np.log(np.expm1(cfg.albedo_start))),
-            network=network, network_config=net_config, network_shape=shape), lattice, scale
+            network=network, network_config=net_config, network_shape=shape,
+            train=train, validation=validation), lattice, scale
 
     def _network_options(self) -> dict[str, object]:
         cfg = self.config

@@ -20,6 +20,7 @@ import optax
 
 from nlosfw.common import FitError
 from nlosfw.model import (
+    BestStep,
     NetworkBuild,
     NeuralFieldModel,
     NeuralVolumeFieldModel,
@@ -86,9 +87,14 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
                                         who=who))
         device = engine.device
         op = JaxPlaneOperator(problem.stack, device)
-        coords, gain, data = (jax.device_put(a, device)
-                              for a in (problem.coords, problem.gain, problem.data))
-        power = float(np.mean(np.abs(problem.data) ** 2))
+        coords, gain, data, train = (
+            jax.device_put(a, device)
+            for a in (problem.coords, problem.gain, problem.data, problem.train))
+        power = np.abs(problem.data) ** 2
+        train_power = float(np.sum(power * problem.train))
+        has_val = problem.validation is not None
+        val = jax.device_put(problem.validation if has_val else problem.train, device)
+        val_power = float(np.sum(power * problem.validation)) if has_val else 1.0
         shift = problem.shift
 
         def albedo(params: Any, rest: Any) -> jax.Array:
@@ -96,36 +102,49 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
             out = out.real if jnp.iscomplexobj(out) else out[..., 0]
             return gain * jax.nn.softplus(out + shift).reshape(gain.shape)
 
-        def loss_of(params: Any, rest: Any) -> jax.Array:
-            residual = op.forward(albedo(params, rest), op.spectra, op.laser) - data
-            return jnp.mean(jnp.abs(residual) ** 2) / power
+        def loss_of(params: Any, rest: Any) -> tuple[jax.Array, tuple[jax.Array, jax.Array]]:
+            current = albedo(params, rest)
+            squared = jnp.abs(op.forward(current, op.spectra, op.laser) - data) ** 2
+            error = jnp.sum(squared * val) / val_power
+            return jnp.sum(squared * train) / train_power, (error, current)
 
         @jax.jit
         def step(params: Any, rest: Any, opt_state: Any, lr: jax.Array
-                 ) -> tuple[Any, Any, jax.Array]:
-            loss, grads = jax.value_and_grad(loss_of)(params, rest)
+                 ) -> tuple[Any, Any, jax.Array, jax.Array, jax.Array]:
+            (loss, (error, current)), grads = jax.value_and_grad(loss_of, has_aux=True)(
+                params, rest)
             updates, opt_state = _ADAM.update(grads, opt_state, params)
             params = jax.tree.map(lambda p, u: p - lr * u, params, updates)
-            return params, opt_state, loss
+            return params, opt_state, loss, error, current
 
         params, rest = engine.params, engine.rest
         opt_state = _ADAM.init(params)
         history: list[dict[str, float]] = []
+        best = BestStep(cfg.patience)
         loss_value = math.nan
+        k = 0
         for k in range(cfg.steps):
-            params, opt_state, loss = step(params, rest, opt_state,
-                                           jnp.asarray(self.learning_rate(k), jnp.float32))
+            params, opt_state, loss, error, current = step(
+                params, rest, opt_state, jnp.asarray(self.learning_rate(k), jnp.float32))
             loss_value = float(loss)
             if not math.isfinite(loss_value):
                 raise FitError(f"{who}: training diverged at step {k + 1} (loss "
                                f"{loss_value}); lower model.lr")
+            val_error = float(error) if has_val else None
+            best.offer(k, val_error, current)
             if k == 0 or (k + 1) % HISTORY_EVERY == 0 or k + 1 == cfg.steps:
-                history.append({"step": k + 1, "loss": loss_value})
+                history.append({"step": k + 1, "loss": loss_value} if val_error is None
+                               else {"step": k + 1, "loss": loss_value, "val_loss": val_error})
             if on_step is not None:
                 on_step(TrainingStep(step=k + 1, total_steps=cfg.steps, loss=loss_value,
                                      seconds=time.perf_counter() - start))
-        fitted = np.asarray(jax.device_get(jax.jit(albedo)(params, rest)))
-        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network)
+            if best.stop(k):
+                break
+        _, (error, current) = jax.jit(loss_of)(params, rest)
+        best.offer(k + 1, float(error) if has_val else None, current)
+        fitted = np.asarray(jax.device_get(best.albedo))
+        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network,
+                             steps=k + 1, best_validation=best.validation)
 
 
 __all__ = ["JaxPlaneOperator", "NeuralVolumeJax"]

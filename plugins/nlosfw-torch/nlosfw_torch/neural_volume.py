@@ -10,11 +10,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from typing import cast
 
 import torch
 
 from nlosfw.common import FitError
 from nlosfw.model import (
+    BestStep,
     NetworkBuild,
     NeuralFieldModel,
     NeuralVolumeFieldModel,
@@ -77,7 +79,12 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         coords = torch.from_numpy(problem.coords).to(device)
         gain = torch.from_numpy(problem.gain).to(device)
         data = torch.from_numpy(problem.data).to(device)
-        power = float(torch.mean(torch.abs(data) ** 2).item())
+        train = torch.from_numpy(problem.train).to(device)
+        val = None if problem.validation is None else \
+            torch.from_numpy(problem.validation).to(device)
+        power = torch.abs(data) ** 2
+        train_power = float(torch.sum(power * train).item())
+        val_power = None if val is None else float(torch.sum(power * val).item())
         state = {**engine.fixed, **engine.params}
         opt = torch.optim.Adam(list(engine.params.values()), lr=cfg.lr)
 
@@ -86,17 +93,28 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
             values = torch.nn.functional.softplus(_real_output(out) + problem.shift)
             return gain * values.reshape(gain.shape)
 
+        def validation_error(squared: torch.Tensor) -> float | None:
+            if val is None or val_power is None:
+                return None
+            return float(torch.sum(squared.detach() * val).item()) / val_power
+
         history: list[dict[str, float]] = []
+        best = BestStep(cfg.patience)
         before = torch.get_num_threads()
         if cfg.threads > 0:
             torch.set_num_threads(cfg.threads)
         try:
             loss_value = math.nan
+            k = 0
             for k in range(cfg.steps):
                 for group in opt.param_groups:
                     group["lr"] = self.learning_rate(k)
                 opt.zero_grad(set_to_none=True)
-                loss = torch.mean(torch.abs(op(albedo()) - data) ** 2) / power
+                current = albedo()
+                squared = torch.abs(op(current) - data) ** 2
+                loss = torch.sum(squared * train) / train_power
+                error = validation_error(squared)
+                best.offer(k, error, current.detach())
                 loss.backward()
                 opt.step()
                 loss_value = float(loss.item())
@@ -104,15 +122,22 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                     raise FitError(f"{who}: training diverged at step {k + 1} (loss "
                                    f"{loss_value}); lower model.lr")
                 if k == 0 or (k + 1) % HISTORY_EVERY == 0 or k + 1 == cfg.steps:
-                    history.append({"step": k + 1, "loss": loss_value})
+                    history.append({"step": k + 1, "loss": loss_value} if error is None
+                                   else {"step": k + 1, "loss": loss_value, "val_loss": error})
                 if on_step is not None:
                     on_step(TrainingStep(step=k + 1, total_steps=cfg.steps, loss=loss_value,
                                          seconds=time.perf_counter() - start))
+                if best.stop(k):
+                    break
             with torch.no_grad():
-                fitted = albedo().cpu().numpy()
+                current = albedo()
+                best.offer(k + 1, validation_error(torch.abs(op(current) - data) ** 2),
+                           current)
+                fitted = cast(torch.Tensor, best.albedo).cpu().numpy()
         finally:
             torch.set_num_threads(before)
-        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network)
+        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network,
+                             steps=k + 1, best_validation=best.validation)
 
 
 __all__ = ["NeuralVolumeTorch", "TorchPlaneOperator"]

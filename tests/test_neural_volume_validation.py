@@ -1,0 +1,51 @@
+"""The neural hidden volume's validation points and kept step (no backend needed)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nlosfw.common import ConfigError
+from nlosfw.model import BestStep, NeuralVolumeConfig, validation_split
+
+
+def test_validation_split_holds_out_a_seeded_fraction_of_the_wall_points():
+    train, val = validation_split((8, 8), 0.1, seed=3)
+    assert val is not None and train.shape == val.shape == (8, 8)
+    assert val.sum() == 6 and train.sum() == 58            # round(0.1 * 64)
+    assert np.array_equal(train + val, np.ones((8, 8)))     # disjoint, every point once
+    again, val_again = validation_split((8, 8), 0.1, seed=3)
+    assert np.array_equal(val, val_again)
+    _, other = validation_split((8, 8), 0.1, seed=4)
+    assert not np.array_equal(val, other)
+
+
+@pytest.mark.parametrize("shape, fraction", [((3, 3), 0.4), ((8, 8), 0.0), ((4, 4), 0.01)])
+def test_no_validation_for_few_points_or_a_zero_fraction(shape, fraction):
+    train, val = validation_split(shape, fraction, seed=0)
+    assert val is None and np.array_equal(train, np.ones(shape))
+
+
+def test_best_step_keeps_the_lowest_error_and_stops_after_patience():
+    best = BestStep(patience=2)
+    for step, error in enumerate([1.0, 0.5, 0.7, 0.6]):
+        best.offer(step, error, f"albedo {step}")
+        if best.stop(step):
+            break
+    assert (best.step, best.error, best.albedo, best.validation) == (1, 0.5, "albedo 1", 0.5)
+    assert step == 3                                       # two steps without improvement
+
+
+def test_best_step_without_validation_keeps_the_latest_and_never_stops():
+    best = BestStep(patience=1)
+    for step in range(5):
+        best.offer(step, None, step)
+        assert not best.stop(step)
+    assert best.albedo == 4 and best.validation is None
+
+
+@pytest.mark.parametrize("option, value", [("validation_fraction", 0.5),
+                                           ("validation_fraction", -0.1), ("patience", -1)])
+def test_bad_validation_options_name_the_option(option, value):
+    with pytest.raises(ConfigError, match=option):
+        NeuralVolumeConfig(network="siren", **{option: value})
