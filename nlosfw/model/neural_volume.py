@@ -30,12 +30,15 @@ The backend is the subclass's (``nlosfw-torch``: ``neural_volume_torch``, ``nlos
 
 Cost: every step propagates the whole volume at every training frequency. On the shared
 diffuse S at 16x (70 planes of 65 x 65 voxels, 135 frequencies) a torch step took about
-10 s on one shared CPU core (2.5 s with ``fit_frequencies`` 16 and a [32, 32] network):
-run it on a GPU, or lower ``fit_frequencies``. Measured once there (thinning seed 0, grid,
-``fit_frequencies`` 16, ``network_hidden`` [32, 32], 100 steps, 5.5 min on one shared CPU
-core): held-out measurement NMSE -0.63 dB, floor -0.92 dB, excess -12.6 dB (interp: +1.62,
-excess -1.9; a zero prediction's excess would be -7.2); fft reconstruction against B's
-full scan PSNR 18.5 dB / SSIM 0.59 (interp 19.3 / 0.52; A's full scan 24.0 / 0.67).
+10 s on one shared CPU core; on one H200 GPU a whole fit at the defaults took about 20 s
+(18 fits at a time). The network learns the scene first and the noise of the kept points
+later: ``validation_fraction`` of the kept wall points are left out of the loss and the step
+with the lowest error there is kept (``patience`` ends the training). Measured on the GPU
+over the three shared captures, thinning seeds 0-2, grid: held-out excess -12.2, -9.9 and
+-12.0 dB at 16x, -10.4, -6.5 and -7.7 dB at 64x (the diffuse S, the dot chart, the
+resolution chart), stopping after 69-144 steps; without validation, 300 steps gave
+-7.7, -8.0, -10.2 dB at 16x and +0.8, -1.3, -4.1 dB at 64x (interp: -1.8, -3.3, -5.8 and
+-1.3, -0.9, -3.7 dB; rsd_prior: -4.4, -7.8, -10.0 and -3.8, -5.2, -6.7 dB).
 """
 
 from __future__ import annotations
