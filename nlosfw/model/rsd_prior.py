@@ -193,14 +193,15 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         albedo, _ = self._solve(op, data, cfg.iterations)
         start = estimate_response(project(op.forward(albedo)), project(data), op.frequencies,
                                   gaussian, cfg.time_offset)
-        best: list[tuple[float, np.ndarray]] = [(math.inf, albedo)]   # the lowest residual
+        best_value, best_albedo = math.inf, albedo     # the lowest residual so far
 
         def residual(response: SystemResponse) -> float:
+            nonlocal best_value, best_albedo
             fitted, result = self._solve(op, data, max(1, cfg.iterations // 4), None,
-                                         response.gains(op.frequencies, True), best[0][1])
+                                         response.gains(op.frequencies, True), best_albedo)
             value = result.objective[-1]
-            if value < best[0][0]:
-                best[0] = (value, fitted)
+            if value < best_value:
+                best_value, best_albedo = value, fitted
             log.debug("rsd_prior: response %s: objective %.6g, residual %.5f",
                       response.summary(), value, result.residual)
             return value
@@ -209,7 +210,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                                    cfg.response_rounds)
         log.info("rsd_prior: system response %s", response.summary())
         albedo, result = self._solve(op, data, cfg.iterations, report,
-                                     response.gains(op.frequencies, True), best[0][1])
+                                     response.gains(op.frequencies, True), best_albedo)
         rms = float(np.sqrt(np.mean(np.abs(response.gains(op.frequencies)) ** 2)))
         return albedo / rms, response, result    # for the gains as they are, not unit RMS
 
