@@ -1,12 +1,16 @@
-"""The neural hidden volume's validation points and kept step (no backend needed)."""
+"""The neural hidden volume's validation points and kept step (no backend needed), and its
+refusal of an operator larger than the memory left (with torch)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from nlosfw.common import ConfigError
+from nlosfw.common import ConfigError, FitError
 from nlosfw.model import BestStep, NeuralVolumeConfig, validation_split
+from nlosfw.plugins import load_plugins
+from nlosfw.plugins.networks import NEURAL_VOLUME_TEST_CONFIG
+from nlosfw.testing.checks_model import fit_fixture
 
 
 def test_validation_split_holds_out_a_seeded_fraction_of_the_wall_points():
@@ -49,3 +53,17 @@ def test_best_step_without_validation_keeps_the_latest_and_never_stops():
 def test_bad_validation_options_name_the_option(option, value):
     with pytest.raises(ConfigError, match=option):
         NeuralVolumeConfig(network="siren", **{option: value})
+
+
+def test_an_operator_larger_than_the_memory_left_is_refused_in_one_line(monkeypatch):
+    """Before its spectra are built, the fit names the operator's size, the memory left and
+    the options that make it smaller."""
+    pytest.importorskip("torch")
+    monkeypatch.setattr("nlosfw.model.neural_volume.available_memory", lambda: 1000)
+    model = load_plugins().registry.create("model", "neural_volume_torch",
+                                           dict(NEURAL_VOLUME_TEST_CONFIG))
+    with pytest.raises(FitError) as err:
+        model.fit(fit_fixture(physical=True))
+    message = str(err.value)
+    assert "\n" not in message and "but 1.0 kB are available" in message, message
+    assert "model.fit_frequencies" in message and "depth planes" in message, message

@@ -46,14 +46,10 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         Preset,
     )
     from nlosfw.model.neural_volume import (
-        BestStep,
         NeuralVolumeConfig,
         NeuralVolumeFieldModel,
-        PlaneStack,
         TrainedVolume,
         VolumeProblem,
-        plane_stack,
-        validation_split,
         volume_coordinates,
     )
     from nlosfw.model.normalisation import FieldNormalisation
@@ -79,6 +75,13 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         thesis_architecture,
     )
     from nlosfw.model.trainer import NeuralFieldModel
+    from nlosfw.model.volume_training import (
+        BestStep,
+        PlaneStack,
+        plane_stack,
+        stack_bytes,
+        validation_split,
+    )
 
 __all__ = [
     "FieldNormalisation",
@@ -116,6 +119,7 @@ __all__ = [
     "NeuralVolumeFieldModel",
     "PlaneStack",
     "plane_stack",
+    "stack_bytes",
     "validation_split",
     "parameter_data_ratio",
     "Preset",

@@ -43,7 +43,7 @@ resolution chart), stopping after 69-144 steps; without validation, 300 steps ga
 
 from __future__ import annotations
 
-import math
+import logging
 import tempfile
 import time
 from collections.abc import Callable, Mapping
@@ -55,6 +55,8 @@ import numpy as np
 
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError, DataError, FitError
+from nlosfw.common.files import format_bytes
+from nlosfw.common.memory import available_memory
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import to_canonical
 from nlosfw.image.rsd_kernel import check_geometry, wall_field
@@ -74,7 +76,15 @@ from nlosfw.model.rsd_sampling import (
 )
 from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.model.trainer import NeuralFieldModel, learning_rate
+from nlosfw.model.volume_training import (
+    PlaneStack,
+    plane_stack,
+    stack_bytes,
+    validation_split,
+)
 from nlosfw.transform.field import PhasorField
+
+log = logging.getLogger(__name__)
 
 #: Inputs of the network are scaled into [-MARGIN, MARGIN] per axis.
 MARGIN = 0.9
@@ -161,31 +171,6 @@ class NeuralVolumeConfig(FieldModelConfig):
 
 
 @dataclass(frozen=True, eq=False)
-class PlaneStack:
-    """The operator's constants for a backend: per plane i and frequency f the kernel
-    spectra K (Z, F, Ly, Lx), the laser legs L (Z, F, Y, X) (None: confocal), and where
-    inputs are placed and outputs read on the padded (Ly, Lx) lattice. Forward:
-    read(ifft2(sum_i K_i * fft2(place(a_i * L_i)))) (see
-    :class:`~nlosfw.image.plane_convolution.PlaneConvolution`)."""
-
-    spectra: np.ndarray
-    laser: np.ndarray | None
-    shape: tuple[int, int]
-    inputs: tuple[slice, slice]
-    outputs: tuple[slice, slice]
-
-
-def plane_stack(op: SceneOperator) -> PlaneStack:
-    """The constants of ``op`` (its dtype) stacked over planes."""
-    z = op.lattice.depths.size
-    spectra = np.stack([op.kernel_spectra(i) for i in range(z)])
-    legs = [op.laser_leg(i) for i in range(z)]
-    laser = None if op.confocal else np.stack([leg for leg in legs if leg is not None])
-    return PlaneStack(spectra, laser, op.conv.shape, op.conv.input_region,
-                      op.conv.output_region)
-
-
-@dataclass(frozen=True, eq=False)
 class VolumeProblem:
     """What a backend trains on: the operator's constants, the normalised kept samples
     ``data`` (F, ny, nx) (canonical order), the network's inputs ``coords`` (V, 3) at the
@@ -204,48 +189,6 @@ class VolumeProblem:
     network_shape: FieldShape
     train: np.ndarray
     validation: np.ndarray | None
-
-
-def validation_split(shape: tuple[int, int], fraction: float, seed: int
-                     ) -> tuple[np.ndarray, np.ndarray | None]:
-    """(train, validation) weights (ny, nx), float32 0/1: ``fraction`` of the wall points,
-    chosen at random with ``seed``, are validation points (none below 10 points or at 0)."""
-    n = shape[0] * shape[1]
-    n_val = int(round(fraction * n))
-    if fraction <= 0 or n < 10 or n_val < 1:
-        return np.ones(shape, np.float32), None
-    chosen = np.random.default_rng(seed).permutation(n)[:n_val]
-    flat = np.zeros(n, np.float32)
-    flat[chosen] = 1
-    validation = flat.reshape(shape)
-    return 1 - validation, validation
-
-
-@dataclass
-class BestStep:
-    """The step with the lowest validation error so far (no validation: the latest) and its
-    albedo (a backend array), for :meth:`NeuralVolumeFieldModel.train`'s loops."""
-
-    patience: int
-    step: int = 0
-    error: float = float("inf")
-    albedo: object = None
-
-    def offer(self, step: int, error: float | None, albedo: object) -> None:
-        """Keep ``albedo`` (the state before step ``step``'s update) if it is the best."""
-        if error is None or error < self.error:
-            self.step, self.error, self.albedo = step, math.inf if error is None else error, \
-                albedo
-
-    @property
-    def validation(self) -> float | None:
-        """The kept step's validation error (None: no validation)."""
-        return self.error if math.isfinite(self.error) else None
-
-    def stop(self, step: int) -> bool:
-        """Whether ``patience`` steps passed without a better validation error."""
-        return self.patience > 0 and math.isfinite(self.error) and \
-            step - self.step >= self.patience
 
 
 @dataclass(frozen=True, eq=False)
@@ -351,6 +294,15 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         op = SceneOperator(lattice, wall, field.geometry, field.frequencies[chosen],
                            OperatorOptions(amplitude=cfg.amplitude, dtype=dtype,
                                            workers=cfg.workers, cache_mb=0.0))
+        need, room = stack_bytes(op), available_memory()
+        log.info("%s: operator of %d planes x %d frequencies on a %d x %d lattice: %s",
+                 who, lattice.depths.size, op.frequencies.size, *op.conv.shape,
+                 format_bytes(need))
+        if room is not None and need > room:
+            raise FitError(f"{who}: its operator ({lattice.depths.size} depth planes x "
+                           f"{op.frequencies.size} frequencies) needs {format_bytes(need)}, "
+                           f"but {format_bytes(room)} are available; lower "
+                           "model.fit_frequencies or narrow model.depth_range")
         data = np.ascontiguousarray(values[chosen]).astype(dtype)
         norms = op.column_norms()
         peak = float((op.adjoint(data).real / norms).max())

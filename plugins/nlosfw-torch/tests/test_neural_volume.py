@@ -22,6 +22,7 @@ from nlosfw.model import (
     SceneOperator,
     VoxelLattice,
     plane_stack,
+    stack_bytes,
     training_grid,
     voxel_lattice,
 )
@@ -221,3 +222,17 @@ def test_torch_and_jax_stop_at_the_same_step(noisy_scene):
     assert abs(torch_report.best_val_loss - jax_report.best_val_loss) < 0.01 * \
         torch_report.best_val_loss
     assert abs(torch_db - jax_db) < 0.3, (torch_db, jax_db)
+
+
+@pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])
+def test_the_operator_size_is_known_before_it_is_built(confocal):
+    """stack_bytes (from the operator's shapes, nothing computed) is exactly what
+    plane_stack holds: 3 planes x 6 frequencies of the padded lattice's spectra, and the
+    laser legs on the 9 x 11 voxels unless confocal."""
+    op = _operator(confocal, 0.06, 0.06)
+    stack = plane_stack(op)
+    held = stack.spectra.nbytes + (0 if stack.laser is None else stack.laser.nbytes)
+    assert stack_bytes(op) == held
+    ly, lx = op.conv.shape
+    assert held == 3 * 6 * (ly * lx + (0 if confocal else 9 * 11)) * 8       # complex64
+
