@@ -24,6 +24,7 @@ from nlosfw.model import (
     plane_stack,
     stack_bytes,
     training_grid,
+    validation_split,
     voxel_lattice,
 )
 from nlosfw.plugins import load_plugins
@@ -236,3 +237,18 @@ def test_the_operator_size_is_known_before_it_is_built(confocal):
     ly, lx = op.conv.shape
     assert held == 3 * 6 * (ly * lx + (0 if confocal else 9 * 11)) * 8       # complex64
 
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_silent_validation_points_train_without_validation(backend, sparse_scene):
+    """Dead pixels at every validation point (all zero there): no validation error to
+    compare, so the training keeps its last step instead of failing."""
+    _, train, _, _, _ = sparse_scene
+    _, val = validation_split(train.values.shape[1:], 0.1, seed=0)
+    assert val is not None
+    silent = train.replace(values=np.where(val > 0, 0, train.values))
+    model = load_plugins().registry.create("model", f"neural_volume_{backend}",
+                                           {**OPTIONS, "steps": 20})
+    report = model.fit(silent)
+    assert report.best_val_loss is None and report.steps == 20
+    assert np.all(np.isfinite(model.albedo)) and model.albedo.max() > 0
