@@ -177,7 +177,8 @@ class VolumeProblem:
     voxel centres (V = Z * Y * X, C order), ``gain`` = s / mean(n) (Z, Y, X) and ``shift`` = c
     (the albedo is gain * softplus(out + shift)), the network to build, and which wall
     points (ny, nx) the loss uses (``train``, 1 or 0) and which choose the kept step
-    (``validation``; None: no validation, the last step is kept)."""
+    (``validation``; None: no validation, or its points are all zero: the last step is
+    kept)."""
 
     stack: PlaneStack
     data: np.ndarray
@@ -313,6 +314,8 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         shape = FieldShape(FieldMode.multi, lattice.shape, int(lattice.depths.size))
         ys, xs = lattice.axes()
         train, validation = validation_split(data.shape[1:], cfg.validation_fraction, cfg.seed)
+        if validation is not None and not np.any(np.abs(data) * validation):
+            validation = None          # silent validation points (dead pixels): no error to compare
         return VolumeProblem(
             stack=plane_stack(op), data=data,
             coords=volume_coordinates(lattice.depths, ys, xs),

@@ -92,11 +92,9 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
             for a in (problem.coords, problem.gain, problem.data, problem.train))
         power = np.abs(problem.data) ** 2
         train_power = float(np.sum(power * problem.train))
-        val_power = (0.0 if problem.validation is None
-                     else float(np.sum(power * problem.validation)))
-        has_val = val_power > 0                          # silent validation points: none
+        has_val = problem.validation is not None
         val = jax.device_put(problem.validation if has_val else problem.train, device)
-        val_power = val_power if has_val else 1.0
+        val_power = float(np.sum(power * problem.validation)) if has_val else 1.0
         shift = problem.shift
 
         def albedo(params: Any, rest: Any) -> jax.Array:

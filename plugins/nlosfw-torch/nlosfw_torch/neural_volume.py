@@ -85,8 +85,6 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         power = torch.abs(data) ** 2
         train_power = float(torch.sum(power * train).item())
         val_power = None if val is None else float(torch.sum(power * val).item())
-        if not (val_power is None or val_power > 0):     # silent validation points: none
-            val = val_power = None
         state = {**engine.fixed, **engine.params}
         opt = torch.optim.Adam(list(engine.params.values()), lr=cfg.lr)
 
