@@ -267,7 +267,8 @@ def test_the_benchmark_collects_the_study_with_its_verdicts(thinned_sweep, tmp_p
     table (labelled as a reduced run) and the verdict against interp."""
     out = tmp_path / "real.json"
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "sparsity_real.py"),
-                             "collect", str(thinned_sweep), "--reduced", "--out", str(out)],
+                             "collect", str(thinned_sweep), "--reduced", "--out", str(out),
+                             "--ran-on", "<b>[a GPU](x)</b> | y"],
                             cwd=tmp_path, capture_output=True, text=True, timeout=600,
                             check=False)
     assert result.returncode == 0, result.stderr
@@ -280,6 +281,8 @@ def test_the_benchmark_collects_the_study_with_its_verdicts(thinned_sweep, tmp_p
         np.mean(floor), rel=1e-6)
     assert "**Reduced run**" in result.stdout
     assert "| ceiling |" in result.stdout and "| interp |" in result.stdout
+    # --ran-on is the user's text: escaped for Markdown (no raw HTML, no link, no cell break)
+    assert r"on &lt;b&gt;\[a GPU\](x)&lt;/b&gt; \| y, " in result.stdout
 
 
 @pytest.mark.skipif(not (REAL / "data_diffuse_s.mat").is_file(),
