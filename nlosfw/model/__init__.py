@@ -61,7 +61,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         split_field,
     )
     from nlosfw.model.rsd_residual import RSDResidualConfig, RSDResidualFieldModel
-    from nlosfw.model.rsd_sampling import training_grid, voxel_lattice
+    from nlosfw.model.rsd_sampling import WallSamples, training_grid, voxel_lattice, wall_samples
     from nlosfw.model.scene_operator import OperatorOptions, SceneOperator, VoxelLattice
     from nlosfw.model.thesis_networks import (
         Architecture,
@@ -141,6 +141,8 @@ __all__ = [
     "VolumeProblem",
     "VoxelLattice",
     "voxel_lattice",
+    "wall_samples",
+    "WallSamples",
     "wire_widths",
     "WireFieldConfig",
     "write_model_file",

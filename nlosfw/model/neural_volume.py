@@ -25,6 +25,9 @@ from the numpy kernel spectra and laser legs of
 smoothness is the prior: no L1 or TV term. The fitted albedo predicts the field anywhere
 ``rsd_prior`` can (through :meth:`RSDPriorFieldModel.from_albedo`).
 
+A random scan trains like ``rsd_prior``'s: on the grid its points came from, the points not
+kept weighing nothing in the loss, the validation points drawn from the kept ones.
+
 The backend is the subclass's (``nlosfw-torch``: ``neural_volume_torch``, ``nlosfw-jax``:
 ``neural_volume_jax``): it finds the network class and implements :meth:`train`.
 
@@ -58,7 +61,6 @@ from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.files import format_bytes
 from nlosfw.common.memory import available_memory
 from nlosfw.image.fft import Precision
-from nlosfw.image.plane_convolution import to_canonical
 from nlosfw.image.rsd_kernel import check_geometry, wall_field
 from nlosfw.model.interface import (
     FieldModel,
@@ -71,9 +73,7 @@ from nlosfw.model.interface import (
 from nlosfw.model.model_files import read_model_file, write_model_file
 from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import (
-    training_grid,
-)
+from nlosfw.model.rsd_sampling import wall_samples
 from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.model.trainer import NeuralFieldModel, learning_rate
 from nlosfw.model.volume_training import (
@@ -285,16 +285,16 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         setup (its depth planes, lattice, frequencies and normalisation)."""
         cfg, who = self.config, self.model_name()
         check_geometry(field.geometry)
-        wall = training_grid(field, who)
-        values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
-        scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))      # rsd_prior's
-        values = values / scale
-        lattice, chosen = RSDPriorFieldModel(cfg.prior_config()).plan_lattice(values, wall,
+        samples = wall_samples(field, who)
+        raw = wall_field(field)
+        scale = float(np.sqrt(np.mean(np.abs(raw) ** 2)))      # rsd_prior's
+        values = samples.on_grid(raw) / scale
+        lattice, chosen = RSDPriorFieldModel(cfg.prior_config()).plan_lattice(values, samples,
                                                                               field)
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
-        op = SceneOperator(lattice, wall, field.geometry, field.frequencies[chosen],
+        op = SceneOperator(lattice, samples.layout, field.geometry, field.frequencies[chosen],
                            OperatorOptions(amplitude=cfg.amplitude, dtype=dtype,
-                                           workers=cfg.workers, cache_mb=0.0))
+                                           workers=cfg.workers, cache_mb=0.0), samples.mask)
         need, room = stack_bytes(op), available_memory()
         log.info("%s: operator of %d planes x %d frequencies on a %d x %d lattice: %s",
                  who, lattice.depths.size, op.frequencies.size, *op.conv.shape,
@@ -313,7 +313,8 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         net_config = network.config_class(**self._network_options())
         shape = FieldShape(FieldMode.multi, lattice.shape, int(lattice.depths.size))
         ys, xs = lattice.axes()
-        train, validation = validation_split(data.shape[1:], cfg.validation_fraction, cfg.seed)
+        train, validation = validation_split(samples.layout.shape, cfg.validation_fraction,
+                                             cfg.seed, samples.mask)
         if validation is not None and not np.any(np.abs(data) * validation):
             validation = None          # silent validation points (dead pixels): no error to compare
         return VolumeProblem(

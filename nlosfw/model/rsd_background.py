@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosfw.common.config import Choice
-from nlosfw.image.plane_convolution import GridLayout, to_canonical
+from nlosfw.model.rsd_sampling import WallSamples
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.temporal_dft import unit_phasor
 
@@ -84,11 +84,14 @@ class WallBackground:
 class BackgroundProjection:
     """The projections Q_f and the offsets of a wall (canonical order) in the fit's domain."""
 
-    def __init__(self, legs: np.ndarray | None, wall_shape: tuple[int, ...]) -> None:
+    def __init__(self, legs: np.ndarray | None, wall_shape: tuple[int, ...],
+                 mask: np.ndarray | None = None) -> None:
         """``legs``: the device path (m) at each wall sample when the fit takes it out of the
-        field (None otherwise); ``wall_shape``: the wall's (Y, X)."""
+        field (None otherwise); ``wall_shape``: the wall's (Y, X); ``mask``: the sampled
+        points of the wall (None: all), the only ones the offsets are fitted on and added to."""
         self._legs = legs
         self._shape = tuple(wall_shape)
+        self._mask = None if mask is None else np.asarray(mask, dtype=bool)
 
     def _basis(self, frequencies: np.ndarray, dtype: type) -> np.ndarray | None:
         """v_f(x), (F, Y, X); None where it is 1 everywhere (no device legs)."""
@@ -99,7 +102,7 @@ class BackgroundProjection:
 
     def offsets(self, frequencies: np.ndarray, residual: np.ndarray) -> np.ndarray:
         """The least-squares b_f of a residual P - A a (F, Y, X) in the fit's domain, (F,)."""
-        return _mean(self._basis(frequencies, residual.dtype.type), residual)
+        return _mean(self._basis(frequencies, residual.dtype.type), residual, self._mask)
 
     def projector(self, frequencies: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
         """p -> Q p for fields (F, Y, X) at ``frequencies`` (a new array)."""
@@ -110,22 +113,23 @@ class BackgroundProjection:
             if kind not in cache:
                 cache[kind] = self._basis(frequencies, kind)
             v = cache[kind]
-            b = _mean(v, p).astype(p.dtype)[:, None, None]
-            return p - (b if v is None else b * v)
+            b = _mean(v, p, self._mask).astype(p.dtype)[:, None, None]
+            offset = b if v is None else b * v
+            return p - (offset if self._mask is None else offset * self._mask)
 
         return project
 
 
 def background_projection(background: Background, field: PhasorField,
-                          wall: GridLayout) -> BackgroundProjection | None:
-    """The projection of a training ``field`` on the canonical grid ``wall`` for
+                          samples: WallSamples) -> BackgroundProjection | None:
+    """The projection of a training ``field`` on its wall grid ``samples`` for
     ``background`` (None for none)."""
     if background == Background.none:
         return None
     geometry = field.geometry
-    legs = (to_canonical(geometry.device_path(field.wall_xyz), wall.order, axes=(0, 1))
+    legs = (samples.on_grid(geometry.device_path(field.wall_xyz))
             if geometry.t_accounts_first_and_last_bounces else None)
-    return BackgroundProjection(legs, wall.shape)
+    return BackgroundProjection(legs, samples.layout.shape, samples.mask)
 
 
 def fit_offsets(projection: BackgroundProjection,
@@ -142,7 +146,10 @@ def fit_offsets(projection: BackgroundProjection,
     return WallBackground(f[order], b[order])
 
 
-def _mean(v: np.ndarray | None, p: np.ndarray) -> np.ndarray:
-    """mean_x conj(v_f(x)) p_f(x) for every f (v None: 1)."""
+def _mean(v: np.ndarray | None, p: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    """mean_x conj(v_f(x)) p_f(x) for every f over the points of ``mask`` (v None: 1;
+    mask None: every point)."""
     r = p if v is None else np.conj(v) * p
+    if mask is not None:
+        return np.asarray(r[:, mask].mean(axis=1))
     return np.asarray(r.reshape(r.shape[0], -1).mean(axis=1))

@@ -27,6 +27,12 @@ training spacing is a whole multiple of it) covering the training grid and half 
 training spacing beyond. Enough frequencies are fitted that paths over twice the depth
 span do not alias in time.
 
+A random scan (scattered samples, :func:`nlosfw.model.protocol.scattered_field`) is fitted
+on the grid its points were drawn from (:func:`~nlosfw.model.rsd_sampling.wall_samples`: the
+smallest regular grid holding them all) with the operator masked to the kept points, so
+the grid's FFT layout serves any subset of it; points that lie on no regular grid are
+refused in one line.
+
 Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a coarse
 lattice (the training spacing laterally, planes a quarter of the shortest wavelength of the
 lower half of the band apart, from the wall to half the capture's time span, within the
@@ -62,7 +68,7 @@ from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.depths import field_depth_range
 from nlosfw.image.fft import Precision
-from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout, to_canonical
+from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout
 from nlosfw.image.rsd_kernel import check_geometry, path_multiplier, wall_field
 from nlosfw.model.fista import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
 from nlosfw.model.interface import (
@@ -88,11 +94,12 @@ from nlosfw.model.rsd_response import (
     search_response,
 )
 from nlosfw.model.rsd_sampling import (
+    WallSamples,
     deepest_path,
     enough_frequencies,
     fit_frequency_indices,
-    training_grid,
     voxel_lattice,
+    wall_samples,
 )
 from nlosfw.model.scene_operator import (
     OperatorOptions,
@@ -144,14 +151,15 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         cfg = self.config
         check_training_field(field, MODEL_NAME)
         check_geometry(field.geometry)
-        wall = training_grid(field)
-        values = to_canonical(wall_field(field), wall.order, axes=(1, 2))
-        scale = float(np.sqrt(np.mean(np.abs(values) ** 2)))
-        values = values / scale
-        self._projection = background_projection(cfg.background, field, wall)
-        lattice, chosen = self.plan_lattice(values, wall, field)
+        samples = wall_samples(field)
+        wall, mask = samples.layout, samples.mask
+        raw = wall_field(field)
+        scale = float(np.sqrt(np.mean(np.abs(raw) ** 2)))
+        values = samples.on_grid(raw) / scale
+        self._projection = background_projection(cfg.background, field, samples)
+        lattice, chosen = self.plan_lattice(values, samples, field)
         depths, freqs = lattice.depths, field.frequencies[chosen]
-        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options())
+        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options(), mask)
         log.info("rsd_prior: %d planes in %.3f-%.3f m, %d x %d voxels, %d frequencies",
                  depths.size, depths.min(), depths.max(), *lattice.shape, freqs.size)
         history: list[dict[str, float]] = []
@@ -167,7 +175,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         albedo, response, result = self._fit_albedo(op, values[chosen], report)
         background = None if self._projection is None else fit_offsets(
             self._projection, lambda f: _gained(response, f, SceneOperator(
-                lattice, wall, field.geometry, f, self._options()).forward(albedo)),
+                lattice, wall, field.geometry, f, self._options(), mask).forward(albedo)),
             field.frequencies, values, scale)
         self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale,
                                background, response)
@@ -254,7 +262,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                        None if start is None else start * norms)
         return result.x / norms, result
 
-    def plan_lattice(self, values: np.ndarray, wall: GridLayout, field: PhasorField
+    def plan_lattice(self, values: np.ndarray, samples: WallSamples, field: PhasorField
                      ) -> tuple[VoxelLattice, np.ndarray]:
         """The voxel lattice a fit of ``field`` uses (planes over ``depth_range`` or from
         :meth:`depth_planes`, ``depth_step`` apart; ``lateral_step``) and the indices of the
@@ -266,18 +274,19 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             near, far = (float(v) for v in cfg.depth_range)
             depths = np.arange(near, far + depth_step / 2, depth_step)
         else:
-            depths = self.depth_planes(values, wall, field, depth_step)
+            depths = self.depth_planes(values, samples, field, depth_step)
         span = float(depths.max() - depths.min())
         chosen = fit_frequency_indices(field.frequencies, enough_frequencies(
             field.frequencies, cfg.fit_frequencies, span))
         lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
-        return voxel_lattice(wall, lateral, depths), chosen
+        return voxel_lattice(samples.layout, lateral, depths), chosen
 
-    def depth_planes(self, values: np.ndarray, wall: GridLayout, field: PhasorField,
+    def depth_planes(self, values: np.ndarray, samples: WallSamples, field: PhasorField,
                      step: float) -> np.ndarray:
         """Planes ``step`` apart within ``depth_margin`` of the planes where a quick fit on a
         coarse lattice finds the scene (see the module docstring); ``values``: the field
-        without device legs, canonical order (``wall``), divided by its RMS."""
+        without device legs on the wall grid of ``samples`` (canonical order, zero where not
+        sampled), divided by its RMS."""
         cfg = self.config
         deepest = deepest_path(field)
         f = field.frequencies
@@ -288,8 +297,9 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         coarse = 1.0 / (4.0 * float(freqs.max()))
         lo, hi = field_depth_range(field) or (coarse, deepest)   # the run's range, if any
         depths = np.arange(max(coarse, lo), max(min(deepest, hi), lo) + coarse / 2, coarse)
+        wall = samples.layout
         lattice = voxel_lattice(wall, max(wall.spacing), depths)
-        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options())
+        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options(), samples.mask)
         albedo, _ = self._solve(op, values[chosen], cfg.depth_iterations)
         contribution = albedo * op.column_norms()
         profile = contribution.reshape(depths.size, -1).max(axis=1)

@@ -111,12 +111,19 @@ class SceneOperator:
 
     ``wall`` is the canonical layout of the wall grid (its spacing and the voxel
     spacing must be whole multiples of one another per axis); fields are (F, ny, nx)
-    in that canonical order, albedos (Z, Y, X).
+    in that canonical order, albedos (Z, Y, X). With ``mask`` (ny, nx) the operator maps
+    to the wall points where it is True only (M A, zero elsewhere; its adjoint A^H M):
+    the kept points of a random scan.
     """
 
     def __init__(self, lattice: VoxelLattice, wall: GridLayout, geometry: CaptureGeometry,
-                 frequencies: np.ndarray, options: OperatorOptions = OperatorOptions()) -> None:
+                 frequencies: np.ndarray, options: OperatorOptions = OperatorOptions(),
+                 mask: np.ndarray | None = None) -> None:
         self.lattice, self.wall, self.geometry = lattice, wall, geometry
+        if mask is not None and np.shape(mask) != wall.shape:
+            raise DataError(f"rsd_prior: a wall mask of shape {np.shape(mask)} for a "
+                            f"{wall.shape} wall grid")
+        self.mask = None if mask is None or np.all(mask) else np.asarray(mask, dtype=bool)
         self.frequencies = np.asarray(frequencies, dtype=float)
         self.options = options
         self.multiplier = path_multiplier(geometry)
@@ -189,7 +196,10 @@ class SceneOperator:
                 self.options.dtype, copy=False)
             spectrum = self.conv.input_spectrum(source)                # (1 or F, *shape)
             acc += self.kernel_spectra(i) * spectrum
-        return self.conv.read_outputs(acc)
+        out = self.conv.read_outputs(acc)
+        if self.mask is not None:
+            out *= self.mask
+        return out
 
     def adjoint(self, fields: np.ndarray) -> np.ndarray:
         """A^H P: the complex back-propagation (Z, Y, X) of fields (F, ny, nx)."""
@@ -197,6 +207,8 @@ class SceneOperator:
         if fields.shape != self.field_shape:
             raise DataError(f"rsd_prior: fields of shape {fields.shape}, expected "
                             f"{self.field_shape}")
+        if self.mask is not None:
+            fields = fields * self.mask
         spectrum = self.conv.output_spectrum(fields)
         out: np.ndarray = np.empty(self.lattice.volume_shape, dtype=self.options.dtype)
         for i in range(out.shape[0]):
@@ -214,7 +226,8 @@ class SceneOperator:
 
     def column_norms(self) -> np.ndarray:
         """||A e_v|| for every voxel (Z, Y, X): sqrt(sum_f sum_s |A_f[s, v]|^2)."""
-        ones = np.ones((1,) + self.wall.shape)
+        ones = (np.ones((1,) + self.wall.shape) if self.mask is None
+                else self.mask[None].astype(float))
         out = np.empty(self.lattice.volume_shape)
         legs = 2 if self.confocal else 1
         lp = None if self.confocal else np.asarray(self.geometry.laser_point, dtype=float)

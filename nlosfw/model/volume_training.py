@@ -60,19 +60,24 @@ def stack_bytes(op: SceneOperator) -> int:
     return z * n_f * (ly * lx + legs) * itemsize
 
 
-def validation_split(shape: tuple[int, int], fraction: float, seed: int
+def validation_split(shape: tuple[int, int], fraction: float, seed: int,
+                     sampled: np.ndarray | None = None
                      ) -> tuple[np.ndarray, np.ndarray | None]:
-    """(train, validation) weights (ny, nx), float32 0/1: ``fraction`` of the wall points,
-    chosen at random with ``seed``, are validation points (none below 10 points or at 0)."""
-    n = shape[0] * shape[1]
-    n_val = int(round(fraction * n))
-    if fraction <= 0 or n < 10 or n_val < 1:
-        return np.ones(shape, np.float32), None
-    chosen = np.random.default_rng(seed).permutation(n)[:n_val]
-    flat = np.zeros(n, np.float32)
-    flat[chosen] = 1
-    validation = flat.reshape(shape)
-    return 1 - validation, validation
+    """(train, validation) weights (ny, nx), float32 0/1: ``fraction`` of the sampled wall
+    points (``sampled`` True, (ny, nx); None: every point), chosen at random with ``seed``,
+    are validation points (none below 10 points or at 0); both are 0 where not sampled."""
+    points = (np.arange(shape[0] * shape[1]) if sampled is None
+              else np.flatnonzero(np.asarray(sampled, dtype=bool)))
+    train = np.zeros(shape[0] * shape[1], np.float32)
+    train[points] = 1
+    n_val = int(round(fraction * points.size))
+    if fraction <= 0 or points.size < 10 or n_val < 1:
+        return train.reshape(shape), None
+    chosen = points[np.random.default_rng(seed).permutation(points.size)[:n_val]]
+    validation = np.zeros_like(train)
+    validation[chosen] = 1
+    train[chosen] = 0
+    return train.reshape(shape), validation.reshape(shape)
 
 
 @dataclass

@@ -20,8 +20,10 @@ from nlosfw.image import grid_layout
 from nlosfw.model import (
     OperatorOptions,
     SceneOperator,
+    SpatialSampling,
     VoxelLattice,
     plane_stack,
+    split_field,
     stack_bytes,
     training_grid,
     validation_split,
@@ -252,3 +254,28 @@ def test_silent_validation_points_train_without_validation(backend, sparse_scene
     report = model.fit(silent)
     assert report.best_val_loss is None and report.steps == 20
     assert np.all(np.isfinite(model.albedo)) and model.albedo.max() > 0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_random_scan_fits_like_a_grid(backend, sparse_scene):
+    """64 random points of the 32 x 32 wall (as many as the 8 x 8 grid) are placed on the
+    grid they came from: the volume predicts the held-out points at least 10 dB better than
+    interp (Clough-Tocher over the scattered points; measured: interp -7.7 dB, torch and
+    JAX -27.7 dB, rsd_prior with l1_weight 0.01 -26.4 dB), and its brightest voxel sits where
+    the scene's brightest is."""
+    full, _, _, lattice, brightest = sparse_scene
+    split = split_field(full, SpatialSampling(pattern="random", step=STEP, seed=2),
+                        spectral="none")
+    held = ~split.spatial_mask
+    host = load_plugins()
+    interp = host.registry.create("model", "interp", {})
+    interp.fit(split.train_field)
+    pts = full.wall_xyz[..., :2]
+    interp_db = _heldout_nmse_db(full, held, interp.predict(pts, FREQUENCIES))
+    model = host.registry.create("model", f"neural_volume_{backend}", OPTIONS)
+    model.fit(split.train_field)
+    volume_db = _heldout_nmse_db(full, held, model.predict(pts, FREQUENCIES))
+    assert volume_db < interp_db - 10.0, (interp_db, volume_db)
+    found = model.scene.lattice.points()[np.unravel_index(np.argmax(model.albedo),
+                                                          model.albedo.shape)]
+    np.testing.assert_allclose(found, lattice.points()[brightest], atol=1e-9)

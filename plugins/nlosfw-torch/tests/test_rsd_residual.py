@@ -11,6 +11,7 @@ import pytest
 pytest.importorskip("torch")
 
 from nlosfw.common import ConfigError
+from nlosfw.model import SpatialSampling, split_field
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 
@@ -160,3 +161,23 @@ def test_held_out_wall_points_choose_the_networks_training_length(scene):
     assert report.best_val_loss is not None and np.isfinite(report.best_val_loss)
     predicted = model.predict(full.wall_xyz[..., :2], FREQUENCIES)
     assert _heldout_nmse_db(full, held, predicted) <= _heldout_nmse_db(full, held, physics) - 3
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_random_scan_fits_both_stages(backend):
+    """A random quarter of the wall (36 scattered points) instead of every other point: the
+    physics stage fits on the grid the points came from, the residual network on the
+    scattered points, and the term is still learnt (held-out error measured: rsd_prior
+    -6.4 dB, torch and JAX residual -15.0 dB)."""
+    full, _, _ = _scene(0.5)
+    split = split_field(full, SpatialSampling(pattern="random", step=2, seed=3),
+                        spectral="none")
+    held = ~split.spatial_mask
+    prior = load_plugins().registry.create("model", "rsd_prior", PRIOR)
+    prior.fit(split.train_field)
+    pts = full.wall_xyz[..., :2]
+    prior_db = _heldout_nmse_db(full, held, prior.predict(pts, FREQUENCIES))
+    model = _residual_model(backend, residual_weight=0.1, network_hidden=[8, 8])
+    model.fit(split.train_field)
+    residual_db = _heldout_nmse_db(full, held, model.predict(pts, FREQUENCIES))
+    assert residual_db <= prior_db - 6.0, (prior_db, residual_db)
