@@ -273,11 +273,12 @@ class PlaneConvolution:
         work[(slice(None),) + self.kernel_region] = kernels
         return scipy.fft.fft2(work, overwrite_x=True, workers=self.workers)
 
-    def input_spectrum(self, values: np.ndarray) -> np.ndarray:
-        """FFT of input values (batch, n_in_y, n_in_x) placed on the padded lattice."""
+    def input_spectrum(self, values: np.ndarray, workers: int | None = None) -> np.ndarray:
+        """FFT of input values (batch, n_in_y, n_in_x) placed on the padded lattice (on
+        ``workers`` threads; None: the layout's)."""
         work = self.padded(values.shape[0], values.dtype.type)
         work[(slice(None),) + self.input_region] = values
-        return scipy.fft.fft2(work, overwrite_x=True, workers=self.workers)
+        return scipy.fft.fft2(work, overwrite_x=True, workers=workers or self.workers)
 
     def output_spectrum(self, values: np.ndarray) -> np.ndarray:
         """FFT of output-side values (batch, n_out_y, n_out_x) placed at the output
@@ -291,7 +292,8 @@ class PlaneConvolution:
         out = scipy.fft.ifft2(product, overwrite_x=True, workers=self.workers)
         return out[(slice(None),) + self.output_region]
 
-    def read_inputs(self, product: np.ndarray) -> np.ndarray:
-        """Inverse FFT of (conjugate-kernel) products, read at the input points (adjoint)."""
-        out = scipy.fft.ifft2(product, overwrite_x=True, workers=self.workers)
+    def read_inputs(self, product: np.ndarray, workers: int | None = None) -> np.ndarray:
+        """Inverse FFT of (conjugate-kernel) products, read at the input points (adjoint;
+        on ``workers`` threads, None: the layout's)."""
+        out = scipy.fft.ifft2(product, overwrite_x=True, workers=workers or self.workers)
         return out[(slice(None),) + self.input_region]

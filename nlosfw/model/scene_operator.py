@@ -33,6 +33,7 @@ import numpy as np
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice
+from nlosfw.common.cores import run_tasks, worker_count
 from nlosfw.common.errors import DataError
 from nlosfw.image.plane_convolution import GridLayout, PlaneConvolution, lattice_axis
 from nlosfw.image.rsd_kernel import path_multiplier, phasor_series, phasor_steps
@@ -132,7 +133,10 @@ class SceneOperator:
         if axes[0] is None or axes[1] is None:
             raise DataError(f"rsd_prior: the wall spacing {wall.spacing} m and the voxel "
                             f"spacing {lattice.step} m must be whole multiples of one another")
+        self.threads = worker_count(options.workers)
+        """Voxel planes propagated at once (each plane's own FFTs on one thread then)."""
         self.conv = PlaneConvolution(axes[0], axes[1], options.workers)
+        self._plane_workers = 1 if self.threads > 1 else options.workers
         n_f, shape = self.frequencies.size, self.conv.shape
         itemsize = np.dtype(options.dtype).itemsize
         spectra_bytes = lattice.depths.size * n_f * shape[0] * shape[1] * itemsize
@@ -186,16 +190,23 @@ class SceneOperator:
         """A a: fields (F, ny, nx) of an albedo (Z, Y, X) (real or complex)."""
         albedo = np.asarray(albedo)
         self._check_albedo(albedo)
-        acc = self.conv.padded(self.frequencies.size, self.options.dtype)
-        for i in range(albedo.shape[0]):
-            plane = albedo[i]
-            if not np.any(plane):
-                continue
-            leg = self.laser_leg(i)
-            source = (plane[None] if leg is None else plane[None] * leg).astype(
-                self.options.dtype, copy=False)
-            spectrum = self.conv.input_spectrum(source)                # (1 or F, *shape)
-            acc += self.kernel_spectra(i) * spectrum
+        planes = [i for i in range(albedo.shape[0]) if np.any(albedo[i])]
+        threads = max(1, min(self.threads, len(planes)))
+        sums: list[np.ndarray] = [self.conv.padded(self.frequencies.size, self.options.dtype)
+                                  for _ in range(threads)]
+
+        def accumulate(k: int) -> None:                  # every threads-th plane from k
+            for i in planes[k::threads]:
+                leg = self.laser_leg(i)
+                source = (albedo[i][None] if leg is None else albedo[i][None] * leg).astype(
+                    self.options.dtype, copy=False)
+                sums[k] += self.kernel_spectra(i) * self.conv.input_spectrum(source,
+                                                                       self._plane_workers)
+
+        run_tasks(accumulate, range(threads), threads)
+        acc = sums[0]
+        for other in sums[1:]:
+            acc += other
         out = self.conv.read_outputs(acc)
         if self.mask is not None:
             out *= self.mask
@@ -211,13 +222,18 @@ class SceneOperator:
             fields = fields * self.mask
         spectrum = self.conv.output_spectrum(fields)
         out: np.ndarray = np.empty(self.lattice.volume_shape, dtype=self.options.dtype)
-        for i in range(out.shape[0]):
+
+        def back_propagate(i: int) -> None:
             product = np.conj(self.kernel_spectra(i)) * spectrum
             leg = self.laser_leg(i)
             if leg is None:                  # confocal: no per-voxel factor, sum f first
-                out[i] = self.conv.read_inputs(product.sum(axis=0, keepdims=True))[0]
+                out[i] = self.conv.read_inputs(product.sum(axis=0, keepdims=True),
+                                               self._plane_workers)[0]
             else:
-                out[i] = np.einsum("fyx,fyx->yx", self.conv.read_inputs(product), np.conj(leg))
+                out[i] = np.einsum("fyx,fyx->yx", self.conv.read_inputs(
+                    product, self._plane_workers), np.conj(leg))
+
+        run_tasks(back_propagate, range(out.shape[0]), min(self.threads, out.shape[0]))
         return out
 
     def normal(self, albedo: np.ndarray) -> np.ndarray:
