@@ -27,11 +27,8 @@ training spacing is a whole multiple of it) covering the training grid and half 
 training spacing beyond. Enough frequencies are fitted that paths over twice the depth
 span do not alias in time.
 
-A random scan (scattered samples, :func:`nlosfw.model.protocol.scattered_field`) is fitted
-on the grid its points were drawn from (:func:`~nlosfw.model.rsd_sampling.wall_samples`: the
-smallest regular grid holding them all) with the operator masked to the kept points, so
-the grid's FFT layout serves any subset of it; points that lie on no regular grid are
-refused in one line.
+A random scan (scattered samples) is fitted on the grid its points came from
+(:func:`~nlosfw.model.rsd_sampling.wall_samples`), the operator masked to the kept points.
 
 Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a coarse
 lattice (the training spacing laterally, planes a quarter of the shortest wavelength of the
@@ -151,9 +148,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         cfg = self.config
         check_training_field(field, MODEL_NAME)
         check_geometry(field.geometry)
-        samples = wall_samples(field)
+        samples, raw = wall_samples(field), wall_field(field)
         wall, mask = samples.layout, samples.mask
-        raw = wall_field(field)
         scale = float(np.sqrt(np.mean(np.abs(raw) ** 2)))
         values = samples.on_grid(raw) / scale
         self._projection = background_projection(cfg.background, field, samples)
@@ -233,7 +229,6 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         """The albedo fitted to ``data`` by FISTA on the column-normalised operator (times
         the per-frequency ``gains`` of the system response, if any), from ``start``."""
         cfg = self.config
-
         norms = op.column_norms()
         project = self._projector(op.frequencies)
         data = project(data)
