@@ -34,20 +34,38 @@ HISTORY_EVERY = 10
 
 class TorchPlaneOperator:
     """A a for an albedo a (Z, Y, X), real: the wall fields (F, ny, nx), complex, on
-    ``device`` (see :class:`nlosfw.model.PlaneStack`)."""
+    ``device`` (see :class:`nlosfw.model.PlaneStack`).
+
+    A confocal scan on the CPU sums over planes as one batched matrix product per lattice
+    point (the spectra held as (Ly Lx, F, Z)): 2.7 times faster there than the product
+    summed over planes, which holds a (Z, F, Ly, Lx) array in every step (70 planes, 135
+    frequencies, 135 x 135, forward and backward: 2.1 s against 5.6 s on 2 cores). A GPU and
+    the single-spot case keep that sum (measured on the H200; each plane's laser leg makes
+    the inputs differ per frequency there).
+    """
 
     def __init__(self, stack: PlaneStack, device: torch.device | str = "cpu") -> None:
-        self.spectra = torch.from_numpy(stack.spectra).to(device)
+        spectra = torch.from_numpy(stack.spectra).to(device)
         self.laser = None if stack.laser is None else torch.from_numpy(stack.laser).to(device)
         self.shape, self.inputs, self.outputs = stack.shape, stack.inputs, stack.outputs
+        self.batched = self.laser is None and spectra.device.type == "cpu"
+        self.dtype = spectra.dtype
+        z, n_f = spectra.shape[:2]
+        self.spectra = (spectra.permute(2, 3, 1, 0).reshape(-1, n_f, z).contiguous()
+                        if self.batched else spectra)
 
     def __call__(self, albedo: torch.Tensor) -> torch.Tensor:
-        a = albedo.to(self.spectra.dtype)[:, None]                  # (Z, 1, Y, X)
+        a = albedo.to(self.dtype)[:, None]                          # (Z, 1, Y, X)
         source = a if self.laser is None else a * self.laser        # (Z, 1 or F, Y, X)
         work = torch.zeros(source.shape[:2] + self.shape, dtype=source.dtype,
                            device=source.device)
         work[(..., self.inputs[0], self.inputs[1])] = source
-        total = torch.sum(self.spectra * torch.fft.fft2(work), dim=0)   # (F, Ly, Lx)
+        planes = torch.fft.fft2(work)                               # (Z, 1 or F, Ly, Lx)
+        if self.batched:                                            # (Ly Lx, F, Z) @ (.., Z, 1)
+            columns = planes[:, 0].permute(1, 2, 0).reshape(-1, planes.shape[0], 1)
+            total = torch.bmm(self.spectra, columns).reshape(self.shape + (-1,)).permute(2, 0, 1)
+        else:
+            total = torch.sum(self.spectra * planes, dim=0)         # (F, Ly, Lx)
         return torch.fft.ifft2(total)[(..., self.outputs[0], self.outputs[1])]
 
 

@@ -86,10 +86,13 @@ def test_torch_and_jax_operators_match_numpy(confocal, spacings):
         assert _relative(jax_got, got) < 1e-5
 
 
-def test_the_torch_operator_is_differentiable():
+@pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])
+def test_the_torch_operator_is_differentiable(confocal):
     """The gradient of 1/2 ||A a - P||^2 by autograd equals Re(A^H (A a - P)) from numpy's
-    adjoint (an independent implementation: correlation with conjugate kernels)."""
-    op = _operator(False, 0.08, 0.04)
+    adjoint (an independent implementation: correlation with conjugate kernels); confocal
+    scans take the batched product on the CPU."""
+    op = _operator(confocal, 0.08, 0.04)
+    assert TorchPlaneOperator(plane_stack(op)).batched == confocal
     rng = np.random.default_rng(5)
     albedo = rng.random(op.lattice.volume_shape).astype(np.float32)
     target = (rng.normal(size=op.field_shape) + 1j * rng.normal(size=op.field_shape))
