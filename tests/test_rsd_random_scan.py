@@ -8,8 +8,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlosfw.capture.enums import CaptureKind
-from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import DataError
 from nlosfw.model.protocol import SpatialSampling, scattered_field, split_field
 from nlosfw.model.rsd_background import BackgroundProjection
@@ -19,32 +17,13 @@ from nlosfw.model.scene_operator import SceneOperator, VoxelLattice
 from nlosfw.model.volume_training import validation_split
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
-
-LASER = np.array([0.07, -0.04, 0.0])
-DEVICE = np.array([-0.6, 0.1, 0.3])
-
-
-def _geometry(confocal: bool) -> CaptureGeometry:
-    if confocal:
-        return CaptureGeometry(kind=CaptureKind.CONFOCAL, laser_xyz=DEVICE, sensor_xyz=DEVICE)
-    return CaptureGeometry(kind=CaptureKind.SINGLE_SPOT, laser_point=LASER, laser_xyz=DEVICE,
-                           sensor_xyz=DEVICE)
+from tests.test_rsd_prior import _geometry, _point_field
 
 
 def _field(values: np.ndarray, wall: np.ndarray, freqs: np.ndarray, confocal: bool
            ) -> PhasorField:
     return PhasorField(values=values, frequencies=freqs, wall_xyz=wall,
                        geometry=_geometry(confocal))
-
-
-def _point_field(target, wall: np.ndarray, freqs: np.ndarray, confocal: bool) -> np.ndarray:
-    """Closed form: a point scatterer (no normal), wall cosines, (F, ...)."""
-    p = np.asarray(target, float)
-    r_s = np.linalg.norm(wall - p, axis=-1)
-    r_l = r_s if confocal else np.linalg.norm(p - LASER)
-    amp = (p[2] / r_l) * (p[2] / r_s) / (r_l**2 * r_s**2)
-    return amp[None] * np.exp(-2j * np.pi * freqs.reshape((-1,) + (1,) * r_s.ndim)
-                              * (r_l + r_s)[None])
 
 
 # ------------------------------------------------------------------ the samples' grid
