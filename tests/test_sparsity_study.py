@@ -178,3 +178,22 @@ def test_the_study_figure_legend_wraps_to_the_figure_width():
                      [:columns])
     assert widest_row <= 0.95 * 11.0
     assert legend_columns([long[0]], 4.0) == 1
+
+
+def test_a_random_pattern_is_drawn_apart_from_the_grid_in_the_same_colour():
+    """The study figure tells a model's random-pattern line from its grid line by a dashed
+    line and hollow markers, in the model's one colour; the references keep their own line
+    style and only go hollow."""
+    from nlosfw.report.study import series_style
+
+    colours: dict = {}
+    grid = series_style("rsd_prior", "grid", "model", colours)
+    scattered = series_style("rsd_prior", "random", "model", colours)
+    other = series_style("siren_torch", "random", "model", colours)
+    assert grid.color == scattered.color != other.color
+    assert (grid.linestyle, grid.fillstyle) == ("-", "full")
+    assert (scattered.linestyle, scattered.fillstyle) == ("--", "none")
+    interp_grid = series_style("interp", "grid", "reference", colours)
+    interp_random = series_style("interp", "random", "reference", colours)
+    assert interp_grid.linestyle == interp_random.linestyle == ":"
+    assert (interp_grid.fillstyle, interp_random.fillstyle) == ("full", "none")

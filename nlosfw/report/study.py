@@ -32,7 +32,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 from nlosfw.common.config import Scalar
 from nlosfw.pipeline.metrics import ImageScores, RunMetrics
@@ -348,15 +348,42 @@ def _plot_series(ax: Axes, line: Sequence[StudyRow], panel: tuple[str, float],
     if not x:
         return
     name = first.series + (" (random)" if first.pattern == "random" else "")
+    style = series_style(first.series, first.pattern, first.kind, colours)
     if first.kind != "model":
-        style = _STYLE[first.series]
         if first.series == "true":
             name = "true (full capture)"
         elif first.series == "ceiling":
             name = "ceiling (half A's full scan)"
-        ax.plot(x, mean, label=name, linewidth=1.2, markersize=4, color=style["color"],
-                linestyle=style["linestyle"], marker=style["marker"])
+        ax.plot(x, mean, label=name, linewidth=1.2, markersize=4, color=style.color,
+                linestyle=style.linestyle, marker=style.marker, fillstyle=style.fillstyle,
+                alpha=style.alpha)
         return
-    colour = colours.setdefault(first.series, f"C{len(colours) % 10}")
-    ax.errorbar(x, mean, yerr=[low, high], color=colour, marker="o", markersize=4,
-                capsize=3, linewidth=1.5, label=f"{name} (mean, min-max over seeds)")
+    ax.errorbar(x, mean, yerr=[low, high], markersize=4, capsize=3, linewidth=1.5,
+                label=f"{name} (mean, min-max over seeds)", color=style.color,
+                linestyle=style.linestyle, marker=style.marker, fillstyle=style.fillstyle,
+                alpha=style.alpha)
+
+
+class SeriesStyle(NamedTuple):
+    """How the study figure draws a series."""
+
+    color: ColorType
+    linestyle: str
+    marker: str
+    fillstyle: str = "full"
+    alpha: float = 1.0
+
+
+def series_style(series: str, pattern: str, kind: str,
+                 colours: dict[str, ColorType]) -> SeriesStyle:
+    """A colour per model (``colours`` assigns them in order) or the reference's own style;
+    a random scan pattern draws the same colour dashed, with hollow markers."""
+    if kind != "model":
+        known = _STYLE[series]
+        style = SeriesStyle(known["color"], known["linestyle"], known["marker"])
+    else:
+        style = SeriesStyle(colours.setdefault(series, f"C{len(colours) % 10}"), "-", "o")
+    if pattern == "random":
+        style = style._replace(linestyle="--" if style.linestyle == "-" else style.linestyle,
+                               fillstyle="none", alpha=0.8)
+    return style
