@@ -119,6 +119,7 @@ def test_column_norms_match_the_operator():
     for confocal in (False, True):
         op = SceneOperator(lattice, grid_layout(wall), _geometry(confocal), freqs)
         norms = op.column_norms()
+        assert op.column_norms() is norms and not norms.flags.writeable   # computed once
         for index in [(0, 0, 0), (1, 3, 4), (0, 4, 2)]:
             e = np.zeros(lattice.volume_shape)
             e[index] = 1.0

@@ -61,7 +61,7 @@ from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.files import format_bytes
 from nlosfw.common.memory import available_memory
 from nlosfw.image.fft import Precision
-from nlosfw.image.rsd_kernel import check_geometry, wall_field
+from nlosfw.image.rsd_kernel import check_geometry
 from nlosfw.model.interface import (
     FieldModel,
     FieldModelConfig,
@@ -73,7 +73,7 @@ from nlosfw.model.interface import (
 from nlosfw.model.model_files import read_model_file, write_model_file
 from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import wall_samples
+from nlosfw.model.rsd_sampling import training_values
 from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.model.trainer import NeuralFieldModel, learning_rate
 from nlosfw.model.volume_training import (
@@ -285,10 +285,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         setup (its depth planes, lattice, frequencies and normalisation)."""
         cfg, who = self.config, self.model_name()
         check_geometry(field.geometry)
-        samples = wall_samples(field, who)
-        raw = wall_field(field)
-        scale = float(np.sqrt(np.mean(np.abs(raw) ** 2)))      # rsd_prior's
-        values = samples.on_grid(raw) / scale
+        samples, values, scale = training_values(field, who)      # rsd_prior's
         lattice, chosen = RSDPriorFieldModel(cfg.prior_config()).plan_lattice(values, samples,
                                                                               field)
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128

@@ -66,7 +66,7 @@ from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.depths import field_depth_range
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout
-from nlosfw.image.rsd_kernel import check_geometry, path_multiplier, wall_field
+from nlosfw.image.rsd_kernel import check_geometry, path_multiplier
 from nlosfw.model.fista import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
 from nlosfw.model.interface import (
     FieldModel,
@@ -95,8 +95,8 @@ from nlosfw.model.rsd_sampling import (
     deepest_path,
     enough_frequencies,
     fit_frequency_indices,
+    training_values,
     voxel_lattice,
-    wall_samples,
 )
 from nlosfw.model.scene_operator import (
     OperatorOptions,
@@ -148,10 +148,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         cfg = self.config
         check_training_field(field, MODEL_NAME)
         check_geometry(field.geometry)
-        samples, raw = wall_samples(field), wall_field(field)
+        samples, values, scale = training_values(field)
         wall, mask = samples.layout, samples.mask
-        scale = float(np.sqrt(np.mean(np.abs(raw) ** 2)))
-        values = samples.on_grid(raw) / scale
         self._projection = background_projection(cfg.background, field, samples)
         lattice, chosen = self.plan_lattice(values, samples, field)
         depths, freqs = lattice.depths, field.frequencies[chosen]

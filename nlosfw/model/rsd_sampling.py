@@ -13,6 +13,7 @@ import numpy as np
 from nlosfw.common.config import number
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.image.plane_convolution import GridLayout, GridOrder, grid_layout, to_canonical
+from nlosfw.image.rsd_kernel import wall_field
 from nlosfw.model.scene_operator import VoxelLattice
 from nlosfw.transform.field import PhasorField
 
@@ -136,6 +137,16 @@ def wall_samples(field: PhasorField, who: str = "rsd_prior") -> WallSamples:
     layout = GridLayout(GridOrder(False, False, False), (axes[0][0], axes[1][0]),
                         (axes[0][1], axes[1][1]), shape)
     return WallSamples(layout, mask, (rows, cols))
+
+
+def training_values(field: PhasorField, who: str = "rsd_prior"
+                    ) -> tuple[WallSamples, np.ndarray, float]:
+    """(the samples' wall grid, the field without device legs on it divided by its RMS over
+    the samples (F, ny, nx), zero where not sampled, that RMS): what ``rsd_prior`` and the
+    neural volume fit."""
+    samples, raw = wall_samples(field, who), wall_field(field)
+    scale = float(np.sqrt(np.mean(np.abs(raw) ** 2)))
+    return samples, samples.on_grid(raw) / scale, scale
 
 
 def _lattice_axis(values: np.ndarray, who: str, name: str) -> tuple[float, float, int]:

@@ -143,6 +143,7 @@ class SceneOperator:
         self._cache = spectra_bytes <= options.cache_mb * 2**20
         self._spectra: dict[int, np.ndarray] = {}
         self._laser: dict[int, np.ndarray | None] = {}
+        self._norms: np.ndarray | None = None
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -241,7 +242,10 @@ class SceneOperator:
         return self.adjoint(self.forward(albedo)).real
 
     def column_norms(self) -> np.ndarray:
-        """||A e_v|| for every voxel (Z, Y, X): sqrt(sum_f sum_s |A_f[s, v]|^2)."""
+        """||A e_v|| for every voxel (Z, Y, X): sqrt(sum_f sum_s |A_f[s, v]|^2) (computed once
+        per operator; read-only)."""
+        if self._norms is not None:
+            return self._norms
         ones = (np.ones((1,) + self.wall.shape) if self.mask is None
                 else self.mask[None].astype(float))
         out = np.empty(self.lattice.volume_shape)
@@ -259,6 +263,8 @@ class SceneOperator:
                               + (z - lp[2]) ** 2)
                 sums = sums * leg_amplitude(r_l, z, self.options.amplitude) ** 2
             out[i] = np.sqrt(np.maximum(sums, 0.0) * self.frequencies.size)
+        out.setflags(write=False)
+        self._norms = out
         return out
 
     def _check_albedo(self, albedo: np.ndarray) -> None:
