@@ -78,6 +78,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.model.volume_training import (
         BestStep,
         PlaneStack,
+        history_entry,
         plane_stack,
         stack_bytes,
         validation_split,
@@ -115,6 +116,7 @@ __all__ = [
     "NeuralFieldConfig",
     "NeuralFieldModel",
     "BestStep",
+    "history_entry",
     "NeuralVolumeConfig",
     "NeuralVolumeFieldModel",
     "PlaneStack",

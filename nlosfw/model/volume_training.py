@@ -80,6 +80,15 @@ def validation_split(shape: tuple[int, int], fraction: float, seed: int,
     return train.reshape(shape), validation.reshape(shape)
 
 
+def history_entry(step: int, loss: float, validation: float | None) -> dict[str, float]:
+    """A fit-history entry of the backends' loops: the step, the training loss and, with
+    validation points, their error (``val_loss``)."""
+    entry: dict[str, float] = {"step": step, "loss": loss}
+    if validation is not None:
+        entry["val_loss"] = validation
+    return entry
+
+
 @dataclass
 class BestStep:
     """The step with the lowest validation error so far (no validation: the latest) and its

@@ -28,6 +28,7 @@ from nlosfw.model import (
     TrainedVolume,
     TrainingStep,
     VolumeProblem,
+    history_entry,
 )
 from nlosfw.plugins import registered_network
 from nlosfw_jax.engine import Fixed, JaxEngine
@@ -133,8 +134,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
             val_error = float(error) if has_val else None
             best.offer(k, val_error, current)
             if k == 0 or (k + 1) % HISTORY_EVERY == 0 or k + 1 == cfg.steps:
-                history.append({"step": k + 1, "loss": loss_value} if val_error is None
-                               else {"step": k + 1, "loss": loss_value, "val_loss": val_error})
+                history.append(history_entry(k + 1, loss_value, val_error))
             if on_step is not None:
                 on_step(TrainingStep(step=k + 1, total_steps=cfg.steps, loss=loss_value,
                                      seconds=time.perf_counter() - start))

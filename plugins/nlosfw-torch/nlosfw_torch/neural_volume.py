@@ -24,6 +24,7 @@ from nlosfw.model import (
     TrainedVolume,
     TrainingStep,
     VolumeProblem,
+    history_entry,
 )
 from nlosfw.plugins import registered_network
 from nlosfw_torch.engine import TorchEngine
@@ -140,8 +141,7 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                     raise FitError(f"{who}: training diverged at step {k + 1} (loss "
                                    f"{loss_value}); lower model.lr")
                 if k == 0 or (k + 1) % HISTORY_EVERY == 0 or k + 1 == cfg.steps:
-                    history.append({"step": k + 1, "loss": loss_value} if error is None
-                                   else {"step": k + 1, "loss": loss_value, "val_loss": error})
+                    history.append(history_entry(k + 1, loss_value, error))
                 if on_step is not None:
                     on_step(TrainingStep(step=k + 1, total_steps=cfg.steps, loss=loss_value,
                                          seconds=time.perf_counter() - start))
