@@ -16,6 +16,12 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.capture.geometry import SPEED_OF_LIGHT, CaptureGeometry, device_legs
     from nlosfw.capture.hdf5 import read_capture, write_capture
     from nlosfw.capture.matfile import mat_variables, read_mat_array, read_mat_struct
+    from nlosfw.capture.pileup import (
+        coates_rates,
+        correct_pileup,
+        first_photon_probabilities,
+        piled_up_counts,
+    )
     from nlosfw.capture.preprocess import (
         AppliedStep,
         BinWidth,
@@ -34,6 +40,10 @@ __all__ = [
     "Capture",
     "CaptureFormat",
     "CaptureFormatConfig",
+    "coates_rates",
+    "correct_pileup",
+    "first_photon_probabilities",
+    "piled_up_counts",
     "ConfocalScan",
     "confocal_capture",
     "detect_format",

@@ -1,14 +1,15 @@
 """Preprocessing of a capture before its transform: pure functions, each returning a new one.
 
 The run options ``capture.gate``, ``time_crop``, ``bin``, ``stride``, ``flip``,
-``transpose``, ``bin_width``, ``tofgrid`` and ``background`` (:class:`Preprocessing`)
-map one to one onto the functions of :mod:`nlosfw.capture.time_axis` and
-:mod:`nlosfw.capture.scan_grid` (re-exported here). :func:`preprocess` applies those that are set,
-in a fixed order (background, bin_width, tofgrid, gate, time_crop, transpose, flip, bin,
-stride), and returns what it did as :class:`AppliedStep` records (the values actually
-used and whether they came from the run's options or the capture format's defaults), so
-a result can be reproduced. Positions in bins refer to the time axis as read (after the
-per-pixel delays are removed). No function modifies its input.
+``transpose``, ``bin_width``, ``tofgrid``, ``background`` and ``pileup_pulses``
+(:class:`Preprocessing`) map one to one onto the functions of :mod:`nlosfw.capture.time_axis`,
+:mod:`nlosfw.capture.scan_grid` (re-exported here) and :mod:`nlosfw.capture.pileup`.
+:func:`preprocess` applies those that are set, in a fixed order (pileup_pulses, background,
+bin_width, tofgrid, gate, time_crop, transpose, flip, bin, stride), and returns what it
+did as :class:`AppliedStep` records (the values actually used and whether they came from
+the run's options or the capture format's defaults), so a result can be reproduced.
+Positions in bins refer to the time axis as read (after the per-pixel delays are
+removed). No function modifies its input.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from typing import Literal
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.pileup import correct_pileup
 from nlosfw.capture.preprocess_options import (
     METRES_PER_PS,
     BinWidth,
@@ -141,10 +143,23 @@ def _dims(shape: tuple[int, ...]) -> str:
 StepResult = tuple[Capture, str] | None
 
 
+def _pileup(c: Capture, o: Preprocessing, extras: Extras) -> StepResult:
+    assert o.pileup_pulses is not None
+    out = correct_pileup(c, o.pileup_pulses)
+    worst = out.scene_info["pileup"]["largest_detection_probability"]
+    return out, (f"Coates' correction over {o.pileup_pulses} pulses per scan point (at most "
+                 f"{100 * worst:.3g}% of a point's pulses detected a photon)")
+
+
 def _background(c: Capture, o: Preprocessing, extras: Extras) -> StepResult:
     if extras.background is None:
         return None
-    return subtract_background(c, extras.background), "subtracted bin by bin"
+    background = extras.background
+    if o.pileup_pulses is not None:
+        background = correct_pileup(background, o.pileup_pulses, where="capture.background")
+        return (subtract_background(c, background),
+                "corrected for pile-up like the capture, subtracted bin by bin")
+    return subtract_background(c, background), "subtracted bin by bin"
 
 
 def _bin_width(c: Capture, o: Preprocessing, extras: Extras) -> StepResult:
@@ -201,7 +216,7 @@ def _stride(c: Capture, o: Preprocessing, extras: Extras) -> StepResult:
 
 
 #: The steps in the order :func:`preprocess` applies them, by option name.
-_STEPS = (("background", _background), ("bin_width", _bin_width), ("tofgrid", _tofgrid),
-          ("gate", _gate), ("time_crop", _time_crop), ("transpose", _transpose),
-          ("flip", _flip), ("bin", _bin), ("stride", _stride))
+_STEPS = (("pileup_pulses", _pileup), ("background", _background), ("bin_width", _bin_width),
+          ("tofgrid", _tofgrid), ("gate", _gate), ("time_crop", _time_crop),
+          ("transpose", _transpose), ("flip", _flip), ("bin", _bin), ("stride", _stride))
 

@@ -137,9 +137,13 @@ class Preprocessing:
     floor(delay / bin width) bins; '' for none."""
     background: str | None = None
     """A capture of the same scan without the hidden scene, subtracted bin by bin."""
+    pileup_pulses: int | None = None
+    """Laser pulses per scan point: correct the detector's pile-up (Coates' estimator,
+    :mod:`nlosfw.capture.pileup`) before every other step, the background capture's too;
+    null: none. Needs raw photon counts."""
 
     def __post_init__(self) -> None:
-        for name in ("bin", "stride"):
+        for name in ("bin", "stride", "pileup_pulses"):
             value = getattr(self, name)
             require(value is None or value >= 1, name, f"must be >= 1, got {value}")
 

@@ -36,7 +36,8 @@ KeyMaterial = dict[str, object]
 class CaptureSource(Preprocessing):
     """Where the capture comes from, and its preprocessing (the fields of
     :class:`~nlosfw.capture.Preprocessing`: gate, time_crop, bin, stride, flip, transpose,
-    bin_width, tofgrid, background), applied to a file's capture and to a simulated one."""
+    bin_width, tofgrid, background, pileup_pulses), applied to a file's capture and to a
+    simulated one."""
 
     path: str | None = None
     """Read this capture file instead of simulating; its format is detected from its content."""

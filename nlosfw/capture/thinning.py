@@ -60,28 +60,30 @@ def count_scale(capture: Capture) -> float:
     return 1.0
 
 
-def photon_counts(capture: Capture, where: str) -> np.ndarray:
-    """H as integer photon counts (int64), or a one-line ConfigError for ``split.thinning``
-    naming ``where`` (the capture) and why it is not counts: complex, not finite, negative,
-    or not integers (after the count scale of a simulated capture)."""
+def photon_counts(capture: Capture, where: str, option: str = OPTION,
+                  purpose: str = "count splitting") -> np.ndarray:
+    """H as integer photon counts (int64), or a one-line ConfigError for ``option`` (the
+    step that needs them, ``purpose``) naming ``where`` (the capture) and why it is not
+    counts: complex, not finite, negative, or not integers (after the count scale of a
+    simulated capture)."""
     H = capture.H
     if np.iscomplexobj(H):
-        raise ConfigError(OPTION, f"{where}: H is complex (a frequency-domain capture); count "
-                                  "splitting needs photon counts")
+        raise ConfigError(option, f"{where}: H is complex (a frequency-domain capture); "
+                                  f"{purpose} needs photon counts")
     if np.issubdtype(H.dtype, np.integer):
         if H.size and int(H.min()) < 0:
-            raise ConfigError(OPTION, f"{where}: H holds negative values (min {int(H.min())}); "
-                                      "count splitting needs photon counts >= 0")
+            raise ConfigError(option, f"{where}: H holds negative values (min {int(H.min())}); "
+                                      f"{purpose} needs photon counts >= 0")
         return H.astype(np.int64)
     if not np.all(np.isfinite(H)):
-        raise ConfigError(OPTION, f"{where}: H holds NaN or infinite values; count splitting "
+        raise ConfigError(option, f"{where}: H holds NaN or infinite values; {purpose} "
                                   "needs photon counts")
     scale = count_scale(capture)
     values = H.astype(np.float64) * scale
     low = float(values.min()) if values.size else 0.0
     if low < 0:
-        raise ConfigError(OPTION, f"{where}: H holds negative values (min {low:.4g}), e.g. after "
-                                  "a background subtraction; count splitting needs raw photon "
+        raise ConfigError(option, f"{where}: H holds negative values (min {low:.4g}), e.g. after "
+                                  f"a background subtraction; {purpose} needs raw photon "
                                   "counts >= 0")
     counts = np.rint(values)
     distance = np.abs(values - counts)
@@ -89,8 +91,8 @@ def photon_counts(capture: Capture, where: str) -> np.ndarray:
     if np.any(bad):
         off = float(distance[bad].max())
         per = "" if scale == 1.0 else f" times its {scale:.4g} counts per unit"
-        raise ConfigError(OPTION, f"{where}: H{per} is not integer photon counts (a value is "
-                                  f"{off:.3g} from the nearest integer); count splitting needs "
+        raise ConfigError(option, f"{where}: H{per} is not integer photon counts (a value is "
+                                  f"{off:.3g} from the nearest integer); {purpose} needs "
                                   "raw counts, before any step that does not keep them integers")
     return np.maximum(counts, 0).astype(np.int64)
 

@@ -86,8 +86,9 @@ def _preprocessed(run: StageContext, raw: CaptureResult) -> CaptureResult:
         return raw
     key = cache_key({"capture": raw.key, **prepared.key_material})
     clean, clean_key = raw.clean, raw.clean_key
-    if clean is not None:
-        clean = prepare(clean, options, frozenset(), run.plan.formats).capture
+    if clean is not None:  # noise-free: no counts, no pile-up to correct
+        ideal = dataclasses.replace(options, pileup_pulses=None)
+        clean = prepare(clean, ideal, frozenset(), run.plan.formats).capture
         clean_key = cache_key({"capture": raw.clean_key, **prepared.key_material})
     return dataclasses.replace(raw, capture=prepared.capture, key=key, steps=prepared.steps,
                                clean=clean, clean_key=clean_key)

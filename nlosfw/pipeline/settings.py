@@ -229,6 +229,9 @@ class RunSettings:
         require(not (self.split.thinning and self.capture.background), "split.thinning",
                 "count splitting needs raw photon counts; a background subtraction "
                 "(capture.background) makes them non-integer: drop one of the two")
+        require(not (self.split.thinning and self.capture.pileup_pulses), "split.thinning",
+                "count splitting needs raw photon counts; the pile-up correction "
+                "(capture.pileup_pulses) turns them into estimates: drop one of the two")
         reserved = {"true", "raw", "model", "interp", "ceiling"}
         for label, options in self.compare.items():
             require(label not in reserved and label.isidentifier(), f"compare.{label}",

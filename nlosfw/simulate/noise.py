@@ -6,6 +6,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
+from nlosfw.capture.pileup import piled_up_counts
 from nlosfw.simulate.scene import NoiseConfig
 
 
@@ -18,7 +19,10 @@ def apply_noise(H: np.ndarray, delta_t: float, noise: NoiseConfig,
     that the capture holds ``photons`` expected signal photons, adds
     ``dark_counts`` expected counts per sensor spread evenly over the bins,
     draws counts, and scales back, so the noisy capture's expectation is ``H``
-    plus the dark-count floor.
+    plus the dark-count floor. With ``pulses`` the detector records at most the first
+    photon of each of that many pulses per scan point (pile-up,
+    :mod:`nlosfw.capture.pileup`): the counts are drawn from the first-photon
+    distribution, and the expectation is no longer ``H``.
     """
     out = np.array(H, dtype=np.float64, copy=True)
     info: dict = {"model": noise.model, "jitter_ps": float(noise.jitter_ps)}
@@ -33,7 +37,12 @@ def apply_noise(H: np.ndarray, delta_t: float, noise: NoiseConfig,
         else:
             scale = noise.photons / total
         dark_per_bin = noise.dark_counts / out.shape[0]
-        counts = rng.poisson(out * scale + dark_per_bin)
+        mean = out * scale + dark_per_bin
+        if noise.pulses is None:
+            counts = rng.poisson(mean)
+        else:
+            counts = piled_up_counts(mean, noise.pulses, rng)
+            info["pulses"] = int(noise.pulses)
         out = counts / scale
         info.update(photons=float(noise.photons), dark_counts=float(noise.dark_counts),
                     counts_per_unit=float(scale), total_counts=int(counts.sum()))

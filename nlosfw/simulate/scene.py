@@ -162,9 +162,14 @@ class NoiseConfig:
     """Expected dark counts per sensor over the whole time window (poisson)."""
     jitter_ps: float = 0.0
     """[ps] Standard deviation of Gaussian timing jitter (any model)."""
+    pulses: int | None = None
+    """Laser pulses per scan point (poisson): the detector records at most the first
+    photon of each (pile-up); ``photons`` are those reaching it. null: an ideal detector."""
 
     def __post_init__(self) -> None:
         require_finite(self)
+        require(self.pulses is None or self.pulses >= 1, "pulses",
+                f"must be >= 1 or null, got {self.pulses}")
         require(self.photons > 0, "photons", f"must be > 0, got {self.photons}")
         require(self.dark_counts >= 0, "dark_counts", f"must be >= 0, got {self.dark_counts}")
         require(self.jitter_ps >= 0, "jitter_ps", f"must be >= 0, got {self.jitter_ps}")
