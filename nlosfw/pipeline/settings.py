@@ -206,7 +206,7 @@ class RunSettings:
     stop_after: StopAfter | None = None
     """The last stage to run (null: every stage)."""
     capture: CaptureSource = field(default_factory=CaptureSource)
-    """Where the capture comes from (default: simulate the scene)."""
+    """The capture: a file, or the scene simulated."""
     split: SplitSettings = field(default_factory=SplitSettings)
     """Which wall samples and frequencies the field models train on."""
     reconstruction: ReconstructionSettings = field(default_factory=ReconstructionSettings)
