@@ -194,7 +194,7 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
             raise ConfigError("simulator", "no plugin selected")
         simulator = host.registry.get(PluginKind.SIMULATOR, str(simulator_node.get("name")))
         simulator.create(_plugin_options(simulator_node, simulator.config_class())
-                         ).check_scene(scene)
+                         ).check(scene)
         check_files(settings.capture.options, formats)
         return
     # a malformed file, a wrong format or an option that does not fit the file must fail

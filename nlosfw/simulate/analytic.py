@@ -49,10 +49,12 @@ class AnalyticSimulator(Simulator[AnalyticConfig]):
     """Closed-form transients of points and patches; quadrature for planar items."""
 
     config_class = AnalyticConfig
+    renders_lobes = True
 
     def render(self, geometry: SceneGeometry) -> Capture:
         scene = geometry.scene
-        positions, normals, area_albedo = self.elements(geometry)
+        positions, normals, area_albedo, lobes = self.elements(geometry)
+        glossy = bool(np.any(lobes > 0))
         shadowed = blocked_fraction(scene, geometry.mesh)
         if shadowed > 0:
             log.warning("analytic: %.1f%% of sampled sight lines of scene %s cross another "
@@ -72,14 +74,16 @@ class AnalyticSimulator(Simulator[AnalyticConfig]):
         has_normal = ~np.isnan(normals[:, 0])
         for start in range(0, positions.shape[0], per_chunk):
             sl = slice(start, start + per_chunk)
-            groups = [(m, n) for m, n in ((has_normal[sl], normals[sl][has_normal[sl]]),
-                                          (~has_normal[sl], None)) if m.any()]
+            surface = has_normal[sl]
+            groups = [(m, n, k) for m, n, k in (
+                (surface, normals[sl][surface], lobes[sl][surface] if glossy else None),
+                (~surface, None, None)) if m.any()]
             for s0 in range(0, n_sensors, block):
                 s1 = min(n_sensors, s0 + block)
                 las = laser[s0:s1] if scene.is_confocal else laser
-                for mask, nrm in groups:
+                for mask, nrm, lob in groups:
                     path, weight = three_bounce(las, positions[sl][mask], nrm,
-                                                area_albedo[sl][mask], sensors[s0:s1])
+                                                area_albedo[sl][mask], sensors[s0:s1], lobe=lob)
                     idx = bin_index(path + legs[None, s0:s1], scene.time.start,
                                     scene.time.bin_width)
                     ok = (idx >= 0) & (idx < bins) & (weight > 0)
@@ -98,29 +102,32 @@ class AnalyticSimulator(Simulator[AnalyticConfig]):
                                   f"{', '.join(SUPPORTED_TYPES)}; got {item.type!r} (use a "
                                   "ray-tracing simulator such as embree)")
 
-    def elements(self, geometry: SceneGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Quadrature elements: positions (E, 3), normals (E, 3; NaN for points), rho*dA (E,)."""
+    def elements(self, geometry: SceneGeometry
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Quadrature elements: positions (E, 3), normals (E, 3; NaN for points), rho*dA (E,)
+        and lobe exponents (E,; 0 for points and Lambertian items)."""
         scene = geometry.scene
         points = geometry.points
         pos = [points.positions]
         nrm = [np.full_like(points.positions, np.nan)]
         area = [points.albedo]
+        lobe = [np.zeros(points.positions.shape[0])]
         for i, item in enumerate(scene.geometry):
             if item.type == "point":
                 continue
             mesh = geometry.mesh.item_mesh(i)
             if item.type == "patch":
                 normal = mesh.face_normals()[0]
-                pos.append(np.asarray(item.position, dtype=float)[None])
-                nrm.append(normal[None])
-                area.append(np.array([item.albedo * mesh.face_areas().sum()]))
-                continue
-            p, n, a = _midpoint_quadrature(mesh, self.config.patch_size)
+                p, n = np.asarray(item.position, dtype=float)[None], normal[None]
+                a = np.array([item.albedo * mesh.face_areas().sum()])
+            else:
+                p, n, a = _midpoint_quadrature(mesh, self.config.patch_size)
             pos.append(p)
             nrm.append(n)
             area.append(a)
-        return np.concatenate(pos), np.concatenate(nrm), np.concatenate(area)
-
+            lobe.append(np.full(a.shape[0], float(item.lobe)))
+        return (np.concatenate(pos), np.concatenate(nrm), np.concatenate(area),
+                np.concatenate(lobe))
 
 def _midpoint_quadrature(mesh: TriangleMesh, size: float) -> tuple[np.ndarray, np.ndarray,
                                                                   np.ndarray]:

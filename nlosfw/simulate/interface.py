@@ -13,7 +13,7 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import GridFormat, HFormat
 from nlosfw.common.config import Configurable, config_to_dict
-from nlosfw.common.errors import DataError
+from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.simulate.geometry import SceneGeometry
 from nlosfw.simulate.scene import Scene
 
@@ -38,6 +38,8 @@ class Simulator(Configurable[SimulatorConfigT], ABC):
     """
 
     config_class: ClassVar[type] = SimulatorConfig
+    renders_lobes: ClassVar[bool] = False
+    """Whether :meth:`render` follows an item's ``lobe`` (else a glossy item is refused)."""
 
     @abstractmethod
     def render(self, geometry: SceneGeometry) -> Capture:
@@ -56,6 +58,17 @@ class Simulator(Configurable[SimulatorConfigT], ABC):
         default accepts every valid scene.
         """
 
+    def check(self, scene: Scene) -> None:
+        """Every check of ``scene`` for this simulator: a glossy item (``lobe`` > 0) is
+        refused unless it :attr:`renders_lobes`, then :meth:`check_scene`."""
+        if not self.renders_lobes:
+            for i, item in enumerate(scene.geometry):
+                if item.lobe > 0:
+                    raise ConfigError(f"scene.geometry[{i}].lobe", (
+                        f"{type(self).__name__} renders Lambertian surfaces only; valid: 0, "
+                        "or a simulator that renders lobes (analytic)"))
+        self.check_scene(scene)
+
     def simulate(self, scene: Scene, base_dir: Path | None = None) -> Capture:
         """The capture of ``scene``: rendered, with ground truth and metadata, then noise."""
         return self.add_noise(self.simulate_clean(scene, base_dir), scene)
@@ -73,7 +86,7 @@ class Simulator(Configurable[SimulatorConfigT], ABC):
 
         geometry = validate_scene(scene, base_dir)  # one-line ConfigError for a bad scene
         scene = geometry.scene
-        self.check_scene(scene)
+        self.check(scene)
         capture = self.render(geometry)
         expected = (scene.time.bins,) + _sensor_axes(scene)
         if capture.H.shape != expected:

@@ -124,6 +124,9 @@ class GeometryItem:
     """Uniform scale of a mesh file's coordinates."""
     params: dict[str, Any] = field(default_factory=dict)
     """Shape-specific parameters (e.g. a heightfield's bumps)."""
+    lobe: float = 0.0
+    """Exponent k of a glossy lobe about the surface normal: the BRDF is rho / pi times
+    cos^k of the half vector's angle (0: Lambertian; :mod:`nlosfw.simulate.physics`)."""
 
     def __post_init__(self) -> None:
         require_finite(self)
@@ -131,6 +134,9 @@ class GeometryItem:
                 f"unknown geometry type {self.type!r}; valid: {', '.join(GEOMETRY_TYPES)}")
         require(self.albedo >= 0, "albedo", f"must be >= 0, got {self.albedo}")
         require(self.scale > 0, "scale", f"must be > 0, got {self.scale}")
+        require(self.lobe >= 0, "lobe", f"must be >= 0 (0: Lambertian), got {self.lobe}")
+        require(self.type != "point" or self.lobe == 0, "lobe",
+                "a point scatterer has no normal to hold a lobe about; valid: 0")
         if self.type in ("rectangle", "patch", "heightfield"):
             require(len(self.size) == 2 and all(s > 0 for s in self.size), "size",
                     f"a {self.type} needs (width, height) > 0, got {self.size}")

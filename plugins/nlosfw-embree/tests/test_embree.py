@@ -178,3 +178,13 @@ def test_window_start_and_cut():
     # float32 bin arithmetic may move a path lying within ~1e-4 bins of an edge
     moved = np.abs(b - a[150:]) > 1e-4 * a.max()
     assert moved.mean() < 0.005
+
+
+def test_a_glossy_item_is_refused_naming_its_lobe():
+    """Embree renders the Lambertian convention only: an item with a lobe is refused in
+    one line before rendering, naming the item and the simulator that renders lobes."""
+    config = tiny_scene_config()
+    config["geometry"][0]["lobe"] = 4.0
+    with pytest.raises(ConfigError, match="Lambertian surfaces only.*analytic") as err:
+        EmbreeSimulator({}).check(scene_from_config(config))
+    assert err.value.option == "scene.geometry[0].lobe"
