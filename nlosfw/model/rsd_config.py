@@ -26,6 +26,16 @@ class RSDPriorConfig(FieldModelConfig):
     amplitude: Amplitude = Amplitude.lambertian
     """Amplitude of each leg: lambertian (surfaces facing the wall, the simulators'),
     point (point scatterers) or inverse_square (no cosines)."""
+    lobe: float = 0.0
+    """Exponent k of a glossy lobe about the voxels' normal, cos^k (lambertian amplitude
+    only; 0: Lambertian)."""
+    fit_lobe: bool = False
+    """Fit k jointly with the albedo over [0, ``lobe_max``] instead
+    (:mod:`nlosfw.model.rsd_lobe`)."""
+    lobe_max: float = 20.0
+    """``fit_lobe``: the largest k searched."""
+    lobe_tolerance: float = 0.25
+    """``fit_lobe``: the search stops when k is known to within this."""
     fit_frequencies: int = 32
     """Frequencies used in the fit, evenly spread over the field's (0: all)."""
     depth_range: tuple[float, ...] = ()
@@ -73,6 +83,15 @@ class RSDPriorConfig(FieldModelConfig):
         require(0 <= self.l1_weight < 1, "l1_weight",
                 f"must be in [0, 1) (1 zeroes the albedo), got {self.l1_weight}")
         require(self.tv_weight >= 0, "tv_weight", f"must be >= 0, got {self.tv_weight}")
+        require(self.lobe >= 0, "lobe", f"must be >= 0 (0: Lambertian), got {self.lobe}")
+        require((self.lobe == 0 and not self.fit_lobe) or self.amplitude == Amplitude.lambertian,
+                "lobe", f"a lobe is about a surface's normal: needs amplitude lambertian, got "
+                f"{self.amplitude}")
+        require(not (self.fit_lobe and self.lobe), "lobe",
+                "is fitted with fit_lobe: leave it 0, or set fit_lobe false to fix it")
+        require(self.lobe_max > 0, "lobe_max", f"must be > 0, got {self.lobe_max}")
+        require(self.lobe_tolerance > 0, "lobe_tolerance",
+                f"must be > 0, got {self.lobe_tolerance}")
         require(self.fit_frequencies >= 0, "fit_frequencies",
                 f"must be >= 0 (0: all), got {self.fit_frequencies}")
         require(len(self.depth_range) in (0, 2), "depth_range",

@@ -38,12 +38,11 @@ contribution ||A e_v|| a_v reaches ``depth_threshold`` of the largest; the fine 
 those within ``depth_margin`` (plus half a coarse step) of them. Separate objects thus cost
 separate clusters of planes, not the whole depth range between them.
 
-With ``background: constant`` one complex offset per frequency, constant over the wall, is
-fitted jointly (minimised out exactly: :mod:`nlosfw.model.rsd_background`) and added to
-predictions; the fit report gives its size relative to the field. With
-``temporal_response: gaussian`` and/or ``time_offset: true`` a gain per frequency (timing
-jitter, a time-origin offset) multiplies the model's field, fitted in turns with the albedo
-(:mod:`nlosfw.model.rsd_response`); the fit report gives the fitted values in ps.
+Terms of real systems, each fitted jointly and reported in the fit report: ``background:
+constant``, a complex offset per frequency, constant over the wall (minimised out exactly:
+:mod:`nlosfw.model.rsd_background`); ``temporal_response: gaussian`` and ``time_offset``,
+a gain per frequency (jitter, a time-origin offset in ps; :mod:`nlosfw.model.rsd_response`);
+``fit_lobe``, a glossy lobe's exponent (:mod:`nlosfw.model.rsd_lobe`; or a fixed ``lobe``).
 
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
@@ -84,11 +83,13 @@ from nlosfw.model.rsd_background import (
     fit_offsets,
 )
 from nlosfw.model.rsd_config import RSDPriorConfig
+from nlosfw.model.rsd_lobe import fit_lobe
 from nlosfw.model.rsd_response import (
     SystemResponse,
     TemporalResponse,
     estimate_response,
     search_response,
+    with_gains,
 )
 from nlosfw.model.rsd_sampling import (
     WallSamples,
@@ -127,6 +128,7 @@ class _Fitted:
     scale: float
     background: WallBackground | None = None
     response: SystemResponse | None = None
+    lobe: float = 0.0
 
 
 class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
@@ -153,32 +155,36 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         self._projection = background_projection(cfg.background, field, samples)
         lattice, chosen = self.plan_lattice(values, samples, field)
         depths, freqs = lattice.depths, field.frequencies[chosen]
-        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options(), mask)
+        def operator(k: float, keep: np.ndarray | None = mask, f: np.ndarray = freqs
+                     ) -> SceneOperator:
+            return SceneOperator(lattice, wall, field.geometry, f, self._options(lobe=k), keep)
+
+        lobe = cfg.lobe if not cfg.fit_lobe else fit_lobe(
+            cfg, operator, lambda op, d, n: self._solve(op, d, n)[0], values[chosen], mask)
         log.info("rsd_prior: %d planes in %.3f-%.3f m, %d x %d voxels, %d frequencies",
                  depths.size, depths.min(), depths.max(), *lattice.shape, freqs.size)
         history: list[dict[str, float]] = []
 
         def report(k: int, objective: float, residual: float) -> None:
             if k == 1 or k % 10 == 0 or k == cfg.iterations:
-                history.append({"step": k, "objective": objective,
-                                "relative_residual": residual})
+                history.append({"step": k, "objective": objective, "relative_residual": residual})
             if on_step is not None:
                 on_step(TrainingStep(step=k, total_steps=cfg.iterations, loss=residual,
                                      seconds=time.perf_counter() - start))
 
-        albedo, response, result = self._fit_albedo(op, values[chosen], report)
+        albedo, response, result = self._fit_albedo(operator(lobe), values[chosen], report)
         background = None if self._projection is None else fit_offsets(
-            self._projection, lambda f: _gained(response, f, SceneOperator(
-                lattice, wall, field.geometry, f, self._options(), mask).forward(albedo)),
+            self._projection,
+            lambda f: with_gains(response, f, operator(lobe, mask, f).forward(albedo)),
             field.frequencies, values, scale)
         self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale,
-                               background, response)
+                               background, response, lobe)
         fitted = {**({} if background is None else background.summary(scale)),
-                  **({} if response is None else response.summary())}
+                  **({} if response is None else response.summary()),
+                  **({"lobe_exponent": lobe} if cfg.fit_lobe else {})}
         return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
-                         final_loss=result.residual,
-                         stopped_early=result.iterations < cfg.iterations, history=history,
-                         fitted=fitted)
+                         final_loss=result.residual, fitted=fitted, history=history,
+                         stopped_early=result.iterations < cfg.iterations)
 
     def _fit_albedo(self, op: SceneOperator, data: np.ndarray,
                     report: Callable[[int, float, float], None]
@@ -307,11 +313,12 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                  "%.3f-%.3f m", depths.size, depths[0], depths[-1], found.size, *found[[0, -1]])
         return grid[near]
 
-    def _options(self, cache: bool = True) -> OperatorOptions:
+    def _options(self, cache: bool = True, lobe: float | None = None) -> OperatorOptions:
         cfg = self.config
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
         return OperatorOptions(amplitude=cfg.amplitude, dtype=dtype, workers=cfg.workers,
-                               cache_mb=cfg.cache_mb if cache else 0.0)
+                               cache_mb=cfg.cache_mb if cache else 0.0,
+                               lobe=cfg.lobe if lobe is None else lobe)
 
     # ------------------------------------------------------------------ predict
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
@@ -321,7 +328,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         kept = np.flatnonzero(np.any(fitted.albedo != 0, axis=(1, 2)))
         lattice = replace(fitted.lattice, depths=fitted.lattice.depths[kept])
         albedo = fitted.albedo[kept]
-        options = self._options(cache=False)
+        options = self._options(cache=False, lobe=fitted.lobe)
         layout = grid_layout(xy) if xy.ndim == 3 else None
         out: np.ndarray | None = None
         if layout is not None and kept.size:
@@ -332,7 +339,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         if out is None:
             points = xy.reshape(-1, 2)
             out = direct_fields(lattice, albedo, points, fitted.geometry, f, options)
-        out = _gained(fitted.response, f, out.reshape((f.size,) + xy.shape[:-1]).astype(
+        out = with_gains(fitted.response, f, out.reshape((f.size,) + xy.shape[:-1]).astype(
             np.complex128) * fitted.scale)
         if fitted.geometry.t_accounts_first_and_last_bounces:
             points3 = np.concatenate([xy, np.zeros(xy.shape[:-1] + (1,))], axis=-1)
@@ -369,7 +376,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         """A fitted model holding ``albedo`` (Z, Y, X) on ``lattice``, in units of the field
         divided by ``scale`` (``neural_volume`` predicts through it)."""
         model = cls(config)
-        model._fitted = _Fitted(lattice, np.asarray(albedo, dtype=np.float32), geometry, scale)
+        model._fitted = _Fitted(lattice, np.asarray(albedo, dtype=np.float32), geometry, scale,
+                                lobe=config.lobe)
         return model
 
     @property
@@ -405,7 +413,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                          {"albedo": fitted.albedo, "depths": lat.depths, **extra},
                          {"origin": list(lat.origin), "step": list(lat.step),
                           "shape": list(lat.shape), "geometry": fitted.geometry.to_dict(),
-                          "scale": fitted.scale,
+                          "scale": fitted.scale, "lobe": fitted.lobe,
                           **({} if fitted.response is None
                              else {"response": fitted.response.to_dict()})})
 
@@ -427,21 +435,15 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                 np.asarray(arrays["background"], np.complex128))
             response = (SystemResponse.from_dict(header["response"]) if "response" in header
                         else None)
+            lobe = float(header.get("lobe", model.config.lobe))
         except (KeyError, TypeError, ValueError, IndexError, ConfigError, DataError) as err:
             raise DataError(f"model file {path}: invalid {MODEL_NAME} file "
                             f"({type(err).__name__})") from None
         if albedo.shape != lattice.volume_shape or not np.all(np.isfinite(albedo)):
             raise DataError(f"model file {path}: albedo of shape {albedo.shape} does not match "
                             f"the lattice {lattice.volume_shape}")
-        model._fitted = _Fitted(lattice, albedo, geometry, scale, background, response)
+        model._fitted = _Fitted(lattice, albedo, geometry, scale, background, response, lobe)
         return model
-
-
-def _gained(response: SystemResponse | None, f: np.ndarray, fields: np.ndarray) -> np.ndarray:
-    """Fields (F, ...) at frequencies f times the response's gains (unchanged for None)."""
-    if response is None:
-        return fields
-    return fields * response.gains(f).reshape((-1,) + (1,) * (fields.ndim - 1))
 
 
 def _pair(values: Sequence[float]) -> tuple[float, float]:

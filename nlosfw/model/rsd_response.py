@@ -195,3 +195,11 @@ def _vertex(xs: list[float], ys: list[float], centre: float, reach: float) -> fl
     if not a[0] > 0:
         return float(xs[int(np.argmin(ys))])
     return float(np.clip(-a[1] / (2 * a[0]), centre - reach, centre + reach))
+
+
+def with_gains(response: SystemResponse | None, f: np.ndarray, fields: np.ndarray
+               ) -> np.ndarray:
+    """Fields (F, ...) at frequencies f times the response's gains (unchanged for None)."""
+    if response is None:
+        return fields
+    return fields * response.gains(f).reshape((-1,) + (1,) * (fields.ndim - 1))

@@ -11,7 +11,10 @@ with r_l = |x_v - x_l|, r_s = |x_v - x_s|, z the voxel's depth and g the amplitu
 one leg (:class:`Amplitude`; constants such as 1/pi^3 are absorbed in the albedo):
 
 * ``lambertian``: g = z^2 / r^4 = cos(wall) cos(voxel) / r^2, a surface element facing
-  the wall, the convention of :mod:`nlosfw.simulate.physics`;
+  the wall, the convention of :mod:`nlosfw.simulate.physics`; with a glossy lobe of
+  exponent k (``OperatorOptions.lobe``) times cos(voxel)^(k/2) per leg: the simulators'
+  cos^k of the half vector's angle exactly for a confocal scan, approximately (the
+  product of the legs' half-powers) for a single spot;
 * ``point``: g = z / r^3 = cos(wall) / r^2, a point scatterer of the same convention;
 * ``inverse_square``: g = 1 / r^2 (no cosines).
 
@@ -47,11 +50,14 @@ class Amplitude(Choice):
     inverse_square = "inverse_square"
 
 
-def leg_amplitude(r: np.ndarray, z: float | np.ndarray, amplitude: str) -> np.ndarray:
-    """g(r, z) of one leg: lambertian z^2/r^4, point z/r^3, inverse_square 1/r^2."""
+def leg_amplitude(r: np.ndarray, z: float | np.ndarray, amplitude: str,
+                  lobe: float = 0.0) -> np.ndarray:
+    """g(r, z) of one leg: lambertian z^2/r^4 (times (z/r)^(lobe/2) for a glossy lobe),
+    point z/r^3, inverse_square 1/r^2."""
     r = np.asarray(r, dtype=float)
     if amplitude == Amplitude.lambertian:
-        return np.asarray(z) ** 2 / r**4
+        g = np.asarray(z) ** 2 / r**4
+        return g if lobe == 0 else g * (np.asarray(z) / r) ** (lobe / 2)
     if amplitude == Amplitude.point:
         return np.asarray(z) / r**3
     return 1.0 / r**2
@@ -100,6 +106,8 @@ class OperatorOptions:
     """How a :class:`SceneOperator` evaluates: amplitude, precision, threads, cache."""
 
     amplitude: str = Amplitude.lambertian
+    lobe: float = 0.0
+    """Exponent k of a glossy lobe about the voxels' normal (lambertian only; 0: none)."""
     dtype: type = np.complex128
     workers: int = -1
     cache_mb: float = 1024.0
@@ -162,13 +170,16 @@ class SceneOperator:
         z = float(self.lattice.depths[index])
         r = self.conv.distances(z)
         legs = 2 if self.confocal else 1
-        amp = leg_amplitude(r, z, self.options.amplitude) ** legs
+        amp = self._leg(r, z) ** legs
         kernels = phasor_series(self.frequencies, -self.multiplier * r, self.options.dtype,
                                 scale=amp)
         spectra = self.conv.kernel_spectrum(kernels, self.options.dtype)
         if self._cache:
             self._spectra[index] = spectra
         return spectra
+
+    def _leg(self, r: np.ndarray, z: float | np.ndarray) -> np.ndarray:
+        return leg_amplitude(r, z, self.options.amplitude, self.options.lobe)
 
     def laser_leg(self, index: int) -> np.ndarray | None:
         """L_f(x_v) = g(r_l) exp(-2 pi i f r_l) on plane ``index``, (F, Y, X); None if confocal."""
@@ -181,7 +192,7 @@ class SceneOperator:
         lp = np.asarray(self.geometry.laser_point, dtype=float)
         r_l = np.sqrt((ys[:, None] - lp[1]) ** 2 + (xs[None, :] - lp[0]) ** 2 + (z - lp[2]) ** 2)
         leg = phasor_series(self.frequencies, -r_l, self.options.dtype,
-                            scale=leg_amplitude(r_l, z, self.options.amplitude))
+                            scale=self._leg(r_l, z))
         if self._cache:
             self._laser[index] = leg
         return leg
@@ -255,13 +266,13 @@ class SceneOperator:
         spectrum = self.conv.output_spectrum(ones)
         for i, z in enumerate(self.lattice.depths):
             r = self.conv.distances(float(z))
-            power = leg_amplitude(r, z, self.options.amplitude) ** (2 * legs)
+            power = self._leg(r, z) ** (2 * legs)
             kernel_spectrum = self.conv.kernel_spectrum(power[None], np.complex128)
             sums = self.conv.read_inputs(np.conj(kernel_spectrum) * spectrum)[0].real
             if lp is not None:
                 r_l = np.sqrt((ys[:, None] - lp[1]) ** 2 + (xs[None, :] - lp[0]) ** 2
                               + (z - lp[2]) ** 2)
-                sums = sums * leg_amplitude(r_l, z, self.options.amplitude) ** 2
+                sums = sums * self._leg(r_l, z) ** 2
             out[i] = np.sqrt(np.maximum(sums, 0.0) * self.frequencies.size)
         out.setflags(write=False)
         self._norms = out
@@ -295,12 +306,12 @@ def direct_fields(lattice: VoxelLattice, albedo: np.ndarray, points: np.ndarray,
     for start in range(0, a.size, block):
         v, w = vox[start:start + block], a[start:start + block]
         r_s = np.sqrt(((v[:, None, :] - pts[None, :, :]) ** 2).sum(-1))      # (n, N)
-        g_s = leg_amplitude(r_s, v[:, 2:3], options.amplitude)
+        g_s = leg_amplitude(r_s, v[:, 2:3], options.amplitude, options.lobe)
         if confocal:
             path, scale = m * r_s, w[:, None] * g_s**2
         else:
             r_l = np.linalg.norm(v - np.asarray(geometry.laser_point, dtype=float), axis=-1)
-            g_l = leg_amplitude(r_l, v[:, 2], options.amplitude)
+            g_l = leg_amplitude(r_l, v[:, 2], options.amplitude, options.lobe)
             path, scale = r_l[:, None] + r_s, (w * g_l)[:, None] * g_s
         for i, phasor in phasor_steps(f, -path, scale=scale):
             out[i] += phasor.sum(axis=0)

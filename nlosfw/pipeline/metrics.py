@@ -165,7 +165,8 @@ class FitMetrics(Document, frozen=True, kw_only=True):
         "background=constant: background_rms_ratio and background_max_ratio, the RMS and "
         "largest offset |b_f| over the training frequencies / the field's RMS; with "
         "temporal_response=gaussian: response_sigma_ps, the fitted jitter's standard deviation; "
-        "with time_offset=true: time_offset_ps, how late the capture's signal is (ps))")] = None
+        "with time_offset=true: time_offset_ps, how late the capture's signal is (ps); with "
+        "fit_lobe=true: lobe_exponent, the glossy lobe's k)")] = None
 
     @classmethod
     def of(cls, report: FitReport) -> "FitMetrics":
