@@ -50,7 +50,7 @@ import logging
 import tempfile
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import ClassVar
 
@@ -123,6 +123,13 @@ class NeuralVolumeConfig(FieldModelConfig):
     """CPU threads of torch while training (0: torch's default; JAX ignores it)."""
     amplitude: Amplitude = Amplitude.lambertian
     """Amplitude of each leg (``rsd_prior``'s): lambertian, point or inverse_square."""
+    lobe: float = 0.0
+    """Exponent k of a glossy lobe about the voxels' normal (``rsd_prior``'s; 0: none)."""
+    fit_lobe: bool = False
+    """Choose k by ``rsd_prior``'s fit with ``fit_lobe`` (its held-out search over [0,
+    ``lobe_max``]) before training; the network then trains with that k."""
+    lobe_max: float = 20.0
+    """``fit_lobe``: the largest k searched."""
     fit_frequencies: int = 0
     """Frequencies used in the fit, evenly spread over the field's (0: all)."""
     depth_range: tuple[float, ...] = ()
@@ -163,9 +170,10 @@ class NeuralVolumeConfig(FieldModelConfig):
     def prior_config(self) -> RSDPriorConfig:
         """``rsd_prior``'s options that find the depth planes and predict."""
         return RSDPriorConfig(
-            seed=self.seed, amplitude=self.amplitude,
-            fit_frequencies=self.fit_frequencies, depth_range=self.depth_range,
-            depth_step=self.depth_step, lateral_step=self.lateral_step,
+            seed=self.seed, amplitude=self.amplitude, lobe=self.lobe, fit_lobe=self.fit_lobe,
+            lobe_max=self.lobe_max, fit_frequencies=self.fit_frequencies,
+            depth_range=self.depth_range, depth_step=self.depth_step,
+            lateral_step=self.lateral_step,
             depth_threshold=self.depth_threshold, depth_iterations=self.depth_iterations,
             depth_margin=self.depth_margin, precision=self.precision, workers=self.workers)
 
@@ -265,32 +273,38 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         who = self.model_name()
         check_training_field(field, who)
         network = self.network_class(self.config.network)   # a bad name fails first
-        problem, lattice, scale = self._problem(field, network)
+        prior, fitted = self.config.prior_config(), {}
+        if prior.fit_lobe:  # rsd_prior's search (its default frequencies), then the network
+            search = replace(prior, fit_frequencies=RSDPriorConfig().fit_frequencies)
+            fitted = {"lobe_exponent": RSDPriorFieldModel(search).fit(field).fitted[
+                "lobe_exponent"]}
+            prior = replace(prior, lobe=fitted["lobe_exponent"], fit_lobe=False)
+        problem, lattice, scale = self._problem(field, network, prior)
         trained = self.train(problem, on_step)
         albedo = np.asarray(trained.albedo, dtype=np.float32)
         if albedo.shape != problem.gain.shape or not np.all(np.isfinite(albedo)):
             raise FitError(f"{who}: training diverged (non-finite albedo); lower model.lr")
-        self._scene = RSDPriorFieldModel.from_albedo(self.config.prior_config(), lattice, albedo,
-                                                     field.geometry, scale)
+        self._scene = RSDPriorFieldModel.from_albedo(prior, lattice, albedo, field.geometry,
+                                                     scale)
         self._n_network = trained.n_parameters
         steps = trained.steps or self.config.steps
         return FitReport(steps=steps, seconds=time.perf_counter() - start,
                          final_loss=trained.final_loss, history=trained.history,
-                         best_val_loss=trained.best_validation,
+                         best_val_loss=trained.best_validation, fitted=fitted,
                          stopped_early=steps < self.config.steps)
 
-    def _problem(self, field: PhasorField, network: type[NeuralFieldModel]
-                 ) -> tuple[VolumeProblem, VoxelLattice, float]:
+    def _problem(self, field: PhasorField, network: type[NeuralFieldModel],
+                 prior: RSDPriorConfig) -> tuple[VolumeProblem, VoxelLattice, float]:
         """(What the backend trains on, the lattice, the field's scale): ``rsd_prior``'s
-        setup (its depth planes, lattice, frequencies and normalisation)."""
+        setup with options ``prior`` (its depth planes, lattice, frequencies, lobe and
+        normalisation)."""
         cfg, who = self.config, self.model_name()
         check_geometry(field.geometry)
         samples, values, scale = training_values(field, who)      # rsd_prior's
-        lattice, chosen = RSDPriorFieldModel(cfg.prior_config()).plan_lattice(values, samples,
-                                                                              field)
+        lattice, chosen = RSDPriorFieldModel(prior).plan_lattice(values, samples, field)
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
         op = SceneOperator(lattice, samples.layout, field.geometry, field.frequencies[chosen],
-                           OperatorOptions(amplitude=cfg.amplitude, dtype=dtype,
+                           OperatorOptions(amplitude=cfg.amplitude, lobe=prior.lobe, dtype=dtype,
                                            workers=cfg.workers, cache_mb=0.0), samples.mask)
         need, room = stack_bytes(op), available_memory()
         log.info("%s: operator of %d planes x %d frequencies on a %d x %d lattice: %s",

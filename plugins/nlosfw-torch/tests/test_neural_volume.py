@@ -282,3 +282,36 @@ def test_a_random_scan_fits_like_a_grid(backend, sparse_scene):
     found = model.scene.lattice.points()[np.unravel_index(np.argmax(model.albedo),
                                                           model.albedo.shape)]
     np.testing.assert_allclose(found, lattice.points()[brightest], atol=1e-9)
+
+
+# ------------------------------------------------------------------ a glossy lobe
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_fitted_lobe_carries_into_the_network(backend):
+    """An 8 cm patch with a k = 8 lobe (analytic simulator, confocal 16 x 16 scan, every
+    other point kept): with ``fit_lobe`` rsd_prior's search finds k (7.3) and the network
+    trains through the operator with it, predicting the held-out points far better than
+    the Lambertian volume (measured, torch and JAX: -20.3 against -9.0 dB)."""
+    from nlosfw.simulate import AnalyticSimulator, scene_from_config
+    from nlosfw.testing import tiny_scene_config
+    from nlosfw.transform import FFTTransform
+
+    config = tiny_scene_config(confocal=True, resolution=16, bins=300, bin_width=0.006,
+                               target=(0.03, -0.02, 0.5), patch=0.08)
+    config["geometry"][0]["lobe"] = 8.0
+    capture = AnalyticSimulator({}).simulate(scene_from_config(config))
+    field = FFTTransform({"n_frequencies": 10, "f_min": 2.0, "f_max": 4.0}).transform(capture)
+    split = split_field(field, spatial_step=2, spectral="none")
+    unseen = ~split.spatial_mask
+    host = load_plugins()
+    options = {"depth_range": [0.5, 0.5], "lateral_step": 1 / 32, "workers": 1,
+               "device": "cpu", "seed": 1}
+    errors, fitted = {}, {}
+    for name, extra in (("lambertian", {}), ("fitted", {"fit_lobe": True})):
+        model = host.registry.create("model", f"neural_volume_{backend}", {**options, **extra})
+        fitted[name] = model.fit(split.train_field).fitted
+        predicted = model.predict(field.wall_xyz[..., :2], field.frequencies)
+        errors[name] = 20 * np.log10(np.linalg.norm(predicted[:, unseen] - field.values[
+            :, unseen]) / np.linalg.norm(field.values[:, unseen]))
+    assert fitted["fitted"]["lobe_exponent"] == pytest.approx(8.0, abs=1.0)
+    assert not fitted["lambertian"]
+    assert errors["fitted"] < errors["lambertian"] - 10.0, errors
