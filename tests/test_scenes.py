@@ -210,8 +210,9 @@ def test_builtin_scenes_are_unchanged(name):
     """Every built-in scene equals the one recorded in tests/data/builtin_scenes.json.
 
     The file holds ``config_to_dict(builtin_scene(name))`` of every scene as written by
-    commit 343f1f1, when each YAML file still spelled out all of its blocks; it guards
-    the scenes against changes in how their files share those blocks.
+    commit 343f1f1, when each YAML file still spelled out all of its blocks (with the
+    options added since at their defaults: ``noise.pulses`` null, each item's ``lobe`` 0);
+    it guards the scenes against changes in how their files share those blocks.
     """
     recorded = json.loads((Path(__file__).parent / "data" / "builtin_scenes.json").read_text())
     assert sorted(recorded) == builtin_scene_names()
