@@ -117,6 +117,32 @@ def test_what_cannot_be_corrected_is_refused_in_one_line(pulses, H, why):
     assert "\n" not in str(err.value)
 
 
+def test_a_file_with_too_few_pulses_is_refused_naming_it(tmp_path, monkeypatch, capsys):
+    from nlosfw.capture.hdf5 import write_capture
+    from nlosfw.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "counts.hdf5"
+    write_capture(path, tiny_capture(resolution=4, bins=40, bin_width=0.04).replace(
+        H=np.full((40, 4, 4), 3.0, dtype=np.float32)))
+    status = main([f"capture.path={path}", "capture.pileup_pulses=100", "model=interp"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1
+    assert err.startswith("error: capture.pileup_pulses: ") and str(path) in err
+    assert "more than 120" in err and not (tmp_path / "outputs").exists()
+
+
+def test_simulated_pileup_needs_photon_counts():
+    from nlosfw.simulate.scene import NoiseConfig
+
+    with pytest.raises(ConfigError, match="set model poisson") as err:
+        NoiseConfig(model="none", pulses=1000)
+    assert err.value.option == "pulses"
+    with pytest.raises(ConfigError, match="must be >= 1"):
+        NoiseConfig(model="poisson", pulses=0)
+
+
 def test_the_options_refuse_no_pulses_and_count_splitting():
     with pytest.raises(ConfigError, match="must be >= 1") as err:
         Preprocessing(pileup_pulses=0)

@@ -82,6 +82,8 @@ class Extras:
 
     delays_ps: np.ndarray | None = None
     background: Capture | None = None
+    source: str = "the capture"
+    """What errors call the capture (its file, when read from one)."""
 
 
 # ------------------------------------------------------------------------------ driver
@@ -145,7 +147,7 @@ StepResult = tuple[Capture, str] | None
 
 def _pileup(c: Capture, o: Preprocessing, extras: Extras) -> StepResult:
     assert o.pileup_pulses is not None
-    out = correct_pileup(c, o.pileup_pulses)
+    out = correct_pileup(c, o.pileup_pulses, where=extras.source)
     worst = out.scene_info["pileup"]["largest_detection_probability"]
     return out, (f"Coates' correction over {o.pileup_pulses} pulses per scan point (at most "
                  f"{100 * worst:.3g}% of a point's pulses detected a photon)")

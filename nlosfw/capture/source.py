@@ -158,7 +158,8 @@ def prepare(capture: Capture, options: Preprocessing, from_format: frozenset[str
                                                     "itself; give the background measurement")
         _, _, background = read_capture_file(bg_path, None, formats)
         material["background"] = file_digest(bg_path)
-    result, steps = preprocess(capture, options, from_format, Extras(delays, background))
+    source = "the capture" if origin is None else str(origin)
+    result, steps = preprocess(capture, options, from_format, Extras(delays, background, source))
     material["steps"] = [[s.option, s.value] for s in steps]
     return Prepared(result, steps, material)
 

@@ -61,7 +61,9 @@ def fit_lobe(config: RSDPriorConfig, operator: Callable[[float, np.ndarray], Sce
     def error(k: float) -> float:
         albedo = solve(operator(k, fit_on), data * fit_on, iterations)
         miss = operator(k, held).forward(albedo) - target
-        if config.background != Background.none:   # a constant offset over the held points
+        # with background: constant, the fit's offsets span every kept point (zero data at
+        # the held ones); the held points' error is taken net of their own offset
+        if config.background != Background.none:
             miss = miss - held * (miss.sum(axis=(1, 2), keepdims=True) / held.sum())
         return float(np.linalg.norm(miss) / np.linalg.norm(target))
 

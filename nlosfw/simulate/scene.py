@@ -176,6 +176,8 @@ class NoiseConfig:
         require_finite(self)
         require(self.pulses is None or self.pulses >= 1, "pulses",
                 f"must be >= 1 or null, got {self.pulses}")
+        require(self.pulses is None or self.model == NoiseModel.poisson, "pulses",
+                "a detector's pile-up needs photon counts: set model poisson, or pulses null")
         require(self.photons > 0, "photons", f"must be > 0, got {self.photons}")
         require(self.dark_counts >= 0, "dark_counts", f"must be >= 0, got {self.dark_counts}")
         require(self.jitter_ps >= 0, "jitter_ps", f"must be >= 0, got {self.jitter_ps}")
