@@ -7,8 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlosfw.capture.enums import CaptureKind
-from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.image.plane_convolution import grid_layout
 from nlosfw.model.protocol import split_field
@@ -24,6 +22,7 @@ from nlosfw.simulate.physics import three_bounce
 from nlosfw.simulate.scene import GeometryItem, scene_from_config
 from nlosfw.testing import fixtures, tiny_scene_config
 from nlosfw.transform.fft import FFTTransform
+from tests.test_rsd_prior import _geometry
 
 #: One voxel plane at the patch's depth, voxels a quarter of the kept points' spacing apart.
 OPTIONS = {"depth_range": [0.5, 0.5], "lateral_step": 1 / 32, "l1_weight": 1e-3,
@@ -57,8 +56,7 @@ def test_the_operator_with_a_lobe_is_the_simulators_physics_for_a_confocal_scan(
     three_bounce's weights with the same lobe, times pi^3, to 1e-10."""
     wall = fixtures.rect_wall_grid((5, 6), 0.06, center=(0.02, -0.01))
     lattice = VoxelLattice(np.array([0.4, 0.47]), (-0.12, -0.15), (0.06, 0.06), (4, 5))
-    geometry = CaptureGeometry(kind=CaptureKind.CONFOCAL, laser_xyz=np.array([-0.6, 0.1, 0.3]),
-                               sensor_xyz=np.array([-0.6, 0.1, 0.3]))
+    geometry = _geometry(confocal=True)
     freqs = np.array([3.0, 4.5])
     albedo = np.random.default_rng(0).random(lattice.volume_shape)
     options = OperatorOptions(amplitude="lambertian", lobe=5.0)

@@ -309,9 +309,8 @@ def test_a_fitted_lobe_carries_into_the_network(backend):
     for name, extra in (("lambertian", {}), ("fitted", {"fit_lobe": True})):
         model = host.registry.create("model", f"neural_volume_{backend}", {**options, **extra})
         fitted[name] = model.fit(split.train_field).fitted
-        predicted = model.predict(field.wall_xyz[..., :2], field.frequencies)
-        errors[name] = 20 * np.log10(np.linalg.norm(predicted[:, unseen] - field.values[
-            :, unseen]) / np.linalg.norm(field.values[:, unseen]))
+        errors[name] = _heldout_nmse_db(field, unseen, model.predict(field.wall_xyz[..., :2],
+                                                                     field.frequencies))
     assert fitted["fitted"]["lobe_exponent"] == pytest.approx(8.0, abs=1.0)
     assert not fitted["lambertian"]
     assert errors["fitted"] < errors["lambertian"] - 10.0, errors
