@@ -71,7 +71,7 @@ def test_the_run_range_bounds_rsd_priors_depth_search(caplog):
     train = split_field(full, spatial_step=2).train_field
     assert field_depth_range(train) == (0.5, 0.7)
     model = RSDPriorFieldModel({"iterations": 5, "depth_iterations": 10, "workers": 1})
-    with caplog.at_level(logging.INFO, logger="nlosfw.model.rsd_prior"):
+    with caplog.at_level(logging.INFO, logger="nlosfw.model.rsd_depths"):
         model.fit(train)
     depths = model.lattice.depths
     margin = model.config.depth_margin + 1 / (4 * 4.5)

@@ -13,12 +13,8 @@ from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.plane_convolution import grid_layout
 from nlosfw.model.fista import FistaProblem, lipschitz, smoothed_tv, solve
 from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_prior import (
-    RSDPriorConfig,
-    RSDPriorFieldModel,
-    fit_frequency_indices,
-    voxel_lattice,
-)
+from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
+from nlosfw.model.rsd_sampling import fit_frequency_indices, voxel_lattice
 from nlosfw.model.scene_operator import (
     OperatorOptions,
     SceneOperator,

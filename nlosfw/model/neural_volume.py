@@ -73,7 +73,7 @@ from nlosfw.model.interface import (
 from nlosfw.model.model_files import read_model_file, write_model_file
 from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import training_values
+from nlosfw.model.rsd_sampling import enough_frequencies, fit_frequency_indices, training_values
 from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.model.trainer import NeuralFieldModel, learning_rate
 from nlosfw.model.volume_training import (
@@ -273,13 +273,9 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         who = self.model_name()
         check_training_field(field, who)
         network = self.network_class(self.config.network)   # a bad name fails first
-        prior, fitted = self.config.prior_config(), {}
-        if prior.fit_lobe:  # rsd_prior's search (its default frequencies), then the network
-            search = replace(prior, fit_frequencies=RSDPriorConfig().fit_frequencies)
-            fitted = {"lobe_exponent": RSDPriorFieldModel(search).fit(field).fitted[
-                "lobe_exponent"]}
-            prior = replace(prior, lobe=fitted["lobe_exponent"], fit_lobe=False)
-        problem, lattice, scale = self._problem(field, network, prior)
+        problem, lattice, scale, prior = self._problem(field, network,
+                                                       self.config.prior_config())
+        fitted = {"lobe_exponent": prior.lobe} if self.config.fit_lobe else {}
         trained = self.train(problem, on_step)
         albedo = np.asarray(trained.albedo, dtype=np.float32)
         if albedo.shape != problem.gain.shape or not np.all(np.isfinite(albedo)):
@@ -294,14 +290,23 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
                          stopped_early=steps < self.config.steps)
 
     def _problem(self, field: PhasorField, network: type[NeuralFieldModel],
-                 prior: RSDPriorConfig) -> tuple[VolumeProblem, VoxelLattice, float]:
-        """(What the backend trains on, the lattice, the field's scale): ``rsd_prior``'s
-        setup with options ``prior`` (its depth planes, lattice, frequencies, lobe and
-        normalisation)."""
+                 prior: RSDPriorConfig
+                 ) -> tuple[VolumeProblem, VoxelLattice, float, RSDPriorConfig]:
+        """(What the backend trains on, the lattice, the field's scale, ``prior`` with its
+        lobe fixed): ``rsd_prior``'s setup with options ``prior`` (its depth planes, lattice,
+        frequencies, lobe and normalisation). With ``fit_lobe``, ``rsd_prior``'s held-out
+        search on this lattice (at its default frequency count) fixes the lobe first."""
         cfg, who = self.config, self.model_name()
         check_geometry(field.geometry)
         samples, values, scale = training_values(field, who)      # rsd_prior's
         lattice, chosen = RSDPriorFieldModel(prior).plan_lattice(values, samples, field)
+        if prior.fit_lobe:
+            search = replace(prior, fit_frequencies=RSDPriorConfig().fit_frequencies)
+            span = float(np.ptp(lattice.depths))
+            picked = fit_frequency_indices(field.frequencies, enough_frequencies(
+                field.frequencies, search.fit_frequencies, span))
+            prior = replace(prior, fit_lobe=False, lobe=RSDPriorFieldModel(search).search_lobe(
+                field, values, samples, lattice, picked))
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
         op = SceneOperator(lattice, samples.layout, field.geometry, field.frequencies[chosen],
                            OperatorOptions(amplitude=cfg.amplitude, lobe=prior.lobe, dtype=dtype,
@@ -334,7 +339,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
             gain=np.full(norms.shape, peak / float(np.mean(norms)), dtype=np.float32),
             shift=float(np.log(np.expm1(cfg.albedo_start))),
             network=network, network_config=net_config, network_shape=shape,
-            train=train, validation=validation), lattice, scale
+            train=train, validation=validation), lattice, scale, prior
 
     def _network_options(self) -> dict[str, object]:
         cfg = self.config

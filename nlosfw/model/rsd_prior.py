@@ -30,13 +30,8 @@ span do not alias in time.
 A random scan (scattered samples) is fitted on the grid its points came from
 (:func:`~nlosfw.model.rsd_sampling.wall_samples`), the operator masked to the kept points.
 
-Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a coarse
-lattice (the training spacing laterally, planes a quarter of the shortest wavelength of the
-lower half of the band apart, from the wall to half the capture's time span, within the
-run's depth range if the field carries it) finds the depths where a plane's largest
-contribution ||A e_v|| a_v reaches ``depth_threshold`` of the largest; the fine planes are
-those within ``depth_margin`` (plus half a coarse step) of them. Separate objects thus cost
-separate clusters of planes, not the whole depth range between them.
+Automatic depth planes: a quick coarse fit finds where the scene is
+(:mod:`nlosfw.model.rsd_depths`).
 
 Terms of real systems, each fitted jointly and reported in the fit report: ``background:
 constant``, a complex offset per frequency, constant over the wall (minimised out exactly:
@@ -62,10 +57,9 @@ import numpy as np
 
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import ConfigError, DataError, FitError
-from nlosfw.image.depths import field_depth_range
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout
-from nlosfw.image.rsd_kernel import check_geometry, path_multiplier
+from nlosfw.image.rsd_kernel import check_geometry
 from nlosfw.model.fista import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
 from nlosfw.model.interface import (
     FieldModel,
@@ -83,6 +77,7 @@ from nlosfw.model.rsd_background import (
     fit_offsets,
 )
 from nlosfw.model.rsd_config import RSDPriorConfig
+from nlosfw.model.rsd_depths import plan_lattice
 from nlosfw.model.rsd_lobe import fit_lobe
 from nlosfw.model.rsd_response import (
     SystemResponse,
@@ -91,14 +86,7 @@ from nlosfw.model.rsd_response import (
     search_response,
     with_gains,
 )
-from nlosfw.model.rsd_sampling import (
-    WallSamples,
-    deepest_path,
-    enough_frequencies,
-    fit_frequency_indices,
-    training_values,
-    voxel_lattice,
-)
+from nlosfw.model.rsd_sampling import WallSamples, training_values
 from nlosfw.model.scene_operator import (
     OperatorOptions,
     SceneOperator,
@@ -155,12 +143,11 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         self._projection = background_projection(cfg.background, field, samples)
         lattice, chosen = self.plan_lattice(values, samples, field)
         depths, freqs = lattice.depths, field.frequencies[chosen]
-        def operator(k: float, keep: np.ndarray | None = mask, f: np.ndarray = freqs
-                     ) -> SceneOperator:
-            return SceneOperator(lattice, wall, field.geometry, f, self._options(lobe=k), keep)
+        def operator(k: float, f: np.ndarray = freqs) -> SceneOperator:
+            return SceneOperator(lattice, wall, field.geometry, f, self._options(lobe=k), mask)
 
-        lobe = cfg.lobe if not cfg.fit_lobe else fit_lobe(
-            cfg, operator, lambda op, d, n: self._solve(op, d, n)[0], values[chosen], mask)
+        lobe = (self.search_lobe(field, values, samples, lattice, chosen) if cfg.fit_lobe
+                else cfg.lobe)
         log.info("rsd_prior: %d planes in %.3f-%.3f m, %d x %d voxels, %d frequencies",
                  depths.size, depths.min(), depths.max(), *lattice.shape, freqs.size)
         history: list[dict[str, float]] = []
@@ -175,7 +162,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         albedo, response, result = self._fit_albedo(operator(lobe), values[chosen], report)
         background = None if self._projection is None else fit_offsets(
             self._projection,
-            lambda f: with_gains(response, f, operator(lobe, mask, f).forward(albedo)),
+            lambda f: with_gains(response, f, operator(lobe, f).forward(albedo)),
             field.frequencies, values, scale)
         self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale,
                                background, response, lobe)
@@ -263,55 +250,25 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
 
     def plan_lattice(self, values: np.ndarray, samples: WallSamples, field: PhasorField
                      ) -> tuple[VoxelLattice, np.ndarray]:
-        """The voxel lattice a fit of ``field`` uses (planes over ``depth_range`` or from
-        :meth:`depth_planes`, ``depth_step`` apart; ``lateral_step``) and the indices of the
-        frequencies it fits; ``values`` as for :meth:`depth_planes`."""
-        cfg = self.config
-        shortest = 1.0 / float(field.frequencies.max())
-        depth_step = cfg.depth_step or shortest / 5
-        if cfg.depth_range:
-            near, far = (float(v) for v in cfg.depth_range)
-            depths = np.arange(near, far + depth_step / 2, depth_step)
-        else:
-            depths = self.depth_planes(values, samples, field, depth_step)
-        span = float(depths.max() - depths.min())
-        chosen = fit_frequency_indices(field.frequencies, enough_frequencies(
-            field.frequencies, cfg.fit_frequencies, span))
-        lateral = cfg.lateral_step or shortest / (2 * path_multiplier(field.geometry))
-        return voxel_lattice(samples.layout, lateral, depths), chosen
+        """The voxel lattice a fit of ``field`` uses and the indices of the frequencies it
+        fits (:func:`~nlosfw.model.rsd_depths.plan_lattice`); ``values``: the field without
+        device legs on the wall grid of ``samples``, divided by its RMS."""
+        return plan_lattice(self.config, values, samples, field, self._options(),
+                            lambda op, data, n: self._solve(op, data, n)[0])
 
-    def depth_planes(self, values: np.ndarray, samples: WallSamples, field: PhasorField,
-                     step: float) -> np.ndarray:
-        """Planes ``step`` apart within ``depth_margin`` of the planes where a quick fit on a
-        coarse lattice finds the scene (see the module docstring); ``values``: the field
-        without device legs on the wall grid of ``samples`` (canonical order, zero where not
-        sampled), divided by its RMS."""
-        cfg = self.config
-        deepest = deepest_path(field)
-        f = field.frequencies
-        lower = np.flatnonzero(f <= f.min() + (f.max() - f.min()) / 2)
-        chosen = lower[fit_frequency_indices(f[lower], enough_frequencies(
-            f[lower], cfg.fit_frequencies, deepest))]
-        freqs = f[chosen]
-        coarse = 1.0 / (4.0 * float(freqs.max()))
-        lo, hi = field_depth_range(field) or (coarse, deepest)   # the run's range, if any
-        depths = np.arange(max(coarse, lo), max(min(deepest, hi), lo) + coarse / 2, coarse)
-        wall = samples.layout
-        lattice = voxel_lattice(wall, max(wall.spacing), depths)
-        op = SceneOperator(lattice, wall, field.geometry, freqs, self._options(), samples.mask)
-        albedo, _ = self._solve(op, values[chosen], cfg.depth_iterations)
-        contribution = albedo * op.column_norms()
-        profile = contribution.reshape(depths.size, -1).max(axis=1)
-        if not profile.max() > 0:
-            raise FitError(f"{MODEL_NAME}: the coarse fit found no scene; give "
-                           "model.depth_range")
-        found = depths[profile >= cfg.depth_threshold * profile.max()]
-        reach = cfg.depth_margin + coarse / 2
-        grid = np.arange(max(step, found.min() - reach), found.max() + reach + step / 2, step)
-        near = np.abs(grid[:, None] - found[None, :]).min(axis=1) <= reach
-        log.info("rsd_prior: the coarse fit's %d planes (%.3f-%.3f m) find the scene on %d in "
-                 "%.3f-%.3f m", depths.size, depths[0], depths[-1], found.size, *found[[0, -1]])
-        return grid[near]
+    def search_lobe(self, field: PhasorField, values: np.ndarray, samples: WallSamples,
+                    lattice: VoxelLattice, chosen: np.ndarray) -> float:
+        """The lobe exponent k fitted on the kept samples (``fit_lobe``'s held-out search,
+        :func:`~nlosfw.model.rsd_lobe.fit_lobe`) on ``lattice`` at the frequencies
+        ``chosen``; arguments as for :meth:`plan_lattice`."""
+        freqs = field.frequencies[chosen]
+
+        def operator(k: float, keep: np.ndarray | None) -> SceneOperator:
+            return SceneOperator(lattice, samples.layout, field.geometry, freqs,
+                                 self._options(lobe=k), keep)
+
+        return fit_lobe(self.config, operator, lambda op, d, n: self._solve(op, d, n)[0],
+                        values[chosen], samples.mask)
 
     def _options(self, cache: bool = True, lobe: float | None = None) -> OperatorOptions:
         cfg = self.config
