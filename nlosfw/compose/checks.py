@@ -30,7 +30,7 @@ from nlosfw.pipeline.plan import check_model_choice, check_reference_choice
 from nlosfw.pipeline.settings import NO_MODEL, OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
 from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
 from nlosfw.simulate.geometry import validate_scene
-from nlosfw.simulate.scene import scene_from_config
+from nlosfw.simulate.scene import NoiseModel, scene_from_config
 from nlosfw.transform.noise_floor import DFT_TRANSFORMS, kernel_power
 
 if TYPE_CHECKING:
@@ -162,6 +162,7 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     settings, the memory it needs, and its capture file or the files it names."""
     settings = run_settings(cfg)
     check_model_choice(cfg, settings)
+    counts_needed = False           # a model's likelihood needs the field's Poisson variance
     for group in _PLUGIN_GROUPS:
         node = cfg.get(group)
         if not isinstance(node, Mapping) or not node:
@@ -170,7 +171,8 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
             continue  # model=none: no field model to check
         spec = host.registry.get(group, str(node.get("name")))
         _check_plugin(spec, f"{group} plugin")
-        spec.make_config(_plugin_options(node, spec.config_class()))
+        config = spec.make_config(_plugin_options(node, spec.config_class()))
+        counts_needed |= bool(getattr(config, "uses_noise_variance", False))
         if group == PluginKind.IMAGER.value:
             check_reference_choice(settings, spec.name,
                                    bool(getattr(spec.load(), "full_grid_only", False)))
@@ -179,7 +181,7 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         spec = host.registry.get(PluginKind.FIELD_MODEL, str(rest.pop("name")))
         _check_plugin(spec, f"compare.{label}: model plugin")
         try:
-            spec.make_config(rest)
+            counts_needed |= bool(getattr(spec.make_config(rest), "uses_noise_variance", False))
         except ConfigError as err:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
@@ -189,6 +191,10 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         path, settings.capture.format, formats), requires=plugin_requires(host))
     if settings.capture.path is None:
         scene = validate_scene(scene_from_config(cfg.get("scene"))).scene
+        if counts_needed and scene.noise.model != NoiseModel.poisson:
+            raise ConfigError("model.likelihood", "poisson weighs samples by their photon "
+                              "counts' noise, but the simulated capture has none; set "
+                              "scene.noise.model=poisson or use least_squares")
         simulator_node = cfg.get("simulator")
         if not isinstance(simulator_node, Mapping):
             raise ConfigError("simulator", "no plugin selected")
@@ -203,17 +209,25 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     if settings.split.thinning:  # count splitting needs photon counts: refused here, not later
         photon_counts(loaded.prepared.capture, str(loaded.path))
         _check_noise_floor(cfg, host, loaded.prepared.capture)
+    if counts_needed:
+        likelihood = ("model.likelihood", "the Poisson likelihood")
+        photon_counts(loaded.prepared.capture, str(loaded.path), *likelihood)
+        _check_noise_floor(cfg, host, loaded.prepared.capture, *likelihood)
 
 
-def _check_noise_floor(cfg: Mapping[str, object], host: PluginHost, capture: Capture) -> None:
-    """Count splitting's noise floor needs a DFT-like transform: the built-in ones are;
-    another is probed on the capture (a ConfigError for split.thinning when it is not)."""
+def _check_noise_floor(cfg: Mapping[str, object], host: PluginHost, capture: Capture,
+                       option: str = "split.thinning", purpose: str = "count splitting"
+                       ) -> None:
+    """Count splitting's noise floor (and a Poisson likelihood) needs a DFT-like transform:
+    the built-in ones are; another is probed on the capture (a ConfigError for ``option``
+    when it is not)."""
     node = cfg.get("transform")
     name = str(node.get("name")) if isinstance(node, Mapping) else ""
     if name in DFT_TRANSFORMS or not isinstance(node, Mapping):
         return
     spec = host.registry.get(PluginKind.PHASOR_TRANSFORM, name)
-    kernel_power(spec.create(_plugin_options(node, spec.config_class())), capture, name)
+    kernel_power(spec.create(_plugin_options(node, spec.config_class())), capture, name,
+                 option, purpose)
 
 
 def _check_plugin(spec: PluginSpec, what: str) -> None:

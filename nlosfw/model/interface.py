@@ -29,6 +29,12 @@ class FieldModelConfig:
     def __post_init__(self) -> None:
         require(bool(self.device), "device", "must be auto, cpu or a device name")
 
+    @property
+    def uses_noise_variance(self) -> bool:
+        """Whether the fit weighs samples by the training field's ``variance`` (the run then
+        computes it, from a capture of photon counts); False unless a model says so."""
+        return False
+
 
 @dataclass(frozen=True)
 class TrainingStep:

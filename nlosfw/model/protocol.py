@@ -166,8 +166,10 @@ def scattered_field(field: PhasorField, mask: np.ndarray) -> PhasorField:
     if mask.shape != field.grid_shape:
         raise DataError(f"scattered_field: mask of shape {mask.shape} for a field on a "
                         f"{field.grid_shape} grid")
+    var = field.variance
     return field.replace(values=field.values[:, mask][:, None, :],
-                         wall_xyz=field.wall_xyz[mask][None])
+                         wall_xyz=field.wall_xyz[mask][None],
+                         variance=None if var is None else var[:, mask][:, None, :])
 
 
 def split_field(field: PhasorField, spatial_step: int | SpatialSampling = 2,

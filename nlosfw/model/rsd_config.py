@@ -8,6 +8,7 @@ from nlosfw.common.config import require
 from nlosfw.image.fft import Precision
 from nlosfw.model.interface import FieldModelConfig
 from nlosfw.model.rsd_background import Background
+from nlosfw.model.rsd_likelihood import Likelihood
 from nlosfw.model.rsd_response import TemporalResponse
 from nlosfw.model.scene_operator import Amplitude
 
@@ -76,6 +77,15 @@ class RSDPriorConfig(FieldModelConfig):
     """Rounds of the response search (with a response term on): each tries every fitted term
     either side of its value, the albedo fitted again each time (a quarter of
     ``iterations``), with steps halving; a round costs about one to two fits."""
+    likelihood: Likelihood = Likelihood.least_squares
+    """The data term: least_squares, or poisson (each wall point weighted by the inverse
+    Poisson variance of its samples, from the capture's photon counts;
+    :mod:`nlosfw.model.rsd_likelihood`)."""
+
+    @property
+    def uses_noise_variance(self) -> bool:
+        """With ``likelihood: poisson`` the fit needs the field's variance."""
+        return self.likelihood == Likelihood.poisson
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -38,6 +38,8 @@ constant``, a complex offset per frequency, constant over the wall (minimised ou
 :mod:`nlosfw.model.rsd_background`); ``temporal_response: gaussian`` and ``time_offset``,
 a gain per frequency (jitter, a time-origin offset in ps; :mod:`nlosfw.model.rsd_response`);
 ``fit_lobe``, a glossy lobe's exponent (:mod:`nlosfw.model.rsd_lobe`; or a fixed ``lobe``).
+``likelihood: poisson`` weighs each wall point by the inverse Poisson variance of its
+samples (:mod:`nlosfw.model.rsd_likelihood`).
 
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
@@ -78,6 +80,7 @@ from nlosfw.model.rsd_background import (
 )
 from nlosfw.model.rsd_config import RSDPriorConfig
 from nlosfw.model.rsd_depths import plan_lattice
+from nlosfw.model.rsd_likelihood import sample_weights
 from nlosfw.model.rsd_lobe import fit_lobe
 from nlosfw.model.rsd_response import (
     SystemResponse,
@@ -129,6 +132,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         super().__init__(config)
         self._fitted: _Fitted | None = None
         self._projection: BackgroundProjection | None = None
+        self._weights: np.ndarray | None = None       # sqrt of the likelihood's weights
 
     # ------------------------------------------------------------------ fit
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
@@ -141,6 +145,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         samples, values, scale = training_values(field)
         wall, mask = samples.layout, samples.mask
         self._projection = background_projection(cfg.background, field, samples)
+        self._weights = (sample_weights(field, samples) if cfg.uses_noise_variance else None)
         lattice, chosen = self.plan_lattice(values, samples, field)
         depths, freqs = lattice.depths, field.frequencies[chosen]
         def operator(k: float, f: np.ndarray = freqs) -> SceneOperator:
@@ -218,19 +223,22 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                gains: np.ndarray | None = None, start: np.ndarray | None = None
                ) -> tuple[np.ndarray, FistaResult]:
         """The albedo fitted to ``data`` by FISTA on the column-normalised operator (times
-        the per-frequency ``gains`` of the system response, if any), from ``start``."""
+        the per-frequency ``gains`` of the system response, if any; each wall point's
+        residual weighted by the likelihood), from ``start``."""
         cfg = self.config
         norms = op.column_norms()
         project = self._projector(op.frequencies)
-        data = project(data)
+        w = None if self._weights is None else self._weights.astype(data.real.dtype)
+        data = project(data) if w is None else w * project(data)
         g = None if gains is None else gains.astype(data.dtype)[:, None, None]
 
         def forward(x: np.ndarray) -> np.ndarray:
             y = op.forward(x / norms)
-            return project(y if g is None else g * y)
+            y = project(y if g is None else g * y)
+            return y if w is None else w * y
 
         def adjoint(p: np.ndarray) -> np.ndarray:
-            q = project(p)
+            q = project(p if w is None else w * p)
             return op.adjoint(q if g is None else np.conj(g) * q) / norms
 
         shape = op.lattice.volume_shape

@@ -270,6 +270,9 @@ def _hold_out_points(field: PhasorField, fraction: float, seed: int
     order = np.random.default_rng([seed, 0x76616C]).permutation(n)   # "val" stream
     values = field.values.reshape(n_f, 1, n)
     wall = field.wall_xyz.reshape(1, n, 3)
+    var = None if field.variance is None else field.variance.reshape(n_f, 1, n)
     val, train = np.sort(order[:n_val]), np.sort(order[n_val:])
-    return (field.replace(values=values[:, :, train], wall_xyz=wall[:, train]),
-            field.replace(values=values[:, :, val], wall_xyz=wall[:, val]))
+    return (field.replace(values=values[:, :, train], wall_xyz=wall[:, train],
+                          variance=None if var is None else var[:, :, train]),
+            field.replace(values=values[:, :, val], wall_xyz=wall[:, val],
+                          variance=None if var is None else var[:, :, val]))

@@ -13,7 +13,10 @@ from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from functools import partial
 
+import numpy as np
+
 from nlosfw.capture.data import Capture
+from nlosfw.capture.thinning import photon_counts
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.hashing import cache_key
 from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
@@ -75,6 +78,9 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
             if capture.thinning is not None and capture.score_key is not None:
                 score = cached_field(capture.thinning.b, capture.score_key)[0]
                 variance = field_variance(transform, capture.thinning.b, planned.name)
+            if any(m.model.config.uses_noise_variance for m in run.plan.models):
+                field = field.replace(variance=_training_variance(transform, capture,
+                                                                  planned.name))
     finally:
         frequencies_log.removeFilter(quiet)
     run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
@@ -83,6 +89,16 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
                     keep_as=Artefact.phasor_field)
     return TransformResult(field=field, cache_hit=hit, clean=clean, plugin=planned.name,
                            score=score, score_variance=variance)
+
+
+def _training_variance(transform: PhasorTransform, capture: CaptureResult, name: str
+                       ) -> np.ndarray:
+    """The Poisson variance of the training capture's field, for a model whose likelihood
+    needs it; a one-line ConfigError for ``model.likelihood`` naming the capture when it is
+    not photon counts or the transform is not DFT-like."""
+    option, purpose = "model.likelihood", "the Poisson likelihood"
+    photon_counts(capture.capture, capture.label, option, purpose)
+    return field_variance(transform, capture.capture, name, option, purpose)
 
 
 def fit_stage(run: StageContext, done: StageResults) -> FitResult:

@@ -28,6 +28,7 @@ class FieldChanges(TypedDict, total=False):
     geometry: CaptureGeometry
     weights: np.ndarray | None
     metadata: dict[str, object]
+    variance: np.ndarray | None
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,7 +38,10 @@ class PhasorField:
     Frequencies are in cycles per metre of optical path (wavelength = 1/f).
     ``weights`` are the spectral weights of the virtual illumination (one per
     frequency; ``None`` means all ones) that an imager applies when it sums
-    frequencies. ``geometry`` says how the field was captured.
+    frequencies. ``geometry`` says how the field was captured. ``variance`` (the values'
+    shape, >= 0; ``None``: unknown) is the noise variance of each value, the capture's
+    Poisson noise through the transform (:func:`nlosfw.transform.noise_floor.field_variance`);
+    a fit may weigh samples by it. It is not written to field files.
 
     Scattered wall samples (an irregular scan) are a field with one row: ``wall_xyz``
     (1, N, 3) and ``values`` (F, 1, N); :meth:`grid_spacing` is None for them.
@@ -49,6 +53,7 @@ class PhasorField:
     geometry: CaptureGeometry
     weights: np.ndarray | None = None
     metadata: dict[str, object] = field(default_factory=dict)
+    variance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -61,6 +66,8 @@ class PhasorField:
         if self.weights is not None:
             set_(self, "weights", np.atleast_1d(np.asarray(self.weights, dtype=np.complex128)))
         set_(self, "metadata", dict(self.metadata or {}))
+        if self.variance is not None:
+            set_(self, "variance", np.asarray(self.variance, dtype=np.float64))
         self._validate()
 
     def _validate(self) -> None:
@@ -83,6 +90,11 @@ class PhasorField:
         ):
             raise DataError(f"weights: need {f.shape[0]} finite values, got shape "
                             f"{self.weights.shape}")
+        var = self.variance
+        if var is not None and (var.shape != v.shape or not np.all(np.isfinite(var))
+                                or np.any(var < 0)):
+            raise DataError(f"variance: must be finite, >= 0 and of the values' shape {v.shape}, "
+                            f"got shape {var.shape}")
 
     @property
     def n_frequencies(self) -> int:
@@ -116,6 +128,7 @@ class PhasorField:
             frequencies=self.frequencies[fi],
             wall_xyz=self.wall_xyz[y, x],
             weights=None if self.weights is None else self.weights[fi],
+            variance=None if self.variance is None else self.variance[fi][:, y, x],
         )
 
     def replace(self, **changes: Unpack[FieldChanges]) -> PhasorField:

@@ -32,11 +32,11 @@ DFT_TRANSFORMS = ("fft", "wavelet")
 _RTOL = 1e-6
 
 
-def kernel_power(transform: PhasorTransform, capture: Capture, name: str = "transform"
-                 ) -> np.ndarray:
+def kernel_power(transform: PhasorTransform, capture: Capture, name: str = "transform",
+                 option: str = OPTION, purpose: str = "count splitting") -> np.ndarray:
     """|K(f, t)|^2 per frequency (F,) of ``transform`` on captures laid out as ``capture``,
-    probed with impulses; a ConfigError for ``split.thinning`` when it is not linear or its
-    kernel's magnitude changes with time."""
+    probed with impulses; a ConfigError for ``option`` (the step that needs it,
+    ``purpose``) when it is not linear or its kernel's magnitude changes with time."""
     n_bins = capture.n_bins
     n_points = int(np.prod(capture.H.shape[1:]))
     bins = np.linspace(0, n_bins - 1, n_points).round().astype(np.int64)
@@ -47,27 +47,28 @@ def kernel_power(transform: PhasorTransform, capture: Capture, name: str = "tran
     power = np.abs(one) ** 2                                    # (F, points)
     scale = np.max(power, axis=1, keepdims=True)
     if not np.all(np.isfinite(power)) or np.any(scale <= 0):
-        raise ConfigError(OPTION, f"the {name} transform gives no finite, nonzero response to "
+        raise ConfigError(option, f"the {name} transform gives no finite, nonzero response to "
                                   "an impulse: its noise floor cannot be computed; use the fft "
-                                  "or wavelet transform with count splitting")
+                                  f"or wavelet transform with {purpose}")
     if not np.allclose(two, 2.0 * one, rtol=_RTOL, atol=_RTOL * float(np.sqrt(scale.max()))):
-        raise ConfigError(OPTION, f"the {name} transform is not linear in H: its noise floor "
+        raise ConfigError(option, f"the {name} transform is not linear in H: its noise floor "
                                   "cannot be computed from counts; use the fft or wavelet "
-                                  "transform with count splitting")
+                                  f"transform with {purpose}")
     spread = float(np.max((power.max(axis=1) - power.min(axis=1)) / scale[:, 0]))
     if spread > _RTOL:
-        raise ConfigError(OPTION, f"the {name} transform weighs time bins unequally (|kernel|^2 "
+        raise ConfigError(option, f"the {name} transform weighs time bins unequally (|kernel|^2 "
                               f"varies by {spread:.2g} over time): the noise floor is computed "
                               "for DFT-like transforms only; use the fft or wavelet transform "
-                              "with count splitting")
+                              f"with {purpose}")
     return np.asarray(power.mean(axis=1))
 
 
-def field_variance(transform: PhasorTransform, capture: Capture, name: str = "transform"
-                   ) -> np.ndarray:
+def field_variance(transform: PhasorTransform, capture: Capture, name: str = "transform",
+                   option: str = OPTION, purpose: str = "count splitting") -> np.ndarray:
     """Var P(f, y, x) of the phasor field of ``capture`` (Poisson counts, their variance
-    estimated by themselves), in the field's layout (F, Y, X)."""
-    power = kernel_power(transform, capture, name)
+    estimated by themselves), in the field's layout (F, Y, X); errors as
+    :func:`kernel_power`'s."""
+    power = kernel_power(transform, capture, name, option, purpose)
     per_point = histogram_2d(capture.replace(H=count_variance(capture))).sum(axis=0)
     layout = to_field_layout(per_point[np.newaxis, :], capture)        # (1, Y, X)
     return power[:, np.newaxis, np.newaxis] * layout
