@@ -18,7 +18,7 @@ from nlosfw.model.rsd_prior import RSDPriorFieldModel
 from nlosfw.model.rsd_sampling import wall_samples
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
-from nlosfw.testing import fixtures, tiny_scene_config
+from nlosfw.testing import fixtures, heldout_error_db, tiny_scene_config
 from nlosfw.testing.fixtures import tiny_capture
 from nlosfw.transform.common import histogram_2d, to_field_layout
 from nlosfw.transform.fft import FFTTransform
@@ -91,8 +91,7 @@ def test_poisson_without_a_variance_is_refused_in_one_line():
 def _heldout_db(model: RSDPriorFieldModel, clean: PhasorField, kept: np.ndarray) -> float:
     """The error at the wall points not kept against the noise-free field, in dB."""
     predicted = model.predict(clean.wall_xyz[..., :2], clean.frequencies)
-    miss = predicted[:, ~kept] - clean.values[:, ~kept]
-    return 20 * np.log10(np.linalg.norm(miss) / np.linalg.norm(clean.values[:, ~kept]))
+    return heldout_error_db(predicted, clean.values, ~kept)
 
 
 def test_weighting_by_the_noise_variance_beats_least_squares_on_uneven_noise():
@@ -177,3 +176,13 @@ def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch
         expected[::2, ::2], field.values.shape), rtol=1e-5)
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["status"] == "completed" and metrics["field"]["model"]["fit"]["steps"] == 20
+
+
+def test_the_kits_heldout_error_counts_only_the_held_points():
+    truth = np.ones((2, 3, 4), complex)
+    held = np.zeros((3, 4), bool)
+    held[1, :] = True
+    predicted = truth.copy()
+    predicted[:, held] *= 1.1                 # 10 % off where held: -20 dB
+    predicted[:, ~held] = 0.0                 # anything where not held
+    assert heldout_error_db(predicted, truth, held) == pytest.approx(-20.0)

@@ -20,7 +20,7 @@ from nlosfw.model.scene_operator import (
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.physics import three_bounce
 from nlosfw.simulate.scene import GeometryItem, scene_from_config
-from nlosfw.testing import fixtures, tiny_scene_config
+from nlosfw.testing import fixtures, heldout_error_db, tiny_scene_config
 from nlosfw.transform.fft import FFTTransform
 from tests.test_rsd_prior import _geometry
 
@@ -88,11 +88,8 @@ def _patch_fit(lobe: float, confocal: bool, options: dict) -> tuple[dict, float]
     split = split_field(field, spatial_step=2, spectral="none")
     model = RSDPriorFieldModel({**OPTIONS, **options})
     report = model.fit(split.train_field)
-    unseen = ~split.spatial_mask
     predicted = model.predict(field.wall_xyz[..., :2], field.frequencies)
-    error = np.linalg.norm(predicted[:, unseen] - field.values[:, unseen]) / np.linalg.norm(
-        field.values[:, unseen])
-    return report.fitted, 20 * np.log10(error)
+    return report.fitted, heldout_error_db(predicted, field.values, ~split.spatial_mask)
 
 
 @pytest.mark.parametrize("lobe, tolerance", [(0.0, 0.5), (4.0, 0.6), (8.0, 0.8)])

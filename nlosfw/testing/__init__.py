@@ -34,6 +34,7 @@ from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy
 from nlosfw.testing.fixtures import (
     Agreement,
     analytic_agreement,
+    heldout_error_db,
     relative_l2,
     rendered,
     scene_with,
@@ -78,6 +79,7 @@ __all__ = [
     "checks_for",
     "combine",
     "fixtures",
+    "heldout_error_db",
     "parametrize_with_checks",
     "spec_of",
     "requires",

@@ -237,6 +237,15 @@ def relative_l2(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(np.asarray(a, dtype=float) - b) / np.linalg.norm(b))
 
 
+def heldout_error_db(predicted: np.ndarray, truth: np.ndarray, held: np.ndarray) -> float:
+    """The error of ``predicted`` against ``truth`` (both (F, Y, X)) at the wall points where
+    ``held`` (Y, X) is True, every frequency: 10 log10(sum |p - t|^2 / sum |t|^2), in dB."""
+    held = np.asarray(held, dtype=bool)
+    miss = np.asarray(predicted)[:, held] - np.asarray(truth)[:, held]
+    power = float(np.sum(np.abs(np.asarray(truth)[:, held]) ** 2))
+    return float(10 * np.log10(float(np.sum(np.abs(miss) ** 2)) / power))
+
+
 class Agreement(NamedTuple):
     """How a transient compares with a reference transient of the same scene."""
 

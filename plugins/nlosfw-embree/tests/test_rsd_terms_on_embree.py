@@ -11,7 +11,7 @@ from nlosfw.capture import SPEED_OF_LIGHT
 from nlosfw.model import split_field
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate import scene_from_config
-from nlosfw.testing import tiny_scene_config
+from nlosfw.testing import heldout_error_db, tiny_scene_config
 from nlosfw.transform import FFTTransform
 
 pytest.importorskip("embreex")
@@ -55,11 +55,9 @@ def _fit(field, options):
     split = split_field(field, spatial_step=2, spectral="none")
     model = load_plugins().registry.create("model", "rsd_prior", {**OPTIONS, **options})
     report = model.fit(split.train_field)
-    unseen = ~split.spatial_mask
     predicted = model.predict(field.wall_xyz[..., :2], field.frequencies)
-    error = np.linalg.norm(predicted[:, unseen] - field.values[:, unseen]) / np.linalg.norm(
-        field.values[:, unseen])
-    return model, report.fitted, 20 * np.log10(error)
+    return model, report.fitted, heldout_error_db(predicted, field.values,
+                                                  ~split.spatial_mask)
 
 
 def test_jitter_offset_and_background_are_recovered_together(captures):

@@ -30,7 +30,7 @@ from nlosfw.model import (
     voxel_lattice,
 )
 from nlosfw.plugins import load_plugins
-from nlosfw.testing import fixtures
+from nlosfw.testing import fixtures, heldout_error_db
 from nlosfw.transform import PhasorField
 
 HAS_JAX = bool(importlib.util.find_spec("jax") and importlib.util.find_spec("optax")
@@ -144,9 +144,7 @@ def _sparse_scene():
 
 
 def _heldout_nmse_db(full: PhasorField, held: np.ndarray, predicted: np.ndarray) -> float:
-    err = predicted[:, held] - full.values[:, held]
-    return float(10 * np.log10(np.sum(np.abs(err) ** 2)
-                               / np.sum(np.abs(full.values[:, held]) ** 2)))
+    return heldout_error_db(predicted, full.values, held)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

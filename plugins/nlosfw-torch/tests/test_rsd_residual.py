@@ -13,7 +13,7 @@ pytest.importorskip("torch")
 from nlosfw.common import ConfigError
 from nlosfw.model import SpatialSampling, split_field
 from nlosfw.plugins import load_plugins
-from nlosfw.testing import fixtures
+from nlosfw.testing import fixtures, heldout_error_db
 
 HAS_JAX = bool(importlib.util.find_spec("jax") and importlib.util.find_spec("optax")
                and importlib.util.find_spec("equinox"))
@@ -58,9 +58,7 @@ def _residual_model(backend: str, **options):
 
 
 def _heldout_nmse_db(full, held, predicted) -> float:
-    err = predicted[:, held] - full.values[:, held]
-    return float(10 * np.log10(np.sum(np.abs(err) ** 2)
-                               / np.sum(np.abs(full.values[:, held]) ** 2)))
+    return heldout_error_db(predicted, full.values, held)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
