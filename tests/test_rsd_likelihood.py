@@ -111,8 +111,11 @@ def test_weighting_by_the_noise_variance_beats_least_squares_on_uneven_noise():
     errors = {}
     for likelihood in ("least_squares", "poisson"):
         model = RSDPriorFieldModel({**OPTIONS, "likelihood": likelihood})
-        model.fit(split.train_field)
+        fitted = model.fit(split.train_field).fitted
         errors[likelihood] = _heldout_db(model, clean, split.spatial_mask)
+    kept = sigma[split.spatial_mask] ** -2.0
+    assert fitted["poisson_weight_max"] / fitted["poisson_weight_min"] == pytest.approx(100.0)
+    assert fitted["poisson_weight_max"] == pytest.approx(kept.max() / kept.mean())
     assert errors["poisson"] < errors["least_squares"] - 6.0
     assert errors["poisson"] < -20.0
     # uniform variance: the weights are all one (to rounding) and the fit is least squares

@@ -61,3 +61,11 @@ def sample_weights(field: PhasorField, samples: WallSamples, who: str = "rsd_pri
     weights = np.where(kept, 1.0 / variance, 0.0)
     weights /= weights[kept].mean()
     return np.sqrt(weights)
+
+
+def weight_summary(sqrt_weights: np.ndarray, mask: np.ndarray | None) -> dict[str, float]:
+    """The fit report's account of the weights (mean 1 over the kept points): the smallest
+    and the largest, how uneven the capture's noise was over the wall."""
+    kept = sqrt_weights[mask] if mask is not None else sqrt_weights.ravel()
+    weights = kept.astype(np.float64) ** 2
+    return {"poisson_weight_min": float(weights.min()), "poisson_weight_max": float(weights.max())}

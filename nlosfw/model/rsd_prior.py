@@ -80,7 +80,7 @@ from nlosfw.model.rsd_background import (
 )
 from nlosfw.model.rsd_config import RSDPriorConfig
 from nlosfw.model.rsd_depths import plan_lattice
-from nlosfw.model.rsd_likelihood import sample_weights
+from nlosfw.model.rsd_likelihood import sample_weights, weight_summary
 from nlosfw.model.rsd_lobe import fit_lobe
 from nlosfw.model.rsd_response import (
     SystemResponse,
@@ -173,7 +173,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                                background, response, lobe)
         fitted = {**({} if background is None else background.summary(scale)),
                   **({} if response is None else response.summary()),
-                  **({"lobe_exponent": lobe} if cfg.fit_lobe else {})}
+                  **({"lobe_exponent": lobe} if cfg.fit_lobe else {}),
+                  **({} if self._weights is None else weight_summary(self._weights, mask))}
         return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
                          final_loss=result.residual, fitted=fitted, history=history,
                          stopped_early=result.iterations < cfg.iterations)
