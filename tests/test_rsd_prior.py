@@ -121,6 +121,15 @@ def test_column_norms_match_the_operator():
             e[index] = 1.0
             expected = np.linalg.norm(op.forward(e))
             assert norms[index] == pytest.approx(expected, rel=1e-9)
+        # weighted (rsd_prior's Poisson likelihood): sqrt(sum_f sum_s w_s |A_f[s, v]|^2)
+        weights = np.random.default_rng(2).random(wall.shape[:2])
+        weighted = op.column_norms(weights)
+        assert op.column_norms() is norms
+        for index in [(0, 0, 0), (1, 3, 4)]:
+            e = np.zeros(lattice.volume_shape)
+            e[index] = 1.0
+            expected = np.sqrt(np.sum(weights * np.abs(op.forward(e)) ** 2))
+            assert weighted[index] == pytest.approx(expected, rel=1e-9)
 
 
 @pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])

@@ -227,9 +227,9 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         the per-frequency ``gains`` of the system response, if any; each wall point's
         residual weighted by the likelihood), from ``start``."""
         cfg = self.config
-        norms = op.column_norms()
-        project = self._projector(op.frequencies)
         w = None if self._weights is None else self._weights.astype(data.real.dtype)
+        norms = op.column_norms(None if w is None else self._weights ** 2)
+        project = self._projector(op.frequencies)
         data = project(data) if w is None else w * project(data)
         g = None if gains is None else gains.astype(data.dtype)[:, None, None]
 

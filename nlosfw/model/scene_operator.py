@@ -252,13 +252,16 @@ class SceneOperator:
         """Re(A^H A a) for a real albedo: the Hessian of the least-squares data term."""
         return self.adjoint(self.forward(albedo)).real
 
-    def column_norms(self) -> np.ndarray:
+    def column_norms(self, weights: np.ndarray | None = None) -> np.ndarray:
         """||A e_v|| for every voxel (Z, Y, X): sqrt(sum_f sum_s |A_f[s, v]|^2) (computed once
-        per operator; read-only)."""
-        if self._norms is not None:
+        per operator; read-only); with ``weights`` (the wall's (ny, nx), >= 0) the weighted
+        norms sqrt(sum_f sum_s weights[s] |A_f[s, v]|^2), computed each time."""
+        if self._norms is not None and weights is None:
             return self._norms
         ones = (np.ones((1,) + self.wall.shape) if self.mask is None
                 else self.mask[None].astype(float))
+        if weights is not None:
+            ones = ones * np.asarray(weights, dtype=float)[None]
         out = np.empty(self.lattice.volume_shape)
         legs = 2 if self.confocal else 1
         lp = None if self.confocal else np.asarray(self.geometry.laser_point, dtype=float)
@@ -275,7 +278,8 @@ class SceneOperator:
                 sums = sums * self._leg(r_l, z) ** 2
             out[i] = np.sqrt(np.maximum(sums, 0.0) * self.frequencies.size)
         out.setflags(write=False)
-        self._norms = out
+        if weights is None:
+            self._norms = out
         return out
 
     def _check_albedo(self, albedo: np.ndarray) -> None:
