@@ -78,7 +78,8 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
             if capture.thinning is not None and capture.score_key is not None:
                 score = cached_field(capture.thinning.b, capture.score_key)[0]
                 variance = field_variance(transform, capture.thinning.b, planned.name)
-            if any(m.model.config.uses_noise_variance for m in run.plan.models):
+            if any(getattr(m.model.config, "uses_noise_variance", False)
+                   for m in run.plan.models):
                 field = field.replace(variance=_training_variance(transform, capture,
                                                                   planned.name))
     finally:
