@@ -228,7 +228,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         residual weighted by the likelihood), from ``start``."""
         cfg = self.config
         w = None if self._weights is None else self._weights.astype(data.real.dtype)
-        norms = op.column_norms(None if w is None else self._weights ** 2)
+        norms = op.column_norms(None if w is None else w.astype(np.float64) ** 2)
         project = self._projector(op.frequencies)
         data = project(data) if w is None else w * project(data)
         g = None if gains is None else gains.astype(data.dtype)[:, None, None]
