@@ -191,10 +191,15 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         path, settings.capture.format, formats), requires=plugin_requires(host))
     if settings.capture.path is None:
         scene = validate_scene(scene_from_config(cfg.get("scene"))).scene
-        if counts_needed and scene.noise.model != NoiseModel.poisson:
-            raise ConfigError("model.likelihood", "poisson weighs samples by their photon "
-                              "counts' noise, but the simulated capture has none; set "
-                              "scene.noise.model=poisson or use least_squares")
+        if scene.noise.model != NoiseModel.poisson:   # what needs counts is refused here
+            if settings.split.thinning:
+                raise ConfigError("split.thinning", "count splitting needs photon counts, but "
+                                  "the simulated capture has no photon noise; set "
+                                  "scene.noise.model=poisson")
+            if counts_needed:
+                raise ConfigError("model.likelihood", "poisson weighs samples by their photon "
+                                  "counts' noise, but the simulated capture has none; set "
+                                  "scene.noise.model=poisson or use least_squares")
         simulator_node = cfg.get("simulator")
         if not isinstance(simulator_node, Mapping):
             raise ConfigError("simulator", "no plugin selected")
