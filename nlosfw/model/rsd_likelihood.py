@@ -14,7 +14,8 @@ the band, is the weighted least squares
 sigma^2(x) the mean of Var P(x, f) over the band (the same at every frequency for a DFT).
 It is the Poisson likelihood to second order, not the exact one of the counts of each
 time bin (that needs a forward model of the whole spectrum, which the phasor-field fit
-does not have). Weights are relative (their mean over the kept points is 1), and a
+does not have). The fit runs on the whitened operator W^(1/2) A, its columns normalised
+by their weighted norms. Weights are relative (their mean over the kept points is 1), and a
 variance is taken as at least ``_FLOOR`` of the median, so that a point with no counts
 is not weighted without bound. The field must carry its variance
 (:attr:`~nlosfw.transform.field.PhasorField.variance`): the pipeline gives it for
