@@ -141,17 +141,6 @@ def test_a_float_capture_file_is_refused_before_the_run(tmp_path, monkeypatch, c
     assert not (tmp_path / "outputs").exists()
 
 
-def test_a_simulated_capture_without_noise_is_refused(tmp_path, monkeypatch, capsys):
-    monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
-    status = main(["scene=tiny", "model=rsd_prior", "model.likelihood=poisson",
-                   f"hydra.run.dir={tmp_path / 'run'}"])
-    err = capsys.readouterr().err
-    assert status == 2 and err.count("\n") == 1
-    assert err.startswith("error: model.likelihood: ") and "scene.noise.model=poisson" in err
-    assert not (tmp_path / "run").exists()
-
-
 def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch):
     """The training field's variance is the bin width squared times each kept point's
     photon count (the capture's counts, over the count scale squared), at every frequency."""

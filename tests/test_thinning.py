@@ -135,15 +135,18 @@ def test_a_float_capture_file_is_refused_before_the_run(tmp_path, monkeypatch, c
     assert not (tmp_path / "outputs").exists()
 
 
-def test_a_simulated_scene_without_photon_noise_is_refused_before_the_run(tmp_path,
-                                                                          monkeypatch, capsys):
+@pytest.mark.parametrize("option, overrides", [
+    ("split.thinning", ["split.thinning=true", "model=interp"]),
+    ("model.likelihood", ["model=rsd_prior", "model.likelihood=poisson"]),   # needs counts too
+])
+def test_a_simulated_scene_without_photon_noise_is_refused_before_the_run(
+        option, overrides, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
-    status = main(["scene=tiny", "split.thinning=true", "model=interp",
-                   f"hydra.run.dir={tmp_path / 'run'}"])
+    status = main(["scene=tiny", *overrides, f"hydra.run.dir={tmp_path / 'run'}"])
     err = capsys.readouterr().err
     assert status == 2 and err.count("\n") == 1
-    assert err.startswith("error: split.thinning: ") and "scene.noise.model=poisson" in err
+    assert err.startswith(f"error: {option}: ") and "scene.noise.model=poisson" in err
     assert not (tmp_path / "run").exists()
 
 
