@@ -72,8 +72,9 @@ from nlosfw.model.interface import (
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
 from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
+from nlosfw.model.rsd_depths import fitted_frequencies
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import enough_frequencies, fit_frequency_indices, training_values
+from nlosfw.model.rsd_sampling import training_values
 from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.model.trainer import NeuralFieldModel, learning_rate
 from nlosfw.model.volume_training import (
@@ -302,9 +303,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         lattice, chosen = RSDPriorFieldModel(prior).plan_lattice(values, samples, field)
         if prior.fit_lobe:
             search = replace(prior, fit_frequencies=RSDPriorConfig().fit_frequencies)
-            span = float(np.ptp(lattice.depths))
-            picked = fit_frequency_indices(field.frequencies, enough_frequencies(
-                field.frequencies, search.fit_frequencies, span))
+            picked = fitted_frequencies(search.fit_frequencies, field, lattice.depths)
             prior = replace(prior, fit_lobe=False, lobe=RSDPriorFieldModel(search).search_lobe(
                 field, values, samples, lattice, picked))
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128

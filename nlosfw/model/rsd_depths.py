@@ -50,11 +50,17 @@ def plan_lattice(config: RSDPriorConfig, values: np.ndarray, samples: WallSample
         depths = np.arange(near, far + step / 2, step)
     else:
         depths = depth_planes(config, values, samples, field, options, solve)
-    span = float(depths.max() - depths.min())
-    chosen = fit_frequency_indices(field.frequencies, enough_frequencies(
-        field.frequencies, config.fit_frequencies, span))
     lateral = config.lateral_step or shortest / (2 * path_multiplier(field.geometry))
-    return voxel_lattice(samples.layout, lateral, depths), chosen
+    return (voxel_lattice(samples.layout, lateral, depths),
+            fitted_frequencies(config.fit_frequencies, field, depths))
+
+
+def fitted_frequencies(count: int, field: PhasorField, depths: np.ndarray) -> np.ndarray:
+    """The indices of the frequencies a fit on voxel planes at ``depths`` uses: at least
+    ``count`` (0: all) evenly spread, and enough that the planes' span does not alias."""
+    span = float(depths.max() - depths.min())
+    return fit_frequency_indices(field.frequencies, enough_frequencies(
+        field.frequencies, count, span))
 
 
 def depth_step(config: RSDPriorConfig, field: PhasorField) -> float:

@@ -145,7 +145,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         samples, values, scale = training_values(field)
         wall, mask = samples.layout, samples.mask
         self._projection = background_projection(cfg.background, field, samples)
-        self._weights = (sample_weights(field, samples) if cfg.uses_noise_variance else None)
+        self._weights = sample_weights(field, samples) if cfg.uses_noise_variance else None
         lattice, chosen = self.plan_lattice(values, samples, field)
         depths, freqs = lattice.depths, field.frequencies[chosen]
         def operator(k: float, f: np.ndarray = freqs) -> SceneOperator:
@@ -227,8 +227,9 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         the per-frequency ``gains`` of the system response, if any; each wall point's
         residual weighted by the likelihood), from ``start``."""
         cfg = self.config
-        w = None if self._weights is None else self._weights.astype(data.real.dtype)
-        norms = op.column_norms(None if w is None else w.astype(np.float64) ** 2)
+        weights = self._weights
+        w = None if weights is None else weights.astype(data.real.dtype)
+        norms = op.column_norms(None if weights is None else weights**2)
         project = self._projector(op.frequencies)
         data = project(data) if w is None else w * project(data)
         g = None if gains is None else gains.astype(data.dtype)[:, None, None]
