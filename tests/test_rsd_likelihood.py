@@ -16,26 +16,12 @@ from nlosfw.model.protocol import scattered_field, split_field
 from nlosfw.model.rsd_likelihood import sample_weights
 from nlosfw.model.rsd_prior import RSDPriorFieldModel
 from nlosfw.model.rsd_sampling import wall_samples
-from nlosfw.simulate.analytic import AnalyticSimulator
-from nlosfw.simulate.scene import scene_from_config
-from nlosfw.testing import fixtures, heldout_error_db, tiny_scene_config
+from nlosfw.testing import fixtures, heldout_error_db
 from nlosfw.testing.fixtures import tiny_capture
 from nlosfw.transform.common import histogram_2d, to_field_layout
-from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
+from tests.test_rsd_lobe import OPTIONS, patch_field
 from tests.test_rsd_prior import _geometry
-
-#: One voxel plane at the patch's depth, as the lobe tests fit it.
-OPTIONS = {"depth_range": [0.5, 0.5], "lateral_step": 1 / 32, "l1_weight": 1e-3,
-           "iterations": 300, "workers": 1}
-
-
-def _patch_field() -> PhasorField:
-    """An 8 cm patch 0.5 m from a 1 m confocal wall of 16 x 16 points, noise-free."""
-    config = tiny_scene_config(confocal=True, resolution=16, bins=300, bin_width=0.006,
-                               target=(0.03, -0.02, 0.5), patch=0.08)
-    capture = AnalyticSimulator({}).simulate(scene_from_config(config))
-    return FFTTransform({"n_frequencies": 10, "f_min": 2.0, "f_max": 4.0}).transform(capture)
 
 
 def _field_of(values: np.ndarray, variance: np.ndarray | None = None) -> PhasorField:
@@ -81,7 +67,7 @@ def test_weights_are_the_inverse_variance_per_point_with_mean_one():
 
 
 def test_poisson_without_a_variance_is_refused_in_one_line():
-    field = _patch_field()
+    field = patch_field()
     model = RSDPriorFieldModel({**OPTIONS, "likelihood": "poisson"})
     with pytest.raises(ConfigError, match="model.likelihood") as err:
         model.fit(field)
@@ -100,7 +86,7 @@ def test_weighting_by_the_noise_variance_beats_least_squares_on_uneven_noise():
     Measured, noise-free error at the held-out points: least squares -13.5 dB, the
     weighted fit -22.6 dB (another noise seed: -11.9 and -23.0); with the noise the same
     everywhere the two fits are the same."""
-    clean = _patch_field()
+    clean = patch_field()
     rng = np.random.default_rng(3)
     rms = float(np.sqrt(np.mean(np.abs(clean.values) ** 2)))
     sigma = np.where(rng.random(clean.grid_shape) < 0.25, 10.0, 1.0) * 0.3 * rms

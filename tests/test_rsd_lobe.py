@@ -22,6 +22,7 @@ from nlosfw.simulate.physics import three_bounce
 from nlosfw.simulate.scene import GeometryItem, scene_from_config
 from nlosfw.testing import fixtures, heldout_error_db, tiny_scene_config
 from nlosfw.transform.fft import FFTTransform
+from nlosfw.transform.field import PhasorField
 from tests.test_rsd_prior import _geometry
 
 #: One voxel plane at the patch's depth, voxels a quarter of the kept points' spacing apart.
@@ -76,15 +77,20 @@ def test_the_operator_with_a_lobe_is_the_simulators_physics_for_a_confocal_scan(
     assert np.linalg.norm(lambertian - expected) > 0.1 * np.linalg.norm(expected)
 
 
-def _patch_fit(lobe: float, confocal: bool, options: dict) -> tuple[dict, float]:
-    """An 8 cm patch 0.5 m from a 1 m wall of 16 x 16 points with the given lobe, rendered
-    by the analytic simulator; rsd_prior fitted on every other point: (fitted values,
-    held-out error in dB at the other points)."""
+def patch_field(lobe: float = 0.0, confocal: bool = True) -> PhasorField:
+    """The field of an 8 cm patch 0.5 m from a 1 m wall of 16 x 16 points with the given
+    lobe, rendered by the analytic simulator (noise-free; 10 frequencies, 2-4 cycles/m)."""
     config = tiny_scene_config(confocal=confocal, resolution=16, bins=300, bin_width=0.006,
                                target=(0.03, -0.02, 0.5), patch=0.08)
     config["geometry"][0]["lobe"] = lobe
     capture = AnalyticSimulator({}).simulate(scene_from_config(config))
-    field = FFTTransform({"n_frequencies": 10, "f_min": 2.0, "f_max": 4.0}).transform(capture)
+    return FFTTransform({"n_frequencies": 10, "f_min": 2.0, "f_max": 4.0}).transform(capture)
+
+
+def _patch_fit(lobe: float, confocal: bool, options: dict) -> tuple[dict, float]:
+    """rsd_prior fitted on every other point of :func:`patch_field`: (fitted values,
+    held-out error in dB at the other points)."""
+    field = patch_field(lobe, confocal)
     split = split_field(field, spatial_step=2, spectral="none")
     model = RSDPriorFieldModel({**OPTIONS, **options})
     report = model.fit(split.train_field)
