@@ -127,9 +127,11 @@ def test_a_float_capture_file_is_refused_before_the_run(tmp_path, monkeypatch, c
     assert not (tmp_path / "outputs").exists()
 
 
-def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch):
+@pytest.mark.parametrize("thinning", [[], ["split.thinning=true"]])
+def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch, thinning):
     """The training field's variance is the bin width squared times each kept point's
-    photon count (the capture's counts, over the count scale squared), at every frequency."""
+    photon count (the capture's counts, over the count scale squared), at every frequency;
+    with count splitting, half A's counts (the transform probed once, on half B)."""
     seen: list[PhasorField] = []
     fit = RSDPriorFieldModel.fit
 
@@ -144,7 +146,7 @@ def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch
     assert main(["scene=tiny", "scene.noise.model=poisson", "scene.noise.photons=2e5",
                  "model=rsd_prior", "model.likelihood=poisson", "model.iterations=20",
                  "split.spatial_step=2", "transform.n_frequencies=21",
-                 "reconstruction.n_depths=4", "figures.enabled=false",
+                 "reconstruction.n_depths=4", "figures.enabled=false", *thinning,
                  f"hydra.run.dir={run}"]) == 0
     capture = read_capture(run / "capture.hdf5")
     per_point = to_field_layout(histogram_2d(capture).sum(axis=0)[None], capture)[0]

@@ -130,6 +130,14 @@ def test_column_norms_match_the_operator():
             e[index] = 1.0
             expected = np.sqrt(np.sum(weights * np.abs(op.forward(e)) ** 2))
             assert weighted[index] == pytest.approx(expected, rel=1e-9)
+        # kept for the same weights, even when the caller's array changes after the call
+        same = weights.copy()
+        assert op.column_norms(same) is weighted
+        same[0, 0] *= 4.0
+        changed = op.column_norms(same)
+        assert changed is not weighted and changed[0, 0, 0] != weighted[0, 0, 0]
+        assert op.column_norms(weights) is not changed
+        np.testing.assert_array_equal(op.column_norms(weights), weighted)
 
 
 @pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])

@@ -152,6 +152,7 @@ class SceneOperator:
         self._spectra: dict[int, np.ndarray] = {}
         self._laser: dict[int, np.ndarray | None] = {}
         self._norms: np.ndarray | None = None
+        self._weighted_norms: tuple[np.ndarray, np.ndarray] | None = None
 
     # ------------------------------------------------------------------ pieces
     @property
@@ -255,13 +256,18 @@ class SceneOperator:
     def column_norms(self, weights: np.ndarray | None = None) -> np.ndarray:
         """||A e_v|| for every voxel (Z, Y, X): sqrt(sum_f sum_s |A_f[s, v]|^2) (computed once
         per operator; read-only); with ``weights`` (the wall's (ny, nx), >= 0) the weighted
-        norms sqrt(sum_f sum_s weights[s] |A_f[s, v]|^2), computed each time."""
+        norms sqrt(sum_f sum_s weights[s] |A_f[s, v]|^2), kept for the last weights asked
+        (a fit solves one operator many times with the same ones)."""
         if self._norms is not None and weights is None:
             return self._norms
+        w = None if weights is None else np.array(weights, dtype=float)
+        if w is not None and self._weighted_norms is not None \
+                and np.array_equal(self._weighted_norms[0], w):
+            return self._weighted_norms[1]
         ones = (np.ones((1,) + self.wall.shape) if self.mask is None
                 else self.mask[None].astype(float))
-        if weights is not None:
-            ones = ones * np.asarray(weights, dtype=float)[None]
+        if w is not None:
+            ones = ones * w[None]
         out = np.empty(self.lattice.volume_shape)
         legs = 2 if self.confocal else 1
         lp = None if self.confocal else np.asarray(self.geometry.laser_point, dtype=float)
@@ -278,8 +284,10 @@ class SceneOperator:
                 sums = sums * self._leg(r_l, z) ** 2
             out[i] = np.sqrt(np.maximum(sums, 0.0) * self.frequencies.size)
         out.setflags(write=False)
-        if weights is None:
+        if w is None:
             self._norms = out
+        else:
+            self._weighted_norms = (w, out)
         return out
 
     def _check_albedo(self, albedo: np.ndarray) -> None:

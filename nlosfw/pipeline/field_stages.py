@@ -41,7 +41,7 @@ from nlosfw.transform.field import PhasorField
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 from nlosfw.transform.frequencies import warn_aliasing
 from nlosfw.transform.interface import PhasorTransform
-from nlosfw.transform.noise_floor import field_variance
+from nlosfw.transform.noise_floor import field_variance, kernel_power
 
 log = logging.getLogger(__name__)
 
@@ -74,14 +74,16 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
                 clean = cached_field(capture.clean, capture.clean_key)[0]
             if not time_domain:
                 _warn_aliasing(field)
-            score = variance = None
+            score = variance = power = None
             if capture.thinning is not None and capture.score_key is not None:
                 score = cached_field(capture.thinning.b, capture.score_key)[0]
-                variance = field_variance(transform, capture.thinning.b, planned.name)
+                power = kernel_power(transform, capture.thinning.b, planned.name)
+                variance = field_variance(transform, capture.thinning.b, planned.name,
+                                          power=power)
             if any(getattr(m.model.config, "uses_noise_variance", False)
                    for m in run.plan.models):
                 field = field.replace(variance=_training_variance(transform, capture,
-                                                                  planned.name))
+                                                                  planned.name, power))
     finally:
         frequencies_log.removeFilter(quiet)
     run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
@@ -92,14 +94,16 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
                            score=score, score_variance=variance)
 
 
-def _training_variance(transform: PhasorTransform, capture: CaptureResult, name: str
-                       ) -> np.ndarray:
+def _training_variance(transform: PhasorTransform, capture: CaptureResult, name: str,
+                       power: np.ndarray | None) -> np.ndarray:
     """The Poisson variance of the training capture's field, for a model whose likelihood
-    needs it; a one-line ConfigError for ``model.likelihood`` naming the capture when it is
-    not photon counts or the transform is not DFT-like."""
+    needs it (``power``: the transform's kernel power when count splitting probed it on
+    half B, whose layout is the training half's); a one-line ConfigError for
+    ``model.likelihood`` naming the capture when it is not photon counts or the transform
+    is not DFT-like."""
     option, purpose = "model.likelihood", "the Poisson likelihood"
     photon_counts(capture.capture, capture.label, option, purpose)
-    return field_variance(transform, capture.capture, name, option, purpose)
+    return field_variance(transform, capture.capture, name, option, purpose, power)
 
 
 def fit_stage(run: StageContext, done: StageResults) -> FitResult:

@@ -64,11 +64,14 @@ def kernel_power(transform: PhasorTransform, capture: Capture, name: str = "tran
 
 
 def field_variance(transform: PhasorTransform, capture: Capture, name: str = "transform",
-                   option: str = OPTION, purpose: str = "count splitting") -> np.ndarray:
+                   option: str = OPTION, purpose: str = "count splitting",
+                   power: np.ndarray | None = None) -> np.ndarray:
     """Var P(f, y, x) of the phasor field of ``capture`` (Poisson counts, their variance
     estimated by themselves), in the field's layout (F, Y, X); errors as
-    :func:`kernel_power`'s."""
-    power = kernel_power(transform, capture, name, option, purpose)
+    :func:`kernel_power`'s. ``power``: :func:`kernel_power`'s result for a capture of this
+    layout, when it was probed already (the probe is two transforms of the capture's size)."""
+    if power is None:
+        power = kernel_power(transform, capture, name, option, purpose)
     per_point = histogram_2d(capture.replace(H=count_variance(capture))).sum(axis=0)
     layout = to_field_layout(per_point[np.newaxis, :], capture)        # (1, Y, X)
     return power[:, np.newaxis, np.newaxis] * layout
