@@ -45,12 +45,25 @@ def _is_fixed(node: Any) -> bool:
 
 class JaxPlaneOperator:
     """A a for an albedo a (Z, Y, X), real: the wall fields (F, ny, nx), complex, on
-    ``device`` (None: JAX's default; see :class:`nlosfw.model.PlaneStack`)."""
+    ``device`` (None: JAX's default; see :class:`nlosfw.model.PlaneStack`).
+
+    A confocal scan on the CPU sums over planes as one product per lattice point (an
+    ``einsum`` over the spectra reordered once as (Ly Lx, F, Z), as the torch operator
+    does): on 2 cores, for 70 planes, 135 frequencies and a 125 x 125 lattice, forward and
+    backward take 0.51 s against 1.14 s for the product summed over planes. A GPU and the
+    single-spot case keep that sum.
+    """
 
     def __init__(self, stack: PlaneStack, device: Any = None) -> None:
-        self.spectra = jax.device_put(stack.spectra, device)
+        platform = (device if device is not None else jax.devices()[0]).platform
+        self.batched = stack.laser is None and platform == "cpu"
+        z, n_f = stack.spectra.shape[:2]
+        spectra = (np.ascontiguousarray(stack.spectra.transpose(2, 3, 1, 0).reshape(-1, n_f, z))
+                   if self.batched else stack.spectra)
+        self.spectra = jax.device_put(spectra, device)
         self.laser = None if stack.laser is None else jax.device_put(stack.laser, device)
         shape, inputs, outputs = stack.shape, stack.inputs, stack.outputs
+        batched = self.batched
 
         def forward(albedo: jax.Array, spectra: jax.Array, laser: jax.Array | None
                     ) -> jax.Array:
@@ -58,7 +71,12 @@ class JaxPlaneOperator:
             source = a if laser is None else a * laser                 # (Z, 1 or F, Y, X)
             work = jnp.zeros(source.shape[:2] + shape, source.dtype)
             work = work.at[(..., inputs[0], inputs[1])].set(source)
-            total = jnp.sum(spectra * jnp.fft.fft2(work), axis=0)     # (F, Ly, Lx)
+            planes = jnp.fft.fft2(work)                                 # (Z, 1 or F, Ly, Lx)
+            if batched:                                                 # (Ly Lx, F, Z) . (.., Z)
+                columns = planes[:, 0].reshape(planes.shape[0], -1).T
+                total = jnp.einsum("lfz,lz->lf", spectra, columns).T.reshape((-1,) + shape)
+            else:
+                total = jnp.sum(spectra * planes, axis=0)               # (F, Ly, Lx)
             return jnp.fft.ifft2(total)[(..., outputs[0], outputs[1])]
 
         self.forward = forward
@@ -103,17 +121,23 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
             out = out.real if jnp.iscomplexobj(out) else out[..., 0]
             return gain * jax.nn.softplus(out + shift).reshape(gain.shape)
 
-        def loss_of(params: Any, rest: Any) -> tuple[jax.Array, tuple[jax.Array, jax.Array]]:
+        # the operator's constants are arguments: closed over, XLA would fold them into
+        # the program (70 planes x 135 frequencies: 95 s to compile instead of a few)
+        constants = (op.spectra, op.laser)
+
+        def loss_of(params: Any, rest: Any, constants: tuple[jax.Array, jax.Array | None]
+                    ) -> tuple[jax.Array, tuple[jax.Array, jax.Array]]:
             current = albedo(params, rest)
-            squared = jnp.abs(op.forward(current, op.spectra, op.laser) - data) ** 2
+            squared = jnp.abs(op.forward(current, *constants) - data) ** 2
             error = jnp.sum(squared * val) / val_power
             return jnp.sum(squared * train) / train_power, (error, current)
 
         @jax.jit
-        def step(params: Any, rest: Any, opt_state: Any, lr: jax.Array
+        def step(params: Any, rest: Any, opt_state: Any, lr: jax.Array,
+                 constants: tuple[jax.Array, jax.Array | None]
                  ) -> tuple[Any, Any, jax.Array, jax.Array, jax.Array]:
             (loss, (error, current)), grads = jax.value_and_grad(loss_of, has_aux=True)(
-                params, rest)
+                params, rest, constants)
             updates, opt_state = _ADAM.update(grads, opt_state, params)
             params = jax.tree.map(lambda p, u: p - lr * u, params, updates)
             return params, opt_state, loss, error, current
@@ -126,7 +150,8 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         k = 0
         for k in range(cfg.steps):
             params, opt_state, loss, error, current = step(
-                params, rest, opt_state, jnp.asarray(self.learning_rate(k), jnp.float32))
+                params, rest, opt_state, jnp.asarray(self.learning_rate(k), jnp.float32),
+                constants)
             loss_value = float(loss)
             if not math.isfinite(loss_value):
                 raise FitError(f"{who}: training diverged at step {k + 1} (loss "
@@ -140,7 +165,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
                                      seconds=time.perf_counter() - start))
             if best.stop(k):
                 break
-        _, (error, current) = jax.jit(loss_of)(params, rest)
+        _, (error, current) = jax.jit(loss_of)(params, rest, constants)
         best.offer(k + 1, float(error) if has_val else None, current)
         fitted = np.asarray(jax.device_get(best.albedo))
         return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network,

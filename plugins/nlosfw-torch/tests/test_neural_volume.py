@@ -87,8 +87,9 @@ def test_torch_and_jax_operators_match_numpy(confocal, spacings):
 
 
 @pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])
-def test_the_torch_operator_is_differentiable(confocal):
-    """The gradient of 1/2 ||A a - P||^2 by autograd equals Re(A^H (A a - P)) from numpy's
+def test_the_torch_and_jax_operators_are_differentiable(confocal):
+    """The gradient of 1/2 ||A a - P||^2 by autograd (torch's, and JAX's when installed)
+    equals Re(A^H (A a - P)) from numpy's
     adjoint (an independent implementation: correlation with conjugate kernels); confocal
     scans take the batched product on the CPU."""
     op = _operator(confocal, 0.08, 0.04)
@@ -102,6 +103,16 @@ def test_the_torch_operator_is_differentiable(confocal):
     (0.5 * torch.sum(torch.abs(residual) ** 2)).backward()
     expected = op.adjoint(op.forward(albedo) - target.astype(np.complex64)).real
     assert _relative(a.grad.numpy(), expected) < 1e-4
+    if HAS_JAX:                        # JAX's gradient, through its einsum on the CPU
+        import jax
+        import jax.numpy as jnp
+        from nlosfw_jax.neural_volume import JaxPlaneOperator
+
+        jop = JaxPlaneOperator(plane_stack(op))
+        assert jop.batched == confocal
+        grad = jax.grad(lambda x: 0.5 * jnp.sum(jnp.abs(jop(x) - target.astype(np.complex64))
+                                                ** 2))(jnp.asarray(albedo))
+        assert _relative(np.asarray(grad), expected) < 1e-4
 
 
 # ------------------------------------------------------------------ a known sparse scene
