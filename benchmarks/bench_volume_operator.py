@@ -1,13 +1,21 @@
-"""Speed of the neural volume's RSD operator in torch (issue 22): one forward and one
-backward, the operator's share of a training step, on the size of a real-data fit at 16x.
+"""Speed of the neural volume's RSD operator in torch and JAX (issue 22): one forward and
+one backward, the operator's share of a training step, on the size of a real-data fit at
+16x.
 
-The size is that of ``neural_volume_torch``'s fit of the shared diffuse S at 16x (a
-confocal 16 x 16 grid of kept points 5.08 cm apart, voxels every 1.27 cm on 65 x 65
-columns, 70 depth planes, all 135 frequencies of its band, complex64). The baseline, timed
-in the same run on the same operator, is the batched product differentiated by autograd's
-own ``bmm`` backward, which conjugates and transposes the spectra in every step; the
-operator's backward computes S^H g as (g^H S)^H instead. Prints a table and writes
-``benchmarks/results/bench_volume_operator.json``; needs the torch plugin.
+The size is that of ``neural_volume_*``'s fit of the shared diffuse S at 16x (a confocal
+16 x 16 grid of kept points 5.08 cm apart, voxels every 1.27 cm on 65 x 65 columns, 70
+depth planes, all 135 frequencies of its band, complex64). Each backend's baseline is
+timed in the same run on the same operator:
+
+- torch: the batched product differentiated by autograd's own ``bmm`` backward, which
+  multiplies by the spectra's conjugate transpose; the operator computes S^H g as
+  (g^H S)^H instead;
+- JAX: the product summed over planes (the GPU's path); the operator on the CPU contracts
+  the reordered spectra with an ``einsum`` instead. Both jitted, the spectra passed as
+  arguments (closed over, XLA folds them into the program and compiles for minutes).
+
+Prints a table and writes ``benchmarks/results/bench_volume_operator.json``; a backend
+whose plugin is not installed is skipped.
 
     python benchmarks/bench_volume_operator.py [--repeats 3] [--planes 70] [--frequencies 135]
 """
@@ -15,29 +23,29 @@ operator's backward computes S^H g as (g^H S)^H instead. Prints a table and writ
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-import torch
-from nlosfw_torch.neural_volume import TorchPlaneOperator
 from rich.console import Console
 from rich.table import Table
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.image import grid_layout
-from nlosfw.model import OperatorOptions, SceneOperator, VoxelLattice, plane_stack
+from nlosfw.model import OperatorOptions, PlaneStack, SceneOperator, VoxelLattice, plane_stack
 from nlosfw.testing import fixtures
 
 RESULTS = Path(__file__).parent / "results" / "bench_volume_operator.json"
 
 
-def operator(planes: int, frequencies: int) -> TorchPlaneOperator:
-    """The torch operator of a 16x fit of the diffuse S (see the module docstring)."""
+def stack_of(planes: int, frequencies: int) -> PlaneStack:
+    """The operator constants of a 16x fit of the diffuse S (see the module docstring)."""
     wall = grid_layout(fixtures.rect_wall_grid((16, 16), 0.0508))
     spacing = 0.0508 / 4
     lattice = VoxelLattice(np.linspace(0.235, 0.65, planes),
@@ -47,33 +55,75 @@ def operator(planes: int, frequencies: int) -> TorchPlaneOperator:
                                sensor_xyz=np.zeros(3))
     op = SceneOperator(lattice, wall, geometry, np.linspace(4.0, 20.0, frequencies),
                        OperatorOptions(dtype=np.complex64, cache_mb=0.0))
-    return TorchPlaneOperator(plane_stack(op))
+    return plane_stack(op)
 
 
-def autograd_bmm(op: TorchPlaneOperator) -> Callable[[torch.Tensor], torch.Tensor]:
-    """The baseline: the operator's batched path with autograd's own ``bmm`` backward."""
-    def forward(albedo: torch.Tensor) -> torch.Tensor:
-        work = torch.zeros((albedo.shape[0],) + op.shape, dtype=op.dtype)
-        work[(..., op.inputs[0], op.inputs[1])] = albedo.to(op.dtype)
-        planes = torch.fft.fft2(work)
-        columns = planes.permute(1, 2, 0).reshape(-1, planes.shape[0], 1)
+def best_of(run: Callable[[], np.ndarray], repeats: int) -> tuple[float, np.ndarray]:
+    """The fastest of ``repeats`` calls (s), after one that warms up (and compiles), and
+    the last call's gradient."""
+    grad = run()
+    best = float("inf")
+    for _ in range(repeats):
+        start = time.perf_counter()
+        grad = run()
+        best = min(best, time.perf_counter() - start)
+    return best, grad
+
+
+def torch_pair(stack: PlaneStack, albedo: np.ndarray, repeats: int) -> dict[str, float]:
+    """torch: autograd's bmm backward against the operator's, forward + backward."""
+    import torch
+    from nlosfw_torch.neural_volume import TorchPlaneOperator
+
+    op = TorchPlaneOperator(stack)
+
+    def baseline(a: torch.Tensor) -> torch.Tensor:
+        work = torch.zeros((a.shape[0],) + op.shape, dtype=op.dtype)
+        work[(..., op.inputs[0], op.inputs[1])] = a.to(op.dtype)
+        columns = torch.fft.fft2(work).permute(1, 2, 0).reshape(-1, a.shape[0], 1)
         total = torch.bmm(op.spectra, columns).reshape(op.shape + (-1,)).permute(2, 0, 1)
         return torch.fft.ifft2(total)[(..., op.outputs[0], op.outputs[1])]
-    return forward
+
+    def gradient(forward: Callable[[torch.Tensor], torch.Tensor]) -> Callable[[], np.ndarray]:
+        def run() -> np.ndarray:
+            a = torch.from_numpy(albedo).requires_grad_(True)
+            torch.sum(torch.abs(forward(a)) ** 2).backward()
+            return a.grad.numpy()
+        return run
+
+    return _row(best_of(gradient(baseline), repeats), best_of(gradient(op), repeats))
 
 
-def time_step(forward: Callable[[torch.Tensor], torch.Tensor], volume: tuple[int, ...],
-              repeats: int) -> tuple[float, torch.Tensor]:
-    """The fastest of ``repeats`` forward + backward passes (s), and the albedo's gradient."""
-    albedo = torch.from_numpy(np.random.default_rng(0).random(volume).astype(np.float32))
-    best, grad = float("inf"), torch.zeros(0)
-    for _ in range(repeats + 1):                     # the first warms the allocator
-        a = albedo.clone().requires_grad_(True)
-        start = time.perf_counter()
-        torch.sum(torch.abs(forward(a)) ** 2).backward()
-        best = min(best, time.perf_counter() - start)
-        grad = a.grad
-    return best, grad
+def jax_pair(stack: PlaneStack, albedo: np.ndarray, repeats: int) -> dict[str, float]:
+    """JAX: the product summed over planes against the operator's einsum on the CPU."""
+    import jax
+    import jax.numpy as jnp
+    from nlosfw_jax.neural_volume import JaxPlaneOperator
+
+    op = JaxPlaneOperator(stack)
+    if not op.batched:
+        raise SystemExit("JAX's default device is not a CPU: the einsum path is not taken")
+    plain = jax.device_put(stack.spectra)
+
+    def baseline(a: Any, spectra: Any) -> Any:
+        work = jnp.zeros((a.shape[0],) + stack.shape, spectra.dtype)
+        work = work.at[(..., stack.inputs[0], stack.inputs[1])].set(a.astype(spectra.dtype))
+        total = jnp.sum(spectra * jnp.fft.fft2(work)[:, None], axis=0)
+        return jnp.fft.ifft2(total)[(..., stack.outputs[0], stack.outputs[1])]
+
+    def gradient(forward: Callable[[Any, Any], Any], spectra: Any) -> Callable[[], np.ndarray]:
+        grad = jax.jit(jax.grad(lambda a, s: jnp.sum(jnp.abs(forward(a, s)) ** 2)))
+        return lambda: np.asarray(grad(jnp.asarray(albedo), spectra).block_until_ready())
+
+    return _row(best_of(gradient(baseline, plain), repeats),
+                best_of(gradient(lambda a, s: op.forward(a, s, None), op.spectra), repeats))
+
+
+def _row(baseline: tuple[float, np.ndarray], operator: tuple[float, np.ndarray]
+         ) -> dict[str, float]:
+    mismatch = np.linalg.norm(operator[1] - baseline[1]) / np.linalg.norm(baseline[1])
+    return {"baseline_s": baseline[0], "operator_s": operator[0],
+            "speedup": baseline[0] / operator[0], "gradient_mismatch": float(mismatch)}
 
 
 def main() -> None:
@@ -82,36 +132,29 @@ def main() -> None:
     parser.add_argument("--planes", type=int, default=70)
     parser.add_argument("--frequencies", type=int, default=135)
     args = parser.parse_args()
-    op = operator(args.planes, args.frequencies)
-    if not op.batched:
-        raise SystemExit("the operator is not on the batched (CPU, confocal) path")
-    volume = (args.planes, 65, 65)
+    stack = stack_of(args.planes, args.frequencies)
+    albedo = np.random.default_rng(0).random((args.planes, 65, 65)).astype(np.float32)
     rows: dict[str, dict[str, float]] = {}
-    before = torch.get_num_threads()
-    for threads in sorted({1, before}):
-        torch.set_num_threads(threads)
-        baseline, expected = time_step(autograd_bmm(op), volume, args.repeats)
-        seconds, grad = time_step(op, volume, args.repeats)
-        mismatch = float(torch.linalg.norm(grad - expected) / torch.linalg.norm(expected))
-        rows[str(threads)] = {"autograd_bmm_s": baseline, "operator_s": seconds,
-                              "speedup": baseline / seconds, "gradient_mismatch": mismatch}
-    torch.set_num_threads(before)
+    for backend, plugin, pair in (("torch", "nlosfw_torch", torch_pair),
+                                  ("jax", "nlosfw_jax", jax_pair)):
+        if importlib.util.find_spec(plugin) is not None:
+            rows[backend] = pair(stack, albedo, args.repeats)
     table = Table(title=f"neural volume operator, {args.planes} planes x "
-                        f"{args.frequencies} frequencies, forward + backward")
-    for column in ("threads", "autograd bmm (s)", "operator (s)", "speed-up",
-                   "gradient mismatch"):
+                        f"{args.frequencies} frequencies, forward + backward "
+                        f"({os.cpu_count()} cores)")
+    for column in ("backend", "baseline (s)", "operator (s)", "speed-up", "gradient mismatch"):
         table.add_column(column, justify="right")
-    for threads, row in rows.items():
-        table.add_row(threads, f"{row['autograd_bmm_s']:.3f}", f"{row['operator_s']:.3f}",
+    for backend, row in rows.items():
+        table.add_row(backend, f"{row['baseline_s']:.3f}", f"{row['operator_s']:.3f}",
                       f"{row['speedup']:.2f}x", f"{row['gradient_mismatch']:.1e}")
     Console().print(table)
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_volume_operator",
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "torch": torch.__version__},
+                    "python": platform.python_version()},
         "planes": args.planes, "frequencies": args.frequencies, "repeats": args.repeats,
-        "threads": rows}, indent=1) + "\n")
+        "backends": rows}, indent=1) + "\n")
 
 
 if __name__ == "__main__":
