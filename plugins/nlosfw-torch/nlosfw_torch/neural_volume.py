@@ -37,8 +37,8 @@ class _SpectraProduct(torch.autograd.Function):
     """S c for constant spectra S (L, F, Z) and columns c (L, Z, 1), with the gradient
     S^H g computed as (g^H S)^H, which reads S as it is stored. Autograd's own backward of
     ``bmm`` multiplies by S's conjugate transpose, about four times the forward's time:
-    the operator's forward and backward took 1.46 s with it and 0.68 s with this on one
-    core (``benchmarks/bench_volume_operator.py``: 70 planes, 135 frequencies, the same
+    the operator's forward and backward take 1.32 s with it and 0.77 s with this on 2
+    cores (``benchmarks/bench_volume_operator.py``: 70 planes, 135 frequencies, the same
     gradient)."""
 
     @staticmethod
@@ -59,10 +59,10 @@ class TorchPlaneOperator:
     A confocal scan on the CPU sums over planes as one batched matrix product per lattice
     point (the spectra reordered once as (Ly Lx, F, Z), a copy as large as the product the
     other path makes in every step; its gradient by :class:`_SpectraProduct`): 2.7 times
-    faster there than the product summed over planes (70 planes, 135 frequencies,
-    135 x 135, forward and backward: 2.1 s against 5.6 s on 2 cores, before the custom
-    gradient halved the former). A GPU and the single-spot case keep that sum (measured on the H200;
-    each plane's laser leg makes the inputs differ per frequency there).
+    faster there than the product summed over planes, before that gradient (70 planes,
+    135 frequencies, 135 x 135, forward and backward: 2.1 s against 5.6 s on 2 cores). A
+    GPU and the single-spot case keep that sum (measured on the H200; each plane's laser
+    leg makes the inputs differ per frequency there).
     """
 
     def __init__(self, stack: PlaneStack, device: torch.device | str = "cpu") -> None:
