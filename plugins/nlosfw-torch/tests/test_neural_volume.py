@@ -89,9 +89,9 @@ def test_torch_and_jax_operators_match_numpy(confocal, spacings):
 @pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])
 def test_the_torch_and_jax_operators_are_differentiable(confocal):
     """The gradient of 1/2 ||A a - P||^2 by autograd (torch's, and JAX's when installed)
-    equals Re(A^H (A a - P)) from numpy's
-    adjoint (an independent implementation: correlation with conjugate kernels); confocal
-    scans take the batched product on the CPU."""
+    equals Re(A^H (A a - P)) from numpy's adjoint (an independent implementation:
+    correlation with conjugate kernels); confocal scans take the batched product on the
+    CPU."""
     op = _operator(confocal, 0.08, 0.04)
     assert TorchPlaneOperator(plane_stack(op)).batched == confocal
     rng = np.random.default_rng(5)
