@@ -1,5 +1,5 @@
-"""The neural hidden volume's validation points and kept step (no backend needed), and its
-refusal of an operator larger than the memory left (with torch)."""
+"""The neural hidden volume's validation points, kept step and aligned operator arrays (no
+backend needed), and its refusal of an operator larger than the memory left (with torch)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from nlosfw.common import ConfigError, FitError
-from nlosfw.model import BestStep, NeuralVolumeConfig, validation_split
+from nlosfw.model import BestStep, NeuralVolumeConfig, aligned_empty, validation_split
 from nlosfw.plugins import load_plugins
 from nlosfw.plugins.networks import NEURAL_VOLUME_TEST_CONFIG
 from nlosfw.testing.checks_model import fit_fixture
@@ -67,3 +67,16 @@ def test_an_operator_larger_than_the_memory_left_is_refused_in_one_line(monkeypa
     message = str(err.value)
     assert "\n" not in message and "but 1.0 kB are available" in message, message
     assert "model.fit_frequencies" in message and "depth planes" in message, message
+
+
+@pytest.mark.parametrize("shape, dtype", [((3, 5, 7), np.complex64), ((1,), np.complex128),
+                                          ((4, 6, 9, 11), np.float32), ((1, 3), np.float32)])
+def test_aligned_empty_starts_on_a_64_byte_boundary(shape, dtype):
+    """aligned_empty (plane_stack's arrays) is C-contiguous, of the shape and dtype asked,
+    starts on a 64-byte boundary and owns memory no other array shares."""
+    arrays = [aligned_empty(shape, dtype) for _ in range(3)]
+    for a in arrays:
+        assert a.shape == shape and a.dtype == np.dtype(dtype) and a.flags.c_contiguous
+        assert a.ctypes.data % 64 == 0
+        a[...] = 1
+    assert not np.shares_memory(arrays[0], arrays[1])

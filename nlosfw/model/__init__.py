@@ -78,6 +78,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.model.volume_training import (
         BestStep,
         PlaneStack,
+        aligned_empty,
         history_entry,
         plane_stack,
         stack_bytes,
@@ -120,6 +121,7 @@ __all__ = [
     "NeuralVolumeConfig",
     "NeuralVolumeFieldModel",
     "PlaneStack",
+    "aligned_empty",
     "plane_stack",
     "stack_bytes",
     "validation_split",

@@ -259,6 +259,11 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         """Train the network on ``problem`` (the backend's)."""
         raise NotImplementedError(f"{type(self).__name__} names no backend")
 
+    def stack_copies(self, confocal: bool) -> int:
+        """How many copies of :func:`plane_stack`'s arrays host memory holds while
+        training (the stack itself, and any reordered copy the backend's operator makes)."""
+        return 1
+
     def learning_rate(self, step: int) -> float:
         """Adam's learning rate at ``step`` (0-based): cosine from ``lr`` to ``lr * lr_final``."""
         cfg = self.config
@@ -310,7 +315,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         op = SceneOperator(lattice, samples.layout, field.geometry, field.frequencies[chosen],
                            OperatorOptions(amplitude=cfg.amplitude, lobe=prior.lobe, dtype=dtype,
                                            workers=cfg.workers, cache_mb=0.0), samples.mask)
-        need, room = stack_bytes(op), available_memory()
+        need, room = stack_bytes(op) * self.stack_copies(op.confocal), available_memory()
         log.info("%s: operator of %d planes x %d frequencies on a %d x %d lattice: %s",
                  who, lattice.depths.size, op.frequencies.size, *op.conv.shape,
                  format_bytes(need))

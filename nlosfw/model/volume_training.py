@@ -28,21 +28,37 @@ class PlaneStack:
     outputs: tuple[slice, slice]
 
 
+ALIGNMENT = 64
+"""Byte alignment of :func:`plane_stack`'s arrays (JAX uses a CPU array in place only when
+it is 64-byte aligned, and copies it otherwise)."""
+
+
+def aligned_empty(shape: tuple[int, ...], dtype: np.dtype | type) -> np.ndarray:
+    """An uninitialised C-contiguous array whose data starts on a :data:`ALIGNMENT`-byte
+    boundary."""
+    dt = np.dtype(dtype)
+    size = math.prod(shape) * dt.itemsize
+    raw = np.empty(size + ALIGNMENT, np.uint8)
+    start = -raw.ctypes.data % ALIGNMENT
+    return raw[start:start + size].view(dt).reshape(shape)
+
+
 def plane_stack(op: SceneOperator) -> PlaneStack:
     """The constants of ``op`` (its dtype) stacked over planes, each written into its place
-    (the memory held is :func:`stack_bytes`, not twice that)."""
+    (the memory held is :func:`stack_bytes`, not twice that), in :func:`aligned_empty`
+    arrays."""
     z = op.lattice.depths.size
     spectra: np.ndarray | None = None
     laser: np.ndarray | None = None
     for i in range(z):
         plane = op.kernel_spectra(i)
         if spectra is None:
-            spectra = np.empty((z, *plane.shape), plane.dtype)
+            spectra = aligned_empty((z, *plane.shape), plane.dtype)
         spectra[i] = plane
         leg = None if op.confocal else op.laser_leg(i)
         if leg is not None:
             if laser is None:
-                laser = np.empty((z, *leg.shape), leg.dtype)
+                laser = aligned_empty((z, *leg.shape), leg.dtype)
             laser[i] = leg
     if spectra is None:
         raise DataError(f"{op.lattice}: no voxel plane to propagate")

@@ -28,10 +28,11 @@ from nlosfw.model import (
     TrainedVolume,
     TrainingStep,
     VolumeProblem,
+    aligned_empty,
     history_entry,
 )
 from nlosfw.plugins import registered_network
-from nlosfw_jax.engine import Fixed, JaxEngine
+from nlosfw_jax.engine import Fixed, JaxEngine, resolve_device
 
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
@@ -58,8 +59,11 @@ class JaxPlaneOperator:
         platform = (device if device is not None else jax.devices()[0]).platform
         self.batched = stack.laser is None and platform == "cpu"
         z, n_f = stack.spectra.shape[:2]
-        spectra = (np.ascontiguousarray(stack.spectra.transpose(2, 3, 1, 0).reshape(-1, n_f, z))
-                   if self.batched else stack.spectra)
+        spectra = stack.spectra
+        if self.batched:            # aligned, so that JAX holds it in place (one copy, not two)
+            ly, lx = stack.spectra.shape[2:]
+            spectra = aligned_empty((ly * lx, n_f, z), stack.spectra.dtype)
+            spectra.reshape(ly, lx, n_f, z)[...] = stack.spectra.transpose(2, 3, 1, 0)
         self.spectra = jax.device_put(spectra, device)
         self.laser = None if stack.laser is None else jax.device_put(stack.laser, device)
         shape, inputs, outputs = stack.shape, stack.inputs, stack.outputs
@@ -95,6 +99,11 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
     def network_class(cls, name: str) -> type[NeuralFieldModel]:
         """The registered JAX network ``name``'s field-model class."""
         return registered_network(name, "jax")
+
+    def stack_copies(self, confocal: bool) -> int:
+        """Two on a confocal scan on the CPU (the operator's reordered spectra), else one
+        (JAX uses :func:`plane_stack`'s aligned arrays in place on the CPU)."""
+        return 2 if confocal and resolve_device(self.config.device).platform == "cpu" else 1
 
     def train(self, problem: VolumeProblem,
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:

@@ -27,7 +27,7 @@ from nlosfw.model import (
     history_entry,
 )
 from nlosfw.plugins import registered_network
-from nlosfw_torch.engine import TorchEngine
+from nlosfw_torch.engine import TorchEngine, resolve_device
 
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
@@ -105,6 +105,11 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
     def network_class(cls, name: str) -> type[NeuralFieldModel]:
         """The registered torch network ``name``'s field-model class."""
         return registered_network(name, "torch")
+
+    def stack_copies(self, confocal: bool) -> int:
+        """Two on a confocal scan on the CPU (the operator's reordered spectra), else one
+        (torch shares the numpy stack's memory on the CPU; a GPU holds its own)."""
+        return 2 if confocal and resolve_device(self.config.device).type == "cpu" else 1
 
     def train(self, problem: VolumeProblem,
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:

@@ -15,7 +15,7 @@ import torch
 from nlosfw_torch.neural_volume import TorchPlaneOperator
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
-from nlosfw.common import ConfigError
+from nlosfw.common import ConfigError, FitError
 from nlosfw.image import grid_layout
 from nlosfw.model import (
     OperatorOptions,
@@ -251,6 +251,54 @@ def test_the_operator_size_is_known_before_it_is_built(confocal):
     ly, lx = op.conv.shape
     assert held == 3 * 6 * (ly * lx + (0 if confocal else 9 * 11)) * 8       # complex64
 
+
+
+@pytest.mark.parametrize("confocal", [False, True], ids=["single_spot", "confocal"])
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_memory_check_counts_the_copies_the_cpu_operator_holds(backend, confocal):
+    """On the CPU the operator uses plane_stack's arrays in place, except a confocal scan's
+    spectra, which it reorders into a copy: stack_copies (what the fit's memory check
+    multiplies stack_bytes by) is 1 and 2 there, as the operator's memory shows."""
+    stack = plane_stack(_operator(confocal, 0.06, 0.06))
+    if backend == "torch":
+        op = TorchPlaneOperator(stack)
+        spectra_in_place = np.shares_memory(op.spectra.numpy(), stack.spectra)
+        laser_in_place = op.laser is None or np.shares_memory(op.laser.numpy(), stack.laser)
+    else:
+        from nlosfw_jax.neural_volume import JaxPlaneOperator
+        jop = JaxPlaneOperator(stack)
+        spectra_in_place = jop.spectra.unsafe_buffer_pointer() == stack.spectra.ctypes.data
+        laser_in_place = jop.laser is None or \
+            jop.laser.unsafe_buffer_pointer() == stack.laser.ctypes.data
+    assert spectra_in_place is not confocal and laser_in_place
+    model = load_plugins().registry.create("model", f"neural_volume_{backend}", OPTIONS)
+    assert model.stack_copies(confocal) == (2 if confocal else 1)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_confocal_fit_is_refused_without_room_for_both_copies(backend, sparse_scene,
+                                                                 monkeypatch):
+    """Room for 1.5 stacks: a confocal fit on the CPU (two copies) is refused in one line,
+    before its spectra are built (counting one copy, it would go on)."""
+    import nlosfw.model.neural_volume as core
+
+    _, train, _, _, _ = sparse_scene
+    confocal = train.replace(geometry=_geometry(True))
+    sizes: list[int] = []
+
+    def counted(op: SceneOperator) -> int:
+        sizes.append(stack_bytes(op))
+        return sizes[-1]
+
+    monkeypatch.setattr(core, "stack_bytes", counted)
+    monkeypatch.setattr(core, "available_memory", lambda: int(1.5 * sizes[-1]))
+    monkeypatch.setattr(core, "plane_stack", lambda op: pytest.fail("stack built"))
+    model = load_plugins().registry.create("model", f"neural_volume_{backend}", OPTIONS)
+    with pytest.raises(FitError) as err:
+        model.fit(confocal)
+    message = str(err.value)
+    assert "\n" not in message and "its operator" in message and "available" in message
+    assert len(sizes) == 1 and sizes[0] > 0
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
