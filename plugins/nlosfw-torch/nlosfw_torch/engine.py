@@ -51,6 +51,8 @@ class TorchEngine(Engine):
                  ) -> None:
         self.threads = build.config.threads
         self.device = resolve_device(build.config.device)
+        self.fixed_x: Any = None
+        self.fixed_val_x: Any = None
         super().__init__(build, state)
 
     # ------------------------------------------------------------------ building
@@ -81,8 +83,9 @@ class TorchEngine(Engine):
                                     eps=1e-8)
 
     # ------------------------------------------------------------------ network
-    def _apply(self, state: Mapping[str, torch.Tensor], x: torch.Tensor) -> torch.Tensor:
-        """(N, 2) outputs, or (K, N, 2) of K stacked networks (single mode)."""
+    def _apply(self, state: Mapping[str, torch.Tensor], x: Any) -> torch.Tensor:
+        """(N, 2) outputs, or (K, N, 2) of K stacked networks (single mode), for inputs
+        ``x`` (N, D) or what the network precomputed from them."""
         def call(s: Mapping[str, torch.Tensor]) -> torch.Tensor:
             out = torch.func.functional_call(self.network, dict(s), (x,))
             return torch.view_as_real(out) if out.is_complex() else out
@@ -111,18 +114,33 @@ class TorchEngine(Engine):
     def to_device(self, a: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).to(self.device)
 
+    def set_data(self, x: np.ndarray, y: np.ndarray, val_x: np.ndarray | None,
+                 val_y: np.ndarray | None) -> None:
+        """As :meth:`Engine.set_data`; a network with ``precompute_inputs(x)`` (what its
+        forward can take instead of inputs it sees again and again, or None) gets that
+        in place of the training and validation inputs."""
+        super().set_data(x, y, val_x, val_y)
+        precompute = getattr(self.network, "precompute_inputs", None)
+        if precompute is not None:
+            with self._threads():
+                self.fixed_x = precompute(self.x)
+                self.fixed_val_x = None if self.val_x is None else precompute(self.val_x)
+
     def step(self, idx: np.ndarray | None, lr: float, smooth: SmoothnessBatch | None = None
              ) -> Any:
         x, y = self.training_data()
+        inputs: Any = x if self.fixed_x is None else self.fixed_x
         state = {**self.fixed, **self.params}
         with self._threads():
             if idx is not None:
                 index = torch.from_numpy(idx).to(self.device)
-                x, y = x.index_select(0, index), y.index_select(-2, index)
+                y = y.index_select(-2, index)
+                inputs = (x.index_select(0, index) if self.fixed_x is None
+                          else self.fixed_x.select(index))
             for group in self.opt.param_groups:
                 group["lr"] = lr
             self.opt.zero_grad(set_to_none=True)
-            loss = torch.mean(torch.square(self._apply(state, x) - y))
+            loss = torch.mean(torch.square(self._apply(state, inputs) - y))
             total = loss
             if smooth is not None:
                 matrix = self.to_device(smooth.matrix)
@@ -138,7 +156,8 @@ class TorchEngine(Engine):
 
     def squared_error(self, start: int, stop: int) -> tuple[float, int]:
         val_x, val_y = self.validation_data()
-        x, y = val_x[start:stop], val_y[..., start:stop, :]
+        x = val_x[start:stop] if self.fixed_val_x is None else self.fixed_val_x.part(start, stop)
+        y = val_y[..., start:stop, :]
         with self._threads(), torch.no_grad():
             out = self._apply({**self.fixed, **self.params}, x)
             return float(torch.sum(torch.square(out - y)).item()), int(y.numel())

@@ -5,15 +5,16 @@ Parts: :class:`Linear` (weights (fan_in, fan_out), the layout the numpy referenc
 and the JAX plugin share), :class:`Sine` (sin(omega0 z)), :class:`PositionalEncoding`
 (NeRF's gamma), :class:`MLP` (linear layers with an activation after each hidden
 one), :class:`FourierFeatures`, :class:`Finer`, :class:`ComplexLinear`,
-:class:`Gabor` and :class:`HashGridEncoding`. The factories :func:`thesis_network`
-and :func:`field_network` build the networks for the shared trainer; they start
-from backend-neutral numpy weights (:func:`nlosfw.model.reference_state`,
-:func:`nlosfw.model.field_network_state`), so torch and JAX train the same network.
+:class:`Gabor`, and the hash grid's encoding
+(:class:`~nlosfw_torch.hash_grid.HashGridEncoding`). The factories
+:func:`thesis_network` and :func:`field_network` build the networks for the shared
+trainer; they start from backend-neutral numpy weights
+(:func:`nlosfw.model.reference_state`, :func:`nlosfw.model.field_network_state`), so
+torch and JAX train the same network.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -23,13 +24,11 @@ import torch
 from torch import nn
 
 from nlosfw.model import (
-    HASH_PRIMES,
     Architecture,
     FieldShape,
     FinerFieldConfig,
     FourierFieldConfig,
     HashGridFieldConfig,
-    HashGridLayout,
     NeuralFieldConfig,
     WireFieldConfig,
     field_network_state,
@@ -38,6 +37,7 @@ from nlosfw.model import (
     thesis_architecture,
     wire_widths,
 )
+from nlosfw_torch.hash_grid import CORNERS_MAX_BYTES, HashCorners, HashGridEncoding
 
 
 class Linear(nn.Module):
@@ -203,45 +203,6 @@ class Gabor(nn.Module):
         return torch.cat([envelope * torch.cos(phase), envelope * torch.sin(phase)], dim=-1)
 
 
-class HashGridEncoding(nn.Module):
-    """Multiresolution hash-grid features of the first ``layout.dims`` input columns (in
-    (-1, 1), clamped), d-linearly interpolated per level; other columns are appended."""
-
-    corners: torch.Tensor
-
-    def __init__(self, layout: HashGridLayout) -> None:
-        super().__init__()
-        self.layout = layout
-        self.tables = nn.ParameterList(nn.Parameter(torch.zeros(rows, layout.features))
-                                       for rows in layout.table_sizes)
-        corners = torch.tensor(list(itertools.product((0, 1), repeat=layout.dims)))
-        self.register_buffer("corners", corners, persistent=False)      # (2^d, d)
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        d, out = self.layout.dims, []
-        u = ((x[:, :d] + 1) / 2).clamp(0, 1)
-        for n, table in zip(self.layout.resolutions, self.tables, strict=True):
-            cell = torch.clamp(torch.floor(u * n), max=n - 1)
-            frac = (u * n - cell)[:, None, :]                              # (N, 1, d)
-            vertex = cell.long()[:, None, :] + self.corners                # (N, 2^d, d)
-            weight = torch.where(self.corners.bool(), frac, 1 - frac).prod(-1)
-            row = self._row(vertex, n, table.shape[0])
-            out.append((weight[..., None] * table[row]).sum(1))
-        return torch.cat([*out, x[:, d:]], dim=1)
-
-    def _row(self, vertex: torch.Tensor, n: int, rows: int) -> torch.Tensor:
-        """Table rows of grid vertices (..., d): row-major when every vertex has its own row,
-        else the spatial hash (XOR of coordinate x prime) mod ``rows`` (a power of two)."""
-        dense = (n + 1) ** self.layout.dims <= rows
-        row = vertex[..., 0] * HASH_PRIMES[0]
-        for axis in range(1, self.layout.dims):
-            if dense:
-                row = row + vertex[..., axis] * (n + 1) ** axis
-            else:
-                row = torch.bitwise_xor(row, vertex[..., axis] * HASH_PRIMES[axis])
-        return row if dense else torch.bitwise_and(row, rows - 1)
-
-
 # --------------------------------------------------------------------------- issue 12 networks
 class _FromNumpy:
     """A network whose initial weights are :func:`nlosfw.model.field_network_state`'s."""
@@ -309,8 +270,16 @@ class HashGridNetwork(_FromNumpy, nn.Module):
         self.mlp = MLP([layout.encoded_dim, *config.hidden, shape.out_dim],
                        [nn.ReLU() for _ in config.hidden])
 
-    def forward(self, v: torch.Tensor) -> torch.Tensor:
+    def forward(self, v: torch.Tensor | HashCorners) -> torch.Tensor:
         return self.mlp(self.encoding(v))
+
+    def precompute_inputs(self, x: torch.Tensor) -> HashCorners | None:
+        """The grid corners of fixed inputs ``x`` (N, D), to pass instead of them at every
+        step (see :class:`HashCorners`); None when they would exceed
+        :data:`~nlosfw_torch.hash_grid.CORNERS_MAX_BYTES`."""
+        if self.encoding.corners_bytes(int(x.shape[0])) > CORNERS_MAX_BYTES:
+            return None
+        return self.encoding.corners(x)
 
 
 _NETWORKS: dict[type, Any] = {FourierFieldConfig: FourierNetwork, WireFieldConfig: WireNetwork,
