@@ -84,7 +84,8 @@ def weighted_rows(table: torch.Tensor, rows: torch.Tensor, weights: torch.Tensor
 class HashGridEncoding(nn.Module):
     """Multiresolution hash-grid features of the first ``layout.dims`` input columns (in
     (-1, 1), clamped), d-linearly interpolated per level; other columns are appended.
-    Called with a :class:`HashCorners` instead of inputs, it skips finding the corners."""
+    Called with a :class:`HashCorners` instead of inputs, it skips finding the corners.
+    Gradients flow to the tables, not to the inputs (the trainers need none there)."""
 
     corner_offsets: torch.Tensor
 
