@@ -3,13 +3,16 @@ one backward, the operator's share of a training step, on the size of a real-dat
 16x.
 
 The size is that of ``neural_volume_*``'s fit of the shared diffuse S at 16x (a confocal
-16 x 16 grid of kept points 5.08 cm apart, voxels every 1.27 cm on 65 x 65 columns, 70
+16 x 16 grid of kept points 5.08 cm apart, voxels every 1.27 cm on 65 x 65 columns
+reaching two voxels past the kept points on each side, as ``rsd_prior`` plans them, 70
 depth planes, all 135 frequencies of its band, complex64). Each backend's baseline is
 timed in the same run on the same operator:
 
-- torch: the batched product differentiated by autograd's own ``bmm`` backward, which
-  multiplies by the spectra's conjugate transpose; the operator computes S^H g as
-  (g^H S)^H instead;
+- torch: ``--torch-baseline autograd`` (the first change): the product per lattice point
+  differentiated by autograd's own ``bmm`` backward, which multiplies by the spectra's
+  conjugate transpose, against the operator's S^H g computed as (g^H S)^H, both per
+  point; ``folded`` (the default, the second change): that product per point against one
+  per orbit of the folded spectra (:func:`nlosfw.model.fold_spectra`);
 - JAX: the product summed over planes (the GPU's path); the operator on the CPU contracts
   the reordered spectra with an ``einsum`` instead. Both jitted, the spectra passed as
   arguments (closed over, XLA folds them into the program and compiles for minutes).
@@ -49,7 +52,7 @@ def stack_of(planes: int, frequencies: int) -> PlaneStack:
     wall = grid_layout(fixtures.rect_wall_grid((16, 16), 0.0508))
     spacing = 0.0508 / 4
     lattice = VoxelLattice(np.linspace(0.235, 0.65, planes),
-                           (wall.origin[0] - spacing, wall.origin[1] - spacing),
+                           (wall.origin[0] - 2 * spacing, wall.origin[1] - 2 * spacing),
                            (spacing, spacing), (65, 65))
     geometry = CaptureGeometry(kind=CaptureKind.CONFOCAL, laser_xyz=np.zeros(3),
                                sensor_xyz=np.zeros(3))
@@ -70,12 +73,18 @@ def best_of(run: Callable[[], np.ndarray], repeats: int) -> tuple[float, np.ndar
     return best, grad
 
 
-def torch_pair(stack: PlaneStack, albedo: np.ndarray, repeats: int) -> dict[str, float]:
-    """torch: autograd's bmm backward against the operator's, forward + backward."""
+def torch_pair(stack: PlaneStack, albedo: np.ndarray, repeats: int, baseline_kind: str
+               ) -> dict[str, float]:
+    """torch, forward + backward: autograd's bmm backward against the operator's (per
+    point), or the operator per point against the operator folded."""
     import torch
     from nlosfw_torch.neural_volume import TorchPlaneOperator
 
-    op = TorchPlaneOperator(stack)
+    op = TorchPlaneOperator(stack, fold=False)
+    if baseline_kind == "folded":
+        folded = TorchPlaneOperator(stack)
+        if folded.folded is None:
+            raise SystemExit("the stack's spectra do not fold: no folded product to time")
 
     def baseline(a: torch.Tensor) -> torch.Tensor:
         work = torch.zeros((a.shape[0],) + op.shape, dtype=op.dtype)
@@ -91,6 +100,8 @@ def torch_pair(stack: PlaneStack, albedo: np.ndarray, repeats: int) -> dict[str,
             return a.grad.numpy()
         return run
 
+    if baseline_kind == "folded":
+        return _row(best_of(gradient(op), repeats), best_of(gradient(folded), repeats))
     return _row(best_of(gradient(baseline), repeats), best_of(gradient(op), repeats))
 
 
@@ -131,14 +142,16 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--planes", type=int, default=70)
     parser.add_argument("--frequencies", type=int, default=135)
+    parser.add_argument("--torch-baseline", choices=("folded", "autograd"), default="folded")
     args = parser.parse_args()
     stack = stack_of(args.planes, args.frequencies)
     albedo = np.random.default_rng(0).random((args.planes, 65, 65)).astype(np.float32)
-    rows: dict[str, dict[str, float]] = {}
-    for backend, plugin, pair in (("torch", "nlosfw_torch", torch_pair),
-                                  ("jax", "nlosfw_jax", jax_pair)):
-        if importlib.util.find_spec(plugin) is not None:
-            rows[backend] = pair(stack, albedo, args.repeats)
+    rows: dict[str, dict[str, Any]] = {}
+    if importlib.util.find_spec("nlosfw_torch") is not None:
+        rows["torch"] = torch_pair(stack, albedo, args.repeats, args.torch_baseline)
+        rows["torch"]["baseline"] = args.torch_baseline
+    if importlib.util.find_spec("nlosfw_jax") is not None:
+        rows["jax"] = jax_pair(stack, albedo, args.repeats)
     table = Table(title=f"neural volume operator, {args.planes} planes x "
                         f"{args.frequencies} frequencies, forward + backward "
                         f"({os.cpu_count()} cores)")

@@ -63,6 +63,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.model.rsd_residual import RSDResidualConfig, RSDResidualFieldModel
     from nlosfw.model.rsd_sampling import WallSamples, training_grid, voxel_lattice, wall_samples
     from nlosfw.model.scene_operator import OperatorOptions, SceneOperator, VoxelLattice
+    from nlosfw.model.spectra_folding import FoldedSpectra, fold_spectra
     from nlosfw.model.thesis_networks import (
         Architecture,
         ThesisNetwork,
@@ -121,6 +122,8 @@ __all__ = [
     "NeuralVolumeConfig",
     "NeuralVolumeFieldModel",
     "PlaneStack",
+    "FoldedSpectra",
+    "fold_spectra",
     "aligned_empty",
     "plane_stack",
     "stack_bytes",
