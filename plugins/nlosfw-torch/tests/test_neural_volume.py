@@ -309,8 +309,6 @@ def test_a_confocal_fit_is_refused_without_room_for_both_copies(backend, sparse_
                                                                  monkeypatch):
     """Room for 1.5 stacks: a confocal fit on the CPU (two copies) is refused in one line,
     before its spectra are built (counting one copy, it would go on)."""
-    import nlosfw.model.neural_volume as core
-
     _, train, _, _, _ = sparse_scene
     confocal = train.replace(geometry=_geometry(True))
     sizes: list[int] = []
@@ -319,9 +317,10 @@ def test_a_confocal_fit_is_refused_without_room_for_both_copies(backend, sparse_
         sizes.append(stack_bytes(op))
         return sizes[-1]
 
-    monkeypatch.setattr(core, "stack_bytes", counted)
-    monkeypatch.setattr(core, "available_memory", lambda: int(1.5 * sizes[-1]))
-    monkeypatch.setattr(core, "plane_stack", lambda op: pytest.fail("stack built"))
+    core = "nlosfw.model.neural_volume"
+    monkeypatch.setattr(f"{core}.stack_bytes", counted)
+    monkeypatch.setattr(f"{core}.available_memory", lambda: int(1.5 * sizes[-1]))
+    monkeypatch.setattr(f"{core}.plane_stack", lambda op: pytest.fail("stack built"))
     model = load_plugins().registry.create("model", f"neural_volume_{backend}", OPTIONS)
     with pytest.raises(FitError) as err:
         model.fit(confocal)
