@@ -13,6 +13,7 @@ from collections.abc import Callable
 from typing import Any, cast
 
 import torch
+from torch.utils.checkpoint import checkpoint
 
 from nlosfw.common import FitError
 from nlosfw.model import (
@@ -33,6 +34,9 @@ from nlosfw_torch.engine import TorchEngine, resolve_device
 
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
+
+#: Voxels per piece of the network's pass on the CPU (see :func:`volume_albedo`).
+CPU_CHUNK = 4096
 
 
 class _SpectraProduct(torch.autograd.Function):
@@ -127,6 +131,29 @@ def _real_output(out: torch.Tensor) -> torch.Tensor:
     return out.real if out.is_complex() else out[..., 0]
 
 
+def volume_albedo(network: Callable[[torch.Tensor], torch.Tensor], coords: torch.Tensor,
+                  gain: torch.Tensor, shift: float, chunk: int | None = None) -> torch.Tensor:
+    """gain * softplus(network(coords) + shift), shaped as ``gain``.
+
+    With ``chunk``, the network runs on ``chunk`` voxels at a time and keeps none of its
+    activations: each piece is run again in the backward pass (``torch.utils.checkpoint``),
+    so every piece's activations stay in the CPU's cache. The network must treat its
+    points independently (every registered network does). Over the 295 750 voxels of the
+    diffuse S at 16x (SIREN 64 x 64, one thread) the network's forward and backward take
+    0.34 s in pieces of 4096 against 0.66 s whole, the gradient the same to 8e-6
+    (``benchmarks/bench_volume_network.py``); the fit of that capture took 50 s against 81 s
+    whole, measured in one session on 2 cores."""
+    def values(x: torch.Tensor) -> torch.Tensor:
+        return torch.nn.functional.softplus(_real_output(network(x)) + shift)
+
+    if chunk is None or coords.shape[0] <= chunk:
+        out = values(coords)
+    else:
+        out = torch.cat([cast(torch.Tensor, checkpoint(values, piece, use_reentrant=False))
+                         for piece in coords.split(chunk)])
+    return gain * out.reshape(gain.shape)
+
+
 class NeuralVolumeTorch(NeuralVolumeFieldModel):
     """A torch network's albedo propagated by RSD; on a GPU when torch sees one."""
 
@@ -163,11 +190,13 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         val_power = None if val is None else float(torch.sum(power * val).item())
         state = {**engine.fixed, **engine.params}
         opt = torch.optim.Adam(list(engine.params.values()), lr=cfg.lr)
+        chunk = CPU_CHUNK if device.type == "cpu" else None
+
+        def network(x: torch.Tensor) -> torch.Tensor:
+            return cast(torch.Tensor, torch.func.functional_call(engine.network, state, (x,)))
 
         def albedo() -> torch.Tensor:
-            out = torch.func.functional_call(engine.network, state, (coords,))
-            values = torch.nn.functional.softplus(_real_output(out) + problem.shift)
-            return gain * values.reshape(gain.shape)
+            return volume_albedo(network, coords, gain, problem.shift, chunk)
 
         def validation_error(squared: torch.Tensor) -> float | None:
             if val is None or val_power is None:
@@ -215,4 +244,4 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                              steps=k + 1, best_validation=best.validation)
 
 
-__all__ = ["NeuralVolumeTorch", "TorchPlaneOperator"]
+__all__ = ["NeuralVolumeTorch", "TorchPlaneOperator", "volume_albedo"]

@@ -12,12 +12,16 @@ import pytest
 pytest.importorskip("torch")
 
 import torch
-from nlosfw_torch.neural_volume import TorchPlaneOperator
+from nlosfw_torch.engine import TorchEngine
+from nlosfw_torch.neural_volume import CPU_CHUNK, TorchPlaneOperator, volume_albedo
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.common import ConfigError, FitError
 from nlosfw.image import grid_layout
 from nlosfw.model import (
+    FieldMode,
+    FieldShape,
+    NetworkBuild,
     OperatorOptions,
     SceneOperator,
     SpatialSampling,
@@ -29,7 +33,7 @@ from nlosfw.model import (
     validation_split,
     voxel_lattice,
 )
-from nlosfw.plugins import load_plugins
+from nlosfw.plugins import NetworkSpec, load_plugins, registered_network
 from nlosfw.testing import fixtures, heldout_error_db
 from nlosfw.transform import PhasorField
 
@@ -142,6 +146,50 @@ def test_the_folded_confocal_product_matches_numpy_and_its_adjoint(fold):
     (0.5 * torch.sum(torch.abs(residual) ** 2)).backward()
     expected = op.adjoint(op.forward(albedo) - target.astype(np.complex64)).real
     assert _relative(a.grad.numpy(), expected) < 1e-4
+
+
+def _torch_networks() -> list[str]:
+    return sorted(spec.factory.name for spec in load_plugins().registry.specs("model")
+                  if isinstance(spec.factory, NetworkSpec)
+                  and spec.factory.engine.value == "torch")
+
+
+@pytest.mark.parametrize("name", _torch_networks())
+def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
+    """Every registered torch network: the albedo computed 1000 voxels at a time (each piece
+    run again in the backward pass) equals the albedo of one pass over all 4 x 23 x 31
+    voxels (1e-6), and so do the gradients of a weighted sum by every parameter (1e-4 of
+    the largest entry). A spy sees the pieces: forward, then once more backward."""
+    network = registered_network(name, "torch")
+    build = NetworkBuild(network.network_factory, network.config_class(
+        seed=3, hidden=[32, 32], device="cpu", steps=10), FieldShape(FieldMode.multi, (23, 31), 4))
+    engine = TorchEngine(build)
+    state = {**engine.fixed, **engine.params}
+    sizes: list[int] = []
+
+    def net(x: torch.Tensor) -> torch.Tensor:
+        sizes.append(x.shape[0])
+        return torch.func.functional_call(engine.network, state, (x,))
+
+    rng = np.random.default_rng(2)
+    coords = torch.from_numpy(rng.uniform(-0.9, 0.9, (4 * 23 * 31, 3)).astype(np.float32))
+    gain = torch.from_numpy(rng.uniform(0.5, 2.0, (4, 23, 31)).astype(np.float32))
+    weights = torch.from_numpy(rng.normal(size=(4, 23, 31)).astype(np.float32))
+    results = []
+    for chunk in (None, 1000):
+        sizes.clear()
+        albedo = volume_albedo(net, coords, gain, -3.0, chunk)
+        grads = torch.autograd.grad(torch.sum(albedo * weights), list(engine.params.values()))
+        results.append((albedo.detach().numpy(), [g.numpy() for g in grads], list(sizes)))
+    (whole, whole_grads, whole_sizes), (pieces, piece_grads, piece_sizes) = results
+    assert whole_sizes == [2852]
+    assert piece_sizes[:3] == [1000, 1000, 852]               # the forward pass
+    assert sorted(piece_sizes[3:]) == [852, 1000, 1000]       # each piece again, backward
+    assert pieces.shape == (4, 23, 31) and np.all(pieces > 0)
+    np.testing.assert_allclose(pieces, whole, rtol=1e-6, atol=1e-6 * np.abs(whole).max())
+    for a, b in zip(piece_grads, whole_grads, strict=True):
+        assert np.abs(a - b).max() <= 1e-4 * np.abs(b).max() + 1e-12
+    assert CPU_CHUNK >= 1024
 
 
 # ------------------------------------------------------------------ a known sparse scene
