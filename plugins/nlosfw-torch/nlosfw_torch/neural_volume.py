@@ -140,7 +140,7 @@ def volume_albedo(network: Callable[[torch.Tensor], torch.Tensor], coords: torch
     so every piece's activations stay in the CPU's cache. The network must treat its
     points independently (every registered network does). Over the 295 750 voxels of the
     diffuse S at 16x (SIREN 64 x 64, one thread) the network's forward and backward take
-    0.34 s in pieces of 4096 against 0.66 s whole, the gradient the same to 8e-6
+    0.35 s in pieces of 4096 against 0.67 s whole, the gradient the same to 8e-6
     (``benchmarks/bench_volume_network.py``); the fit of that capture took 50 s against 81 s
     whole, measured in one session on 2 cores."""
     def values(x: torch.Tensor) -> torch.Tensor:
