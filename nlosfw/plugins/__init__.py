@@ -20,6 +20,7 @@ from nlosfw.plugins.manager import (
     PluginHost,
     load_plugins,
     registered_network,
+    registered_networks,
 )
 from nlosfw.plugins.networks import (
     ENGINES,
@@ -75,5 +76,6 @@ __all__ = [
     "register_rsd_residual",
     "register_thesis_networks",
     "registered_network",
+    "registered_networks",
     "thesis_network_model",
 ]

@@ -142,12 +142,22 @@ def load_plugins(env: Mapping[str, str] | None = None,
     return PluginHost(manager=manager, registry=registry, broken=broken)
 
 
+def _network_specs(engine: str) -> dict[str, PluginSpec]:
+    return {spec.factory.name: spec for spec in load_plugins().registry.specs("model")
+            if isinstance(spec.factory, NetworkSpec) and spec.factory.engine.value == engine}
+
+
+def registered_networks(engine: str) -> list[str]:
+    """The names of the networks registered through ``register_networks`` for ``engine``
+    (``torch``, ``jax``), sorted."""
+    return sorted(_network_specs(engine))
+
+
 def registered_network(name: str, engine: str) -> type[NeuralFieldModel]:
     """The field-model class of the network ``name`` registered through ``register_networks``
     for ``engine`` (``siren`` and ``torch``: ``siren_torch``'s class). A one-line
     ConfigError on ``model.network`` lists the valid names."""
-    networks = {spec.factory.name: spec for spec in load_plugins().registry.specs("model")
-                if isinstance(spec.factory, NetworkSpec) and spec.factory.engine.value == engine}
+    networks = _network_specs(engine)
     if name not in networks:
         raise ConfigError("model.network", f"{name!r} is not a network registered for "
                           f"{engine}; valid: {', '.join(sorted(networks)) or 'none'}")

@@ -8,8 +8,9 @@ import sys
 import numpy as np
 import pytest
 
+from nlosfw.common import ConfigError
 from nlosfw.model import read_model_file
-from nlosfw.plugins import load_plugins
+from nlosfw.plugins import load_plugins, registered_network, registered_networks
 from nlosfw.testing import fixtures
 
 pytest.importorskip("torch")
@@ -45,6 +46,19 @@ def test_only_the_mlp_counts_as_parameters():
     model.fit(fixtures.smooth_field(n=8, frequencies=np.linspace(2.0, 3.0, 4), seed=2))
     # 2 * 8 features -> 12 -> 10 -> 2, weights and biases; B is not a parameter
     assert model.n_parameters == (16 * 12 + 12) + (12 * 10 + 10) + (10 * 2 + 2)
+
+
+def test_listed_among_the_torch_networks_and_found_by_name():
+    """registered_networks lists the example beside torch's own networks (not for JAX,
+    which it does not register for), and registered_network finds its field model; a
+    wrong name's error lists the same names."""
+    names = registered_networks("torch")
+    assert "example_fourier" in names and names == sorted(names)
+    assert "example_fourier" not in registered_networks("jax")
+    assert registered_network("example_fourier", "torch").model_name() == \
+        "example_fourier_torch"
+    with pytest.raises(ConfigError, match="valid: " + ", ".join(names) + "$"):
+        registered_network("no_such_network", "torch")
 
 
 @pytest.mark.slow

@@ -16,16 +16,10 @@ from nlosfw_jax.engine import Fixed, JaxEngine  # noqa: E402
 from nlosfw_jax.neural_volume import CPU_CHUNK, volume_albedo  # noqa: E402
 
 from nlosfw.model import FieldMode, FieldShape, NetworkBuild  # noqa: E402
-from nlosfw.plugins import NetworkSpec, load_plugins, registered_network  # noqa: E402
+from nlosfw.plugins import registered_network, registered_networks  # noqa: E402
 
 
-def _jax_networks() -> list[str]:
-    return sorted(spec.factory.name for spec in load_plugins().registry.specs("model")
-                  if isinstance(spec.factory, NetworkSpec)
-                  and spec.factory.engine.value == "jax")
-
-
-@pytest.mark.parametrize("name", _jax_networks())
+@pytest.mark.parametrize("name", registered_networks("jax"))
 def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
     """Every registered JAX network: the albedo computed 1000 voxels at a time (the last
     piece padded, each piece run again in the backward pass) equals one pass over all

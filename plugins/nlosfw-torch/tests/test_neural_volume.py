@@ -33,7 +33,7 @@ from nlosfw.model import (
     validation_split,
     voxel_lattice,
 )
-from nlosfw.plugins import NetworkSpec, load_plugins, registered_network
+from nlosfw.plugins import load_plugins, registered_network, registered_networks
 from nlosfw.testing import fixtures, heldout_error_db
 from nlosfw.transform import PhasorField
 
@@ -148,13 +148,7 @@ def test_the_folded_confocal_product_matches_numpy_and_its_adjoint(fold):
     assert _relative(a.grad.numpy(), expected) < 1e-4
 
 
-def _torch_networks() -> list[str]:
-    return sorted(spec.factory.name for spec in load_plugins().registry.specs("model")
-                  if isinstance(spec.factory, NetworkSpec)
-                  and spec.factory.engine.value == "torch")
-
-
-@pytest.mark.parametrize("name", _torch_networks())
+@pytest.mark.parametrize("name", registered_networks("torch"))
 def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
     """Every registered torch network: the albedo computed 1000 voxels at a time (each piece
     run again in the backward pass) equals the albedo of one pass over all 4 x 23 x 31
