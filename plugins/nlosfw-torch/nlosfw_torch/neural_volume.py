@@ -35,7 +35,9 @@ from nlosfw_torch.engine import TorchEngine, resolve_device
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
 
-#: Voxels per piece of the network's pass on the CPU (see :func:`volume_albedo`).
+#: Voxels per piece of the network's pass on the CPU (see :func:`volume_albedo`). For
+#: SIRENs of two hidden layers 64, 128 and 256 wide over 295 750 voxels (one thread), 4096
+#: was within 9 % of the fastest of 1024 to 8192, and 1.4 to 2 times faster than one pass.
 CPU_CHUNK = 4096
 
 
