@@ -156,6 +156,24 @@ def gaussian_band(centre: float, sigma_f: float, n: int = 9,
     return f, w.astype(np.complex128)
 
 
+class VolumeInputs(NamedTuple):
+    """What a neural volume's network pass takes, float32: ``coords`` (Z Y X, 3) in
+    [-0.9, 0.9], ``gain`` (Z, Y, X) in [0.5, 2] and ``weights`` (Z, Y, X), standard normal
+    (to differentiate a weighted sum of the albedo)."""
+
+    coords: np.ndarray
+    gain: np.ndarray
+    weights: np.ndarray
+
+
+def volume_inputs(shape: tuple[int, int, int] = (4, 23, 31), seed: int = 2) -> VolumeInputs:
+    """Random :class:`VolumeInputs` for a lattice of ``shape``, the same for every backend."""
+    rng = np.random.default_rng(seed)
+    coords = rng.uniform(-0.9, 0.9, (int(np.prod(shape)), 3)).astype(np.float32)
+    gain = rng.uniform(0.5, 2.0, shape).astype(np.float32)
+    return VolumeInputs(coords, gain, rng.normal(size=shape).astype(np.float32))
+
+
 def aligned_voxels(wall: np.ndarray, depths: npt.ArrayLike) -> np.ndarray:
     """Planes (Z, Y, X, 3) at ``depths`` whose (x, y) are exactly the wall points (Y, X, 3)."""
     depths = np.atleast_1d(np.asarray(depths, dtype=float))

@@ -17,6 +17,7 @@ from nlosfw_jax.neural_volume import CPU_CHUNK, volume_albedo  # noqa: E402
 
 from nlosfw.model import FieldMode, FieldShape, NetworkBuild  # noqa: E402
 from nlosfw.plugins import registered_network, registered_networks  # noqa: E402
+from nlosfw.testing import fixtures  # noqa: E402
 
 
 @pytest.mark.parametrize("name", registered_networks("jax"))
@@ -38,10 +39,7 @@ def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
             return module(x)
         return net
 
-    rng = np.random.default_rng(2)
-    coords = jnp.asarray(rng.uniform(-0.9, 0.9, (4 * 23 * 31, 3)).astype(np.float32))
-    gain = jnp.asarray(rng.uniform(0.5, 2.0, (4, 23, 31)).astype(np.float32))
-    weights = jnp.asarray(rng.normal(size=(4, 23, 31)).astype(np.float32))
+    coords, gain, weights = (jnp.asarray(a) for a in fixtures.volume_inputs((4, 23, 31)))
     results = []
     for chunk in (None, 1000):
         sizes.clear()

@@ -165,10 +165,7 @@ def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
         sizes.append(x.shape[0])
         return torch.func.functional_call(engine.network, state, (x,))
 
-    rng = np.random.default_rng(2)
-    coords = torch.from_numpy(rng.uniform(-0.9, 0.9, (4 * 23 * 31, 3)).astype(np.float32))
-    gain = torch.from_numpy(rng.uniform(0.5, 2.0, (4, 23, 31)).astype(np.float32))
-    weights = torch.from_numpy(rng.normal(size=(4, 23, 31)).astype(np.float32))
+    coords, gain, weights = (torch.from_numpy(a) for a in fixtures.volume_inputs((4, 23, 31)))
     results = []
     for chunk in (None, 1000):
         sizes.clear()
