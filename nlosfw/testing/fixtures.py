@@ -156,22 +156,15 @@ def gaussian_band(centre: float, sigma_f: float, n: int = 9,
     return f, w.astype(np.complex128)
 
 
-class VolumeInputs(NamedTuple):
-    """What a neural volume's network pass takes, float32: ``coords`` (Z Y X, 3) in
-    [-0.9, 0.9], ``gain`` (Z, Y, X) in [0.5, 2] and ``weights`` (Z, Y, X), standard normal
-    (to differentiate a weighted sum of the albedo)."""
-
-    coords: np.ndarray
-    gain: np.ndarray
-    weights: np.ndarray
-
-
-def volume_inputs(shape: tuple[int, int, int] = (4, 23, 31), seed: int = 2) -> VolumeInputs:
-    """Random :class:`VolumeInputs` for a lattice of ``shape``, the same for every backend."""
+def volume_inputs(shape: tuple[int, int, int] = (4, 23, 31), seed: int = 2
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What a neural volume's network pass takes, drawn at random, the same for every
+    backend, float32: (coords (Z Y X, 3) in [-0.9, 0.9], gain (Z, Y, X) in [0.5, 2],
+    weights (Z, Y, X) standard normal, to differentiate a weighted sum of the albedo)."""
     rng = np.random.default_rng(seed)
     coords = rng.uniform(-0.9, 0.9, (int(np.prod(shape)), 3)).astype(np.float32)
     gain = rng.uniform(0.5, 2.0, shape).astype(np.float32)
-    return VolumeInputs(coords, gain, rng.normal(size=shape).astype(np.float32))
+    return coords, gain, rng.normal(size=shape).astype(np.float32)
 
 
 def aligned_voxels(wall: np.ndarray, depths: npt.ArrayLike) -> np.ndarray:
