@@ -4,6 +4,7 @@ against a known sparse scene and the interp baseline."""
 
 from __future__ import annotations
 
+import importlib
 import importlib.util
 
 import numpy as np
@@ -13,7 +14,7 @@ pytest.importorskip("torch")
 
 import torch
 from nlosfw_torch.engine import TorchEngine
-from nlosfw_torch.neural_volume import CPU_CHUNK, TorchPlaneOperator, volume_albedo
+from nlosfw_torch.neural_volume import TorchPlaneOperator, volume_albedo
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.common import ConfigError, FitError
@@ -180,7 +181,6 @@ def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
     np.testing.assert_allclose(pieces, whole, rtol=1e-6, atol=1e-6 * np.abs(whole).max())
     for a, b in zip(piece_grads, whole_grads, strict=True):
         assert np.abs(a - b).max() <= 1e-4 * np.abs(b).max() + 1e-12
-    assert CPU_CHUNK >= 1024
 
 
 # ------------------------------------------------------------------ a known sparse scene
@@ -366,6 +366,28 @@ def test_a_confocal_fit_is_refused_without_room_for_both_copies(backend, sparse_
     message = str(err.value)
     assert "\n" not in message and "its operator" in message and "available" in message
     assert len(sizes) == 1 and sizes[0] > 0
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_cpu_fit_runs_the_network_in_pieces(backend, sparse_scene, monkeypatch):
+    """On the CPU both backends' training evaluates the albedo through volume_albedo in
+    pieces of the module's CPU_CHUNK (the sparse scene's lattice has more voxels than
+    that, so the pieces are really taken)."""
+    module = importlib.import_module(f"nlosfw_{backend}.neural_volume")
+    chunks: list[int | None] = []
+    original = module.volume_albedo
+
+    def spy(network, coords, gain, shift, chunk=None):
+        chunks.append(chunk)
+        return original(network, coords, gain, shift, chunk)
+
+    monkeypatch.setattr(module, "volume_albedo", spy)
+    _, train, _, lattice, _ = sparse_scene
+    assert int(np.prod(lattice.volume_shape)) > module.CPU_CHUNK
+    model = load_plugins().registry.create("model", f"neural_volume_{backend}",
+                                           {**OPTIONS, "steps": 2, "patience": 0})
+    model.fit(train)
+    assert chunks and set(chunks) == {module.CPU_CHUNK}
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
