@@ -27,7 +27,13 @@ from nlosfw.compose.store import hydra_session
 from nlosfw.pipeline.budget import check_memory
 from nlosfw.pipeline.model_budget import plugin_requires
 from nlosfw.pipeline.plan import check_model_choice, check_reference_choice
-from nlosfw.pipeline.settings import NO_MODEL, OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
+from nlosfw.pipeline.settings import (
+    NO_MODEL,
+    OPTIONAL_GROUPS,
+    SELECTOR_GROUPS,
+    RunSettings,
+    run_settings,
+)
 from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
 from nlosfw.simulate.geometry import validate_scene
 from nlosfw.simulate.scene import NoiseModel, scene_from_config
@@ -172,7 +178,7 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         spec = host.registry.get(group, str(node.get("name")))
         _check_plugin(spec, f"{group} plugin")
         config = spec.make_config(_plugin_options(node, spec.config_class()))
-        counts_needed |= bool(getattr(config, "uses_noise_variance", False))
+        counts_needed |= _needs_counts(config, settings, "model")
         if group == PluginKind.IMAGER.value:
             check_reference_choice(settings, spec.name,
                                    bool(getattr(spec.load(), "full_grid_only", False)))
@@ -181,10 +187,11 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         spec = host.registry.get(PluginKind.FIELD_MODEL, str(rest.pop("name")))
         _check_plugin(spec, f"compare.{label}: model plugin")
         try:
-            counts_needed |= bool(getattr(spec.make_config(rest), "uses_noise_variance", False))
+            config = spec.make_config(rest)
         except ConfigError as err:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
+        counts_needed |= _needs_counts(config, settings, f"compare.{label}")
     formats = host.capture_formats()
     # before anything sized by the configuration is allocated
     check_memory(cfg, file_shape=lambda path: file_transient_shape(
@@ -197,8 +204,8 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
                                   "the simulated capture has no photon noise; set "
                                   "scene.noise.model=poisson")
             if counts_needed:
-                raise ConfigError("model.likelihood", "poisson weighs samples by their photon "
-                                  "counts' noise, but the simulated capture has none; set "
+                raise ConfigError("model.likelihood", "a Poisson likelihood needs photon "
+                                  "counts, but the simulated capture has none; set "
                                   "scene.noise.model=poisson or use least_squares")
         simulator_node = cfg.get("simulator")
         if not isinstance(simulator_node, Mapping):
@@ -218,6 +225,18 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         likelihood = ("model.likelihood", "the Poisson likelihood")
         photon_counts(loaded.prepared.capture, str(loaded.path), *likelihood)
         _check_noise_floor(cfg, host, loaded.prepared.capture, *likelihood)
+
+
+def _needs_counts(config: object, settings: RunSettings, option: str) -> bool:
+    """Whether a model's likelihood needs the capture's photon counts; a ConfigError for
+    ``split.spectral`` when it takes the counts themselves while frequencies are held out
+    (the counts hold every frequency)."""
+    if getattr(config, "uses_photon_counts", False) and settings.split.spectral != "none":
+        raise ConfigError("split.spectral", f"{option}: the photon counts' likelihood sees "
+                          "every frequency of the counts, so no frequency can be held out; "
+                          f"set split.spectral=none (got {settings.split.spectral})")
+    return bool(getattr(config, "uses_noise_variance", False)
+                or getattr(config, "uses_photon_counts", False))
 
 
 def _check_noise_floor(cfg: Mapping[str, object], host: PluginHost, capture: Capture,

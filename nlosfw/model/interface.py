@@ -35,6 +35,13 @@ class FieldModelConfig:
         computes it, from a capture of photon counts); False unless a model says so."""
         return False
 
+    @property
+    def uses_photon_counts(self) -> bool:
+        """Whether the fit takes the training field's photon counts (``PhasorField.counts``:
+        the run then carries them, from a capture of photon counts, with no frequency held
+        out); False unless a model says so."""
+        return False
+
 
 @dataclass(frozen=True)
 class TrainingStep:

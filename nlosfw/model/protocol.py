@@ -17,6 +17,7 @@ imager sums over its points directly, and field models fit it like any other.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -166,10 +167,12 @@ def scattered_field(field: PhasorField, mask: np.ndarray) -> PhasorField:
     if mask.shape != field.grid_shape:
         raise DataError(f"scattered_field: mask of shape {mask.shape} for a field on a "
                         f"{field.grid_shape} grid")
-    var = field.variance
+    var, counts = field.variance, field.counts
     return field.replace(values=field.values[:, mask][:, None, :],
                          wall_xyz=field.wall_xyz[mask][None],
-                         variance=None if var is None else var[:, mask][:, None, :])
+                         variance=None if var is None else var[:, mask][:, None, :],
+                         counts=None if counts is None else dataclasses.replace(
+                             counts, counts=counts.counts[:, mask][:, None, :]))
 
 
 def split_field(field: PhasorField, spatial_step: int | SpatialSampling = 2,
@@ -182,7 +185,9 @@ def split_field(field: PhasorField, spatial_step: int | SpatialSampling = 2,
     :class:`SpatialSampling` chooses the grid or a random pattern. Spectral: hold out
     ``spectral_fraction`` of the frequencies, ``interleaved`` (every tenth or so:
     interpolation), ``tail`` (the highest ones: extrapolation) or ``none``. The thesis
-    setting, 151 frequencies, holds out 16 and trains on 135.
+    setting, 151 frequencies, holds out 16 and trains on 135. The training field keeps the
+    photon counts (:attr:`PhasorField.counts`) of its wall points only when no frequency
+    is held out: they hold every frequency.
     """
     if not isinstance(field, PhasorField):
         raise DataError(f"split_field: expected a PhasorField, got {type(field).__name__}")
@@ -197,6 +202,8 @@ def split_field(field: PhasorField, spatial_step: int | SpatialSampling = 2,
     mask = sampling.mask(field.grid_shape)
     held = heldout_frequency_indices(field.n_frequencies, spectral, spectral_fraction)
     train = np.setdiff1d(np.arange(field.n_frequencies), held)
+    if held.size and field.counts is not None:
+        field = field.replace(counts=None)
     if sampling.pattern == SpatialPattern.grid:
         k = sampling.step
         train_field = field.select(train, slice(None, None, k), slice(None, None, k))

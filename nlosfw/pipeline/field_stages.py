@@ -16,8 +16,9 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.thinning import photon_counts
+from nlosfw.capture.thinning import count_scale, photon_counts
 from nlosfw.common.config import config_to_dict
+from nlosfw.common.errors import ConfigError
 from nlosfw.common.hashing import cache_key
 from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
 from nlosfw.image.transient import measured_band_frequencies
@@ -36,8 +37,9 @@ from nlosfw.pipeline.results import (
 )
 from nlosfw.pipeline.settings import Artefact
 from nlosfw.transform import frequencies as frequencies_module
+from nlosfw.transform.common import histogram_2d, to_field_layout
 from nlosfw.transform.fft import FFTTransform
-from nlosfw.transform.field import PhasorField
+from nlosfw.transform.field import PhasorField, PhotonCounts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 from nlosfw.transform.frequencies import warn_aliasing
 from nlosfw.transform.interface import PhasorTransform
@@ -84,6 +86,10 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
                    for m in run.plan.models):
                 field = field.replace(variance=_training_variance(transform, capture,
                                                                   planned.name, power))
+            if any(getattr(m.model.config, "uses_photon_counts", False)
+                   for m in run.plan.models):
+                field = field.replace(counts=_training_counts(transform, capture, planned.name,
+                                                              power))
     finally:
         frequencies_log.removeFilter(quiet)
     run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
@@ -104,6 +110,25 @@ def _training_variance(transform: PhasorTransform, capture: CaptureResult, name:
     option, purpose = "model.likelihood", "the Poisson likelihood"
     photon_counts(capture.capture, capture.label, option, purpose)
     return field_variance(transform, capture.capture, name, option, purpose, power)
+
+
+def _training_counts(transform: PhasorTransform, capture: CaptureResult, name: str,
+                     power: np.ndarray | None) -> PhotonCounts:
+    """The training capture's photon counts in the field's wall layout, for a model whose
+    likelihood is theirs; a one-line ConfigError for ``model.likelihood`` naming the capture
+    when it is not photon counts or the transform is not the plain temporal DFT
+    (|K(f, t)| = delta_t) that relates the counts to the field."""
+    option, purpose = "model.likelihood", "the photon counts' likelihood"
+    source = capture.capture
+    counts = photon_counts(source, capture.label, option, purpose).astype(np.float64)
+    power = kernel_power(transform, source, name, option, purpose) if power is None else power
+    if not np.allclose(power, source.delta_t ** 2, rtol=1e-6):
+        raise ConfigError(option, f"{capture.label}: the {name} transform is not the plain "
+                          "temporal DFT of the counts (|kernel| != delta_t), so its field "
+                          f"cannot be related to them; use the fft or wavelet transform")
+    layout = to_field_layout(histogram_2d(source.replace(H=counts)), source)
+    return PhotonCounts(layout, float(source.t_start), float(source.delta_t),
+                        count_scale(source))
 
 
 def fit_stage(run: StageContext, done: StageResults) -> FitResult:

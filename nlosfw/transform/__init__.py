@@ -11,7 +11,7 @@ from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
     from nlosfw.transform.fft import FFTTransform, FFTTransformConfig
-    from nlosfw.transform.field import PhasorField, regular_grid_spacing
+    from nlosfw.transform.field import PhasorField, PhotonCounts, regular_grid_spacing
     from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
     from nlosfw.transform.frequencies import (
         aliasing_warning,
@@ -35,6 +35,7 @@ __all__ = [
     "FFTTransformConfig",
     "GaussianWavelet",
     "PhasorField",
+    "PhotonCounts",
     "PhasorTransform",
     "PhasorTransformConfig",
     "read_phasor_field",

@@ -29,6 +29,36 @@ class FieldChanges(TypedDict, total=False):
     weights: np.ndarray | None
     metadata: dict[str, object]
     variance: np.ndarray | None
+    counts: PhotonCounts | None
+
+
+@dataclass(frozen=True, eq=False)
+class PhotonCounts:
+    """The photon counts a field was transformed from: ``counts[t, y, x]`` (>= 0, in the
+    field's wall layout) in time bins ``delta_t`` metres of path wide, bin i centred at
+    ``t_start + (i + 1/2) delta_t`` (the transform's time axis, device legs included when
+    the capture's times include them); the capture's H is ``counts / count_scale``."""
+
+    counts: np.ndarray
+    t_start: float
+    delta_t: float
+    count_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        counts = np.asarray(self.counts, dtype=np.float64)
+        object.__setattr__(self, "counts", counts)
+        if counts.ndim != 3 or counts.shape[0] < 1:
+            raise DataError(f"counts: must have shape (time, y, x), got {counts.shape}")
+        if not np.all(np.isfinite(counts)) or np.any(counts < 0):
+            raise DataError("counts: must be finite photon counts >= 0")
+        if not (np.isfinite(self.t_start) and np.isfinite(self.delta_t) and self.delta_t > 0
+                and np.isfinite(self.count_scale) and self.count_scale > 0):
+            raise DataError(f"counts: need a finite t_start, delta_t > 0 and count_scale > 0, "
+                            f"got {self.t_start}, {self.delta_t}, {self.count_scale}")
+
+    def select(self, y: Index = slice(None), x: Index = slice(None)) -> PhotonCounts:
+        """The counts of some wall samples (as :meth:`PhasorField.select` takes them)."""
+        return dataclasses.replace(self, counts=self.counts[:, y, x])
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,7 +71,10 @@ class PhasorField:
     frequencies. ``geometry`` says how the field was captured. ``variance`` (the values'
     shape, >= 0; ``None``: unknown) is the noise variance of each value, the capture's
     Poisson noise through the transform (:func:`nlosfw.transform.noise_floor.field_variance`);
-    a fit may weigh samples by it. It is not written to field files.
+    a fit may weigh samples by it. ``counts`` (``None``: not carried) are the photon counts
+    the field was transformed from, at every wall point of the field and every time bin
+    (so every frequency, whatever frequencies the field keeps); a fit may take the exact
+    Poisson likelihood of them. Neither is written to field files.
 
     Scattered wall samples (an irregular scan) are a field with one row: ``wall_xyz``
     (1, N, 3) and ``values`` (F, 1, N); :meth:`grid_spacing` is None for them.
@@ -54,6 +87,7 @@ class PhasorField:
     weights: np.ndarray | None = None
     metadata: dict[str, object] = field(default_factory=dict)
     variance: np.ndarray | None = None
+    counts: PhotonCounts | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -95,6 +129,9 @@ class PhasorField:
                                 or np.any(var < 0)):
             raise DataError(f"variance: must be finite, >= 0 and of the values' shape {v.shape}, "
                             f"got shape {var.shape}")
+        if self.counts is not None and self.counts.counts.shape[1:] != v.shape[1:]:
+            raise DataError(f"counts: wall layout {self.counts.counts.shape[1:]} is not the "
+                            f"values' {v.shape[1:]}")
 
     @property
     def n_frequencies(self) -> int:
@@ -129,6 +166,7 @@ class PhasorField:
             wall_xyz=self.wall_xyz[y, x],
             weights=None if self.weights is None else self.weights[fi],
             variance=None if self.variance is None else self.variance[fi][:, y, x],
+            counts=None if self.counts is None else self.counts.select(y, x),
         )
 
     def replace(self, **changes: Unpack[FieldChanges]) -> PhasorField:
