@@ -78,14 +78,29 @@ class RSDPriorConfig(FieldModelConfig):
     either side of its value, the albedo fitted again each time (a quarter of
     ``iterations``), with steps halving; a round costs about one to two fits."""
     likelihood: Likelihood = Likelihood.least_squares
-    """The data term: least_squares, or poisson (each wall point weighted by the inverse
+    """The data term: least_squares; poisson (each wall point weighted by the inverse
     Poisson variance of its samples, from the capture's photon counts;
-    :mod:`nlosfw.model.rsd_likelihood`)."""
+    :mod:`nlosfw.model.rsd_likelihood`); or poisson_counts (the least-squares albedo
+    refined by the exact Poisson likelihood of the counts in every time bin, with a
+    background per bin; needs ``split.spectral=none``; :mod:`nlosfw.model.rsd_counts`)."""
+    counts_iterations: int = 100
+    """``poisson_counts``: the most EM iterations on the counts."""
+    counts_stop: bool = True
+    """``poisson_counts``: stop EM where the likelihood of an independent half of the
+    counts peaks (binomial thinning with ``seed``); false: run every iteration."""
+    counts_bin: float | None = None
+    """[m] ``poisson_counts``: width of the fitted time bins, whole bins of the capture
+    summed; default a quarter of the shortest wavelength of the field's band."""
 
     @property
     def uses_noise_variance(self) -> bool:
         """With ``likelihood: poisson`` the fit needs the field's variance."""
         return self.likelihood == Likelihood.poisson
+
+    @property
+    def uses_photon_counts(self) -> bool:
+        """With ``likelihood: poisson_counts`` the fit needs the field's photon counts."""
+        return self.likelihood == Likelihood.poisson_counts
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -129,3 +144,9 @@ class RSDPriorConfig(FieldModelConfig):
                 f"must be true or false, got {self.time_offset!r}")
         require(self.response_rounds >= 1, "response_rounds",
                 f"must be >= 1, got {self.response_rounds}")
+        require(self.counts_iterations >= 1, "counts_iterations",
+                f"must be >= 1, got {self.counts_iterations}")
+        require(isinstance(self.counts_stop, bool), "counts_stop",
+                f"must be true or false, got {self.counts_stop!r}")
+        require(self.counts_bin is None or self.counts_bin > 0, "counts_bin",
+                f"must be > 0 m or null, got {self.counts_bin}")

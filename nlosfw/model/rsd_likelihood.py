@@ -1,5 +1,7 @@
-"""The likelihood ``rsd_prior`` fits by: plain least squares, or the Poisson noise of the
-capture's photon counts (``likelihood: poisson``).
+"""The likelihood ``rsd_prior`` fits by: plain least squares, the Poisson noise of the
+capture's photon counts to second order (``likelihood: poisson``, here), or the exact
+Poisson likelihood of the counts in every time bin (``likelihood: poisson_counts``,
+:mod:`nlosfw.model.rsd_counts`).
 
 A phasor sample is a DFT of a wall point's histogram, P(x, f) = sum_t K(f, t) n(x, t). With
 Poisson counts n its variance is Var P(x, f) = sum_t |K(f, t)|^2 n(x, t): for every nlosfw
@@ -13,8 +15,8 @@ the band, is the weighted least squares
 
 sigma^2(x) the mean of Var P(x, f) over the band (the same at every frequency for a DFT).
 It is the Poisson likelihood to second order, not the exact one of the counts of each
-time bin (that needs a forward model of the whole spectrum, which the phasor-field fit
-does not have). The fit runs on the whitened operator W^(1/2) A, its columns normalised
+time bin (that needs a forward model of the whole spectrum: ``poisson_counts``). The fit
+runs on the whitened operator W^(1/2) A, its columns normalised
 by their weighted norms. Weights are relative (their mean over the kept points is 1), and a
 variance is taken as at least ``_FLOOR`` of the median, so that a point with no counts
 is not weighted without bound. The field must carry its variance
@@ -40,6 +42,7 @@ class Likelihood(Choice):
 
     least_squares = "least_squares"
     poisson = "poisson"
+    poisson_counts = "poisson_counts"
 
 
 def sample_weights(field: PhasorField, samples: WallSamples, who: str = "rsd_prior"

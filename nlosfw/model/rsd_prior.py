@@ -39,7 +39,9 @@ constant``, a complex offset per frequency, constant over the wall (minimised ou
 a gain per frequency (jitter, a time-origin offset in ps; :mod:`nlosfw.model.rsd_response`);
 ``fit_lobe``, a glossy lobe's exponent (:mod:`nlosfw.model.rsd_lobe`; or a fixed ``lobe``).
 ``likelihood: poisson`` weighs each wall point by the inverse Poisson variance of its
-samples (:mod:`nlosfw.model.rsd_likelihood`).
+samples (:mod:`nlosfw.model.rsd_likelihood`); ``likelihood: poisson_counts`` refines the
+albedo by the exact Poisson likelihood of the photon counts in every time bin, with a
+background per bin (:mod:`nlosfw.model.rsd_counts`).
 
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
@@ -72,13 +74,13 @@ from nlosfw.model.interface import (
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
 from nlosfw.model.rsd_background import (
-    Background,
     BackgroundProjection,
     WallBackground,
     background_projection,
     fit_offsets,
 )
 from nlosfw.model.rsd_config import RSDPriorConfig
+from nlosfw.model.rsd_counts import CountsScene, refine_by_counts
 from nlosfw.model.rsd_depths import plan_lattice
 from nlosfw.model.rsd_likelihood import sample_weights, weight_summary
 from nlosfw.model.rsd_lobe import fit_lobe
@@ -169,12 +171,21 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             self._projection,
             lambda f: with_gains(response, f, operator(lobe, f).forward(albedo)),
             field.frequencies, values, scale)
+        counts = None
+        if cfg.uses_photon_counts:
+            counts = refine_by_counts(
+                field, CountsScene(lattice, field.geometry, self._options(lobe=lobe), response,
+                                   scale), albedo, cfg.counts_iterations,
+                cfg.counts_bin or 0.25 / float(field.frequencies.max()),
+                cfg.seed if cfg.counts_stop else None)
+            albedo, background = counts.albedo, counts.background
         self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale,
                                background, response, lobe)
         fitted = {**({} if background is None else background.summary(scale)),
                   **({} if response is None else response.summary()),
                   **({"lobe_exponent": lobe} if cfg.fit_lobe else {}),
-                  **({} if self._weights is None else weight_summary(self._weights, mask))}
+                  **({} if self._weights is None else weight_summary(self._weights, mask)),
+                  **({} if counts is None else counts.summary)}
         return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
                          final_loss=result.residual, fitted=fitted, history=history,
                          stopped_early=result.iterations < cfg.iterations)
@@ -397,7 +408,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             albedo = np.asarray(arrays["albedo"], dtype=np.float32)
             geometry = CaptureGeometry.from_dict(header["geometry"])
             scale = float(header["scale"])
-            background = None if model.config.background == Background.none else WallBackground(
+            background = None if "background" not in arrays else WallBackground(
                 np.asarray(arrays["background_frequencies"], float),
                 np.asarray(arrays["background"], np.complex128))
             response = (SystemResponse.from_dict(header["response"]) if "response" in header
