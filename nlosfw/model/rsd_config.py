@@ -8,6 +8,7 @@ from nlosfw.common.config import require
 from nlosfw.image.fft import Precision
 from nlosfw.model.interface import FieldModelConfig
 from nlosfw.model.rsd_background import Background
+from nlosfw.model.rsd_counts import CountsStop
 from nlosfw.model.rsd_likelihood import Likelihood
 from nlosfw.model.rsd_response import TemporalResponse
 from nlosfw.model.scene_operator import Amplitude
@@ -85,9 +86,10 @@ class RSDPriorConfig(FieldModelConfig):
     background per bin; needs ``split.spectral=none``; :mod:`nlosfw.model.rsd_counts`)."""
     counts_iterations: int = 100
     """``poisson_counts``: the most EM iterations on the counts."""
-    counts_stop: bool = True
-    """``poisson_counts``: stop EM where the likelihood of an independent half of the
-    counts peaks (binomial thinning with ``seed``); false: run every iteration."""
+    counts_stop: CountsStop = CountsStop.likelihood
+    """``poisson_counts``: when EM stops. likelihood: the counts are split binomially
+    (``seed``) into two independent halves, EM runs on one and stops where the other's
+    likelihood peaks; none: after ``counts_iterations``."""
     counts_bin: float | None = None
     """[m] ``poisson_counts``: width of the fitted time bins, whole bins of the capture
     summed; default a quarter of the shortest wavelength of the field's band."""
@@ -146,7 +148,5 @@ class RSDPriorConfig(FieldModelConfig):
                 f"must be >= 1, got {self.response_rounds}")
         require(self.counts_iterations >= 1, "counts_iterations",
                 f"must be >= 1, got {self.counts_iterations}")
-        require(isinstance(self.counts_stop, bool), "counts_stop",
-                f"must be true or false, got {self.counts_stop!r}")
         require(self.counts_bin is None or self.counts_bin > 0, "counts_bin",
                 f"must be > 0 m or null, got {self.counts_bin}")

@@ -38,19 +38,25 @@ EM runs on one, and stops at the iteration where the other's likelihood peaks
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import sparse
 from scipy.special import ndtr
 
 from nlosfw.capture.geometry import CaptureGeometry, CaptureKind
+from nlosfw.common.config import Choice
 from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.model.rsd_background import WallBackground
 from nlosfw.model.rsd_response import SystemResponse
 from nlosfw.model.scene_operator import OperatorOptions, VoxelLattice, leg_amplitude
-from nlosfw.transform.field import PhasorField, PhotonCounts
-from nlosfw.transform.temporal_dft import unit_phasor
+from nlosfw.transform.counts import BinnedCounts, bin_counts
+from nlosfw.transform.field import PhasorField
+
+if TYPE_CHECKING:
+    from nlosfw.model.rsd_config import RSDPriorConfig
 
 #: The pulse is cut this many standard deviations either side of its centre.
 _TAIL = 4.0
@@ -58,18 +64,11 @@ _TAIL = 4.0
 _BLOCK = 2**22
 
 
-@dataclass(frozen=True)
-class CountsProblem:
-    """The counts of the kept wall points binned for the fit, and where they lie."""
+class CountsStop(Choice):
+    """When the counts' EM stops (module docstring)."""
 
-    counts: np.ndarray
-    """(J, N) photons per fitted bin J and kept point N."""
-    edges: np.ndarray
-    """(J + 1,) bin edges in metres of path."""
-    points: np.ndarray
-    """(N, 3) the kept wall points."""
-    factor: int
-    """Bins of the capture summed into one fitted bin."""
+    likelihood = "likelihood"
+    none = "none"
 
 
 @dataclass(frozen=True, eq=False)
@@ -99,30 +98,7 @@ class CountsFit:
     """The fit report's values (``counts_*``)."""
 
 
-def counts_problem(counts: PhotonCounts, wall_xyz: np.ndarray, bin_width: float
-                   ) -> CountsProblem:
-    """The kept points' counts summed into bins of the largest whole number of the
-    capture's bins not wider than ``bin_width`` (m), from the first bin holding a count."""
-    n_raw = counts.counts.reshape(counts.counts.shape[0], -1)
-    points = np.asarray(wall_xyz, dtype=float).reshape(-1, 3)
-    if n_raw.shape[1] != points.shape[0]:
-        raise FitError(f"counts of {n_raw.shape[1]} wall points for {points.shape[0]} points")
-    factor = max(1, int(math.floor(bin_width / counts.delta_t + 1e-9)))
-    hits = np.flatnonzero(n_raw.sum(axis=1) > 0)
-    if hits.size == 0:
-        raise FitError("poisson_counts: the kept wall points caught no photon")
-    first = int(hits[0])
-    n_bins = (n_raw.shape[0] - first) // factor
-    if n_bins < 1:
-        raise FitError("poisson_counts: fewer time bins after the first count than one "
-                       "fitted bin holds; lower counts_bin")
-    binned = n_raw[first:first + n_bins * factor].reshape(n_bins, factor, -1).sum(axis=1)
-    width = factor * counts.delta_t
-    edges = counts.t_start + first * counts.delta_t + width * np.arange(n_bins + 1)
-    return CountsProblem(binned, edges, points, factor)
-
-
-def counts_operator(problem: CountsProblem, scene: CountsScene, support: np.ndarray,
+def counts_operator(problem: BinnedCounts, scene: CountsScene, support: np.ndarray,
                     photons_per_unit: float) -> sparse.csr_matrix:
     """M: expected photons per fitted bin and point (row j * N + x) per unit of albedo of
     each voxel of ``support`` (flat lattice indices; column order), without background."""
@@ -175,13 +151,12 @@ def log_likelihood(counts: np.ndarray, expected: np.ndarray) -> float:
 
 
 def fit_counts(counts: np.ndarray, operator: sparse.csr_matrix, start: np.ndarray,
-               iterations: int, check: np.ndarray | None = None
+               iterations: int, score: Callable[[np.ndarray], float] | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """EM on ``counts`` (J, N) from the albedo ``start`` (support,) (module docstring):
-    (albedo, background per fitted bin (J,), the log-likelihood before each iteration and
-    after the last). With ``check`` (counts of the same shape, independent of ``counts``),
-    the log-likelihood is of ``check`` instead, under the fitted expectation (the
-    validation that chooses when to stop)."""
+    (albedo, background per fitted bin (J,), the score of the expected counts before each
+    iteration and after the last). The score is the log-likelihood of ``counts`` unless
+    ``score`` (of the expected counts (J, N)) is given."""
     n = counts
     n_bins, n_points = n.shape
     a = np.asarray(start, dtype=np.float64).copy()
@@ -193,7 +168,7 @@ def fit_counts(counts: np.ndarray, operator: sparse.csr_matrix, start: np.ndarra
     history = []
     for _ in range(iterations + 1):
         expected = scene + b[:, None]
-        history.append(log_likelihood(n if check is None else check, expected))
+        history.append(log_likelihood(n, expected) if score is None else score(expected))
         if len(history) > iterations:
             break
         ratio = n / expected
@@ -203,53 +178,44 @@ def fit_counts(counts: np.ndarray, operator: sparse.csr_matrix, start: np.ndarra
     return a, b, np.asarray(history)
 
 
-def stopping_iteration(counts: np.ndarray, operator: sparse.csr_matrix, start: np.ndarray,
+def stopping_iteration(problem: BinnedCounts, operator: sparse.csr_matrix, start: np.ndarray,
                        iterations: int, seed: int) -> int:
     """The iterations of EM that fit the counts best without fitting their noise: split
     every count into Binomial(n, 1/2) and the rest (two independent Poisson halves, as
     count splitting does), run EM on one half from half the ``start`` and return the
-    iteration at which the other half's likelihood peaks (at least 1)."""
+    iteration at which the other half's likelihood peaks (at least one)."""
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0xC0DE]))
+    counts = problem.counts
     half = rng.binomial(counts.astype(np.int64), 0.5).astype(np.float64)
+    other = counts - half
     history = fit_counts(half, operator, 0.5 * np.asarray(start), iterations,
-                         check=counts - half)[2]
+                         lambda expected: log_likelihood(other, expected))[2]
     return max(1, int(np.argmax(history)))
 
 
-def background_field(problem: CountsProblem, background: np.ndarray, counts: PhotonCounts,
-                     frequencies: np.ndarray) -> WallBackground:
-    """The background's phasor (raw field units, the same at every wall point): each fitted
-    bin's photons spread evenly over its capture bins, through the temporal DFT."""
-    k = problem.factor
-    per_bin = np.repeat(background / k, k)                    # photons per capture bin
-    step = counts.delta_t
-    centres = problem.edges[0] + (np.arange(per_bin.size) + 0.5) * step
-    f = np.asarray(frequencies, dtype=float)
-    values = unit_phasor(-np.outer(f, centres)) @ per_bin * step / counts.count_scale
-    return WallBackground(f, np.asarray(values, dtype=np.complex128))
-
-
 def refine_by_counts(field: PhasorField, scene: CountsScene, albedo: np.ndarray,
-                     iterations: int, bin_width: float, seed: int | None) -> CountsFit:
+                     config: RSDPriorConfig) -> CountsFit:
     """The least-squares ``albedo`` (Z, Y, X) refined by EM on the counts of the training
-    ``field``'s points, in bins about ``bin_width`` wide (m): ``iterations`` of it, or with
-    a ``seed`` as many as :func:`stopping_iteration` finds, up to ``iterations``; the
+    ``field``'s points (``config``'s ``counts_*`` options: ``counts_iterations`` of EM, or
+    with ``counts_stop`` as many as :func:`stopping_iteration` finds, up to that); the
     background's phasor at the field's frequencies."""
+    iterations, stop, seed = config.counts_iterations, config.counts_stop, config.seed
     counts = field.counts
     if counts is None:
         raise ConfigError("model.likelihood", "rsd_prior: poisson_counts fits the photon "
                           "counts, which this field does not carry: it needs a capture of "
                           "photon counts run through the pipeline with split.spectral=none "
                           "(or a PhasorField with counts); use least_squares or poisson")
-    problem = counts_problem(counts, field.wall_xyz, bin_width)
+    bin_width = config.counts_bin or 0.25 / float(field.frequencies.max())
+    problem = bin_counts(counts, field.wall_xyz, bin_width)
     flat = np.asarray(albedo, dtype=np.float64).ravel()
     support = np.flatnonzero(flat > 0)
     if support.size == 0:
         raise FitError("poisson_counts: the least-squares albedo it starts from is zero")
     photons = scene.scale * counts.count_scale / counts.delta_t
     operator = counts_operator(problem, scene, support, photons)
-    steps = iterations if seed is None else stopping_iteration(
-        problem.counts, operator, flat[support], iterations, seed)
+    steps = iterations if stop == CountsStop.none else stopping_iteration(
+        problem, operator, flat[support], iterations, seed)
     a, b, history = fit_counts(problem.counts, operator, flat[support], steps)
     out = np.zeros_like(flat)
     out[support] = a
@@ -260,4 +226,5 @@ def refine_by_counts(field: PhasorField, scene: CountsScene, albedo: np.ndarray,
                "counts_background": float(np.median(b) / problem.factor),
                "counts_loglik_gain": float((history[-1] - history[0]) / max(total, 1.0))}
     return CountsFit(out.reshape(np.shape(albedo)),
-                     background_field(problem, b, counts, field.frequencies), history, summary)
+                     WallBackground(field.frequencies, problem.field_of(b, field.frequencies)),
+                     history, summary)

@@ -173,11 +173,9 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             field.frequencies, values, scale)
         counts = None
         if cfg.uses_photon_counts:
-            counts = refine_by_counts(
-                field, CountsScene(lattice, field.geometry, self._options(lobe=lobe), response,
-                                   scale), albedo, cfg.counts_iterations,
-                cfg.counts_bin or 0.25 / float(field.frequencies.max()),
-                cfg.seed if cfg.counts_stop else None)
+            scene = CountsScene(lattice, field.geometry, self._options(lobe=lobe), response,
+                                scale)
+            counts = refine_by_counts(field, scene, albedo, cfg)
             albedo, background = counts.albedo, counts.background
         self._fitted = _Fitted(lattice, albedo.astype(np.float32), field.geometry, scale,
                                background, response, lobe)
