@@ -233,3 +233,28 @@ def test_a_field_without_counts_is_refused_in_one_line():
     with pytest.raises(ConfigError, match="model.likelihood") as err:
         model.fit(field)
     assert "\n" not in str(err.value) and "split.spectral=none" in str(err.value)
+
+
+def test_device_legs_in_the_times_need_a_field_that_keeps_them(tmp_path, monkeypatch, capsys):
+    """The counts' model writes the device legs into each point's times; a transform that
+    takes them out of the field is refused in one line, and one that keeps them fits (the
+    simulator's dark counts found again)."""
+    legs = ["scene.capture.device_legs=true", "split.spectral=none",
+            "model.counts_stop=likelihood"]
+    status, fitted = _run(tmp_path, monkeypatch, *legs)
+    err = capsys.readouterr().err
+    assert status == 2 and not fitted and err.count("\n") == 1
+    assert err.startswith("error: transform.remove_device_legs: ")
+    (tmp_path / "kept").mkdir()
+    status, fitted = _run(tmp_path / "kept", monkeypatch, *legs,
+                          "transform.remove_device_legs=false")
+    assert status == 0
+    assert fitted["counts_background"] == pytest.approx(0.5, rel=0.1)
+    # a capture file with the legs in its times: refused before the run
+    capture = tmp_path / "kept" / "run" / "capture.hdf5"
+    status = main([f"capture.path={capture}", "model=rsd_prior", "split.spectral=none",
+                   "model.likelihood=poisson_counts", f"hydra.run.dir={tmp_path / 'file'}"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1 and str(capture) in err
+    assert err.startswith("error: transform.remove_device_legs: ")
+    assert not (tmp_path / "file").exists()

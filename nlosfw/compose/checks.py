@@ -37,6 +37,7 @@ from nlosfw.pipeline.settings import (
 from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
 from nlosfw.simulate.geometry import validate_scene
 from nlosfw.simulate.scene import NoiseModel, scene_from_config
+from nlosfw.transform.counts import check_counts_times
 from nlosfw.transform.noise_floor import DFT_TRANSFORMS, kernel_power
 
 if TYPE_CHECKING:
@@ -169,6 +170,8 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     settings = run_settings(cfg)
     check_model_choice(cfg, settings)
     counts_needed = False           # a model's likelihood needs the field's Poisson variance
+    times_needed = False            # or the counts themselves, in the capture's own times
+    transform_config: object = None
     for group in _PLUGIN_GROUPS:
         node = cfg.get(group)
         if not isinstance(node, Mapping) or not node:
@@ -179,6 +182,9 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         _check_plugin(spec, f"{group} plugin")
         config = spec.make_config(_plugin_options(node, spec.config_class()))
         counts_needed |= _needs_counts(config, settings, "model")
+        times_needed |= bool(getattr(config, "uses_photon_counts", False))
+        if group == PluginKind.PHASOR_TRANSFORM.value:
+            transform_config = config
         if group == PluginKind.IMAGER.value:
             check_reference_choice(settings, spec.name,
                                    bool(getattr(spec.load(), "full_grid_only", False)))
@@ -192,6 +198,7 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
         counts_needed |= _needs_counts(config, settings, f"compare.{label}")
+        times_needed |= bool(getattr(config, "uses_photon_counts", False))
     formats = host.capture_formats()
     # before anything sized by the configuration is allocated
     check_memory(cfg, file_shape=lambda path: file_transient_shape(
@@ -224,6 +231,9 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     if counts_needed:
         likelihood = ("model.likelihood", "the Poisson likelihood")
         photon_counts(loaded.prepared.capture, str(loaded.path), *likelihood)
+        if times_needed:
+            check_counts_times(loaded.prepared.capture.geometry, transform_config,
+                               str(loaded.path))
         _check_noise_floor(cfg, host, loaded.prepared.capture, *likelihood)
 
 

@@ -83,7 +83,9 @@ class RSDPriorConfig(FieldModelConfig):
     Poisson variance of its samples, from the capture's photon counts;
     :mod:`nlosfw.model.rsd_likelihood`); or poisson_counts (the least-squares albedo
     refined by the exact Poisson likelihood of the counts in every time bin, with a
-    background per bin; needs ``split.spectral=none``; :mod:`nlosfw.model.rsd_counts`)."""
+    background per bin; needs ``split.spectral=none``, and
+    ``transform.remove_device_legs=false`` when the capture's times include the device
+    legs; :mod:`nlosfw.model.rsd_counts`)."""
     counts_iterations: int = 100
     """``poisson_counts``: the most EM iterations on the counts."""
     counts_stop: CountsStop = CountsStop.likelihood

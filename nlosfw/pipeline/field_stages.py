@@ -38,6 +38,7 @@ from nlosfw.pipeline.results import (
 from nlosfw.pipeline.settings import Artefact
 from nlosfw.transform import frequencies as frequencies_module
 from nlosfw.transform.common import histogram_2d, to_field_layout
+from nlosfw.transform.counts import check_counts_times
 from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField, PhotonCounts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
@@ -120,6 +121,7 @@ def _training_counts(transform: PhasorTransform, capture: CaptureResult, name: s
     (|K(f, t)| = delta_t) that relates the counts to the field."""
     option, purpose = "model.likelihood", "the photon counts' likelihood"
     source = capture.capture
+    check_counts_times(source.geometry, transform.config, capture.label)
     counts = photon_counts(source, capture.label, option, purpose).astype(np.float64)
     power = kernel_power(transform, source, name, option, purpose) if power is None else power
     if not np.allclose(power, source.delta_t ** 2, rtol=1e-6):

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlosfw.common.errors import DataError
+from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.transform.field import PhotonCounts
 from nlosfw.transform.temporal_dft import unit_phasor
 
@@ -60,3 +61,15 @@ def bin_counts(counts: PhotonCounts, wall_xyz: np.ndarray, bin_width: float) -> 
     width = factor * counts.delta_t
     edges = counts.t_start + first * counts.delta_t + width * np.arange(n_bins + 1)
     return BinnedCounts(binned, edges, points, factor, counts)
+
+
+def check_counts_times(geometry: CaptureGeometry, transform_config: object, where: str
+                       ) -> None:
+    """A one-line ConfigError for ``transform.remove_device_legs`` naming the capture
+    ``where`` when the transform would take the device legs out of the field while the
+    counts keep them in their times: a fit of both needs the same times."""
+    if (geometry.t_accounts_first_and_last_bounces
+            and getattr(transform_config, "remove_device_legs", False)):
+        raise ConfigError("transform.remove_device_legs", f"{where}: the photon counts' "
+                          "likelihood models the counts in the capture's own times, which "
+                          "include the device legs; set transform.remove_device_legs=false")
