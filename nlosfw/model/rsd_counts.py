@@ -150,31 +150,27 @@ def log_likelihood(counts: np.ndarray, expected: np.ndarray) -> float:
     return float(np.sum(counts * np.log(expected)) - np.sum(expected))
 
 
-def fit_counts(counts: np.ndarray, operator: sparse.csr_matrix, start: np.ndarray,
+def fit_counts(n: np.ndarray, operator: sparse.csr_matrix, start: np.ndarray,
                iterations: int, score: Callable[[np.ndarray], float] | None = None
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """EM on ``counts`` (J, N) from the albedo ``start`` (support,) (module docstring):
-    (albedo, background per fitted bin (J,), the score of the expected counts before each
-    iteration and after the last). The score is the log-likelihood of ``counts`` unless
-    ``score`` (of the expected counts (J, N)) is given."""
-    n = counts
-    n_bins, n_points = n.shape
+    """EM on the counts ``n`` (J, N) from the albedo ``start`` (support,) (module
+    docstring): (albedo, background per fitted bin (J,), the score of the expected counts
+    before each iteration and after the last). The score is the log-likelihood of ``n``
+    unless ``score`` (of the expected counts (J, N)) is given."""
+    score = score or (lambda expected: log_likelihood(n, expected))
     a = np.asarray(start, dtype=np.float64).copy()
-    scene = (operator @ a).reshape(n_bins, n_points)
+    scene = (operator @ a).reshape(n.shape)
     excess = n.mean(axis=1) - scene.mean(axis=1)
     b = np.maximum(excess, 0.05 * n.mean(axis=1)) + 1e-6 * max(float(n.mean()), 1e-12)
     colsum = np.asarray(operator.sum(axis=0)).ravel()
     seen = colsum > 0
-    history = []
-    for _ in range(iterations + 1):
-        expected = scene + b[:, None]
-        history.append(log_likelihood(n, expected) if score is None else score(expected))
-        if len(history) > iterations:
-            break
-        ratio = n / expected
+    history = [score(scene + b[:, None])]
+    for _ in range(iterations):
+        ratio = n / (scene + b[:, None])
         a[seen] *= (operator.T @ ratio.ravel())[seen] / colsum[seen]
         b *= ratio.mean(axis=1)
-        scene = (operator @ a).reshape(n_bins, n_points)
+        scene = (operator @ a).reshape(n.shape)
+        history.append(score(scene + b[:, None]))
     return a, b, np.asarray(history)
 
 
