@@ -181,6 +181,8 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         spec = host.registry.get(group, str(node.get("name")))
         _check_plugin(spec, f"{group} plugin")
         config = spec.make_config(_plugin_options(node, spec.config_class()))
+        if group == PluginKind.FIELD_MODEL.value:
+            _check_model_config(spec, config)
         counts_needed |= _needs_counts(config, settings, "model")
         times_needed |= bool(getattr(config, "uses_photon_counts", False))
         if group == PluginKind.PHASOR_TRANSFORM.value:
@@ -194,6 +196,7 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         _check_plugin(spec, f"compare.{label}: model plugin")
         try:
             config = spec.make_config(rest)
+            _check_model_config(spec, config)
         except ConfigError as err:
             raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
                               err.problem) from None
@@ -235,6 +238,13 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
             check_counts_times(loaded.prepared.capture.geometry, transform_config,
                                str(loaded.path))
         _check_noise_floor(cfg, host, loaded.prepared.capture, *likelihood)
+
+
+def _check_model_config(spec: PluginSpec, config: object) -> None:
+    """The model plugin's own checks of what its options name (``check_config``)."""
+    check = getattr(spec.load(), "check_config", None)
+    if callable(check):
+        check(config)
 
 
 def _needs_counts(config: object, settings: RunSettings, option: str) -> bool:

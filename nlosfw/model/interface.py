@@ -76,6 +76,11 @@ class FieldModel(Configurable[ModelConfigT], ABC):
 
     config_class: ClassVar[type] = FieldModelConfig
 
+    @classmethod
+    def check_config(cls, config: ModelConfigT) -> None:
+        """Check what ``config`` names outside itself (a registered network, its options)
+        before a run starts: a one-line ConfigError naming the option. Default: nothing."""
+
     @abstractmethod
     def fit(self, field: PhasorField, validation: PhasorField | None = None,
             on_step: Callable[[TrainingStep], None] | None = None) -> FitReport:

@@ -47,6 +47,7 @@ resolution chart), stopping after 69-144 steps; without validation, 300 steps ga
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import tempfile
 import time
@@ -57,7 +58,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from nlosfw.common.config import require
+from nlosfw.common.config import config_from_mapping, require
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.files import format_bytes
 from nlosfw.common.memory import available_memory
@@ -88,6 +89,9 @@ from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
+#: The network options the neural volume sets from its own.
+_VOLUME_SETS = frozenset({"seed", "device", "hidden", "steps", "lr", "threads",
+                          "validation_fraction"})
 #: Inputs of the network are scaled into [-MARGIN, MARGIN] per axis.
 MARGIN = 0.9
 
@@ -103,6 +107,10 @@ class NeuralVolumeConfig(FieldModelConfig):
     model's backend (siren, fourier, hashgrid, ...)."""
     network_hidden: tuple[int, ...] = (64, 64)
     """Widths of the network's hidden layers."""
+    network_options: dict[str, bool | int | float | str] = dataclasses.field(default_factory=dict)
+    """Options of the network's own config (siren's ``omega0_first``, a hash grid's
+    levels, ...), checked by it before the run; its widths, seed, device, steps, learning
+    rate and threads are this model's options, refused here."""
     steps: int = 300
     """Adam steps (full batch: every kept sample at every training frequency); an upper
     bound when ``patience`` stops sooner."""
@@ -155,6 +163,10 @@ class NeuralVolumeConfig(FieldModelConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         require(bool(self.network), "network", "must name a registered network, e.g. siren")
+        taken = sorted(set(self.network_options) & _VOLUME_SETS)
+        require(not taken, f"network_options.{taken[0] if taken else ''}",
+                "is set by the neural volume's own options (network_hidden, seed, device, "
+                "steps, lr, threads); set it there")
         require(len(self.network_hidden) >= 1 and all(h >= 1 for h in self.network_hidden),
                 "network_hidden", f"must be one or more widths >= 1, got "
                 f"{list(self.network_hidden)}")
@@ -331,7 +343,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         if not peak > 0:
             raise FitError(f"{who}: no non-negative albedo correlates with the field "
                            "(max Re(A^H P) <= 0); check the capture geometry and the field's sign")
-        net_config = network.config_class(**self._network_options())
+        net_config = self.network_config(network, cfg)
         shape = FieldShape(FieldMode.multi, lattice.shape, int(lattice.depths.size))
         ys, xs = lattice.axes()
         train, validation = validation_split(samples.layout.shape, cfg.validation_fraction,
@@ -346,11 +358,23 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
             network=network, network_config=net_config, network_shape=shape,
             train=train, validation=validation), lattice, scale, prior
 
-    def _network_options(self) -> dict[str, object]:
-        cfg = self.config
-        return {"seed": cfg.seed, "device": cfg.device, "hidden": list(cfg.network_hidden),
-                "steps": cfg.steps, "lr": cfg.lr, "threads": cfg.threads,
-                "validation_fraction": 0.0}
+    @classmethod
+    def check_config(cls, config: NeuralVolumeConfig) -> None:
+        """The network must be registered for this backend and take ``network_options``."""
+        cls.network_config(cls.network_class(config.network), config)
+
+    @staticmethod
+    def network_config(network: type[NeuralFieldModel], config: NeuralVolumeConfig
+                       ) -> NeuralFieldConfig:
+        """The albedo network's config: ``config``'s widths, seed, device, steps, learning
+        rate and threads, and its ``network_options`` (errors name them)."""
+        options = {"seed": config.seed, "device": config.device,
+                   "hidden": list(config.network_hidden), "steps": config.steps,
+                   "lr": config.lr, "threads": config.threads, "validation_fraction": 0.0,
+                   **config.network_options}
+        built: NeuralFieldConfig = config_from_mapping(network.config_class, options,
+                                                       "model.network_options")
+        return built
 
     # ------------------------------------------------------------------ predict
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:

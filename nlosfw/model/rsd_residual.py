@@ -150,6 +150,11 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
         in the plugin registry)."""
         raise NotImplementedError(f"{cls.__name__} names no backend")
 
+    @classmethod
+    def check_config(cls, config: RSDResidualConfig) -> None:
+        """The network must be registered for this backend (``model.network``)."""
+        cls.network_class(config.network)
+
     def _network_model(self) -> NeuralFieldModel:
         cls = self.network_class(self.config.network)
         return cls(self.config.network_options())
