@@ -77,3 +77,10 @@ def test_the_network_gets_its_options_and_the_volumes(monkeypatch):
     assert default.network_options == {}
     with pytest.raises(ConfigError, match="network_options.lr"):
         NeuralVolumeConfig(network="siren", network_options={"lr": 0.1})
+
+
+def test_the_jax_volume_checks_its_network_options_too(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("jax")
+    err = _refused(tmp_path, monkeypatch, capsys, "model=neural_volume_jax",
+                   "+model.network_options.omega0_first=0")
+    assert err.startswith("error: model.network_options.omega0_first: must be > 0"), err
