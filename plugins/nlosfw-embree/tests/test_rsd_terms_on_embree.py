@@ -4,9 +4,12 @@ bins) and a background (a late tail added at every wall point), alone and togeth
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
+from nlosfw import run
 from nlosfw.capture import SPEED_OF_LIGHT
 from nlosfw.model import split_field
 from nlosfw.plugins import load_plugins
@@ -106,18 +109,14 @@ def test_the_counts_likelihood_recovers_the_dark_counts_with_the_jitter(tmp_path
     """``likelihood: poisson_counts`` on an embree capture of photon counts with 80 ps of
     jitter and 0.5 dark counts a bin: the jitter is fitted first (by least squares) and the
     counts' EM, with that pulse, finds the dark counts again. Measured: 83.2 ps and 0.495."""
-    import json
-
-    import nlosfw
-
     monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
-    out = nlosfw.run(["simulator=embree", "scene=tiny", "scene.noise.model=poisson",
-                      "scene.noise.photons=1e6", "scene.noise.dark_counts=256",
-                      f"scene.noise.jitter_ps={JITTER_PS}", "model=rsd_prior",
-                      "model.likelihood=poisson_counts", "model.temporal_response=gaussian",
-                      "model.counts_stop=likelihood", "split.spectral=none",
-                      "transform.n_frequencies=21", "reconstruction.n_depths=4",
-                      "figures.enabled=false"], output_dir=tmp_path / "run")
+    out = run(["simulator=embree", "scene=tiny", "scene.noise.model=poisson",
+               "scene.noise.photons=1e6", "scene.noise.dark_counts=256",
+               f"scene.noise.jitter_ps={JITTER_PS}", "model=rsd_prior",
+               "model.likelihood=poisson_counts", "model.temporal_response=gaussian",
+               "model.counts_stop=likelihood", "split.spectral=none",
+               "transform.n_frequencies=21", "reconstruction.n_depths=4",
+               "figures.enabled=false"], output_dir=tmp_path / "run")
     fitted = json.loads((out.dir / "metrics.json").read_text())["field"]["model"]["fit"][
         "fitted"]
     assert fitted["response_sigma_ps"] == pytest.approx(JITTER_PS, rel=0.1)
