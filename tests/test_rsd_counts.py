@@ -177,7 +177,8 @@ def test_a_field_carries_its_counts_through_selection_and_scattering_but_not_hel
 
 
 # ---------------------------------------------------------------- in a run
-def _run(tmp_path, monkeypatch, *overrides: str) -> tuple[int, dict]:
+def _run(tmp_path, monkeypatch, *overrides: str, model: str = "rsd_prior"
+         ) -> tuple[int, dict]:
     """A run of the tiny scene with photon noise and known dark counts (256 per wall point
     over the 512 bins: 0.5 a bin) fitted with poisson_counts: (status, fit report)."""
     reports: list = []
@@ -191,7 +192,7 @@ def _run(tmp_path, monkeypatch, *overrides: str) -> tuple[int, dict]:
     monkeypatch.chdir(tmp_path)
     monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
     status = main(["scene=tiny", "scene.noise.model=poisson", "scene.noise.photons=1e6",
-                   "scene.noise.dark_counts=256", "model=rsd_prior",
+                   "scene.noise.dark_counts=256", f"model={model}",
                    "model.likelihood=poisson_counts", "model.iterations=60",
                    "split.spatial_step=2", "transform.n_frequencies=21",
                    "reconstruction.n_depths=4", "figures.enabled=false", *overrides,
@@ -199,17 +200,24 @@ def _run(tmp_path, monkeypatch, *overrides: str) -> tuple[int, dict]:
     return status, (reports[0].fitted if reports else {})
 
 
-@pytest.mark.parametrize("thinning", [[], ["split.thinning=true"]])
-def test_a_run_recovers_the_simulators_dark_counts(tmp_path, monkeypatch, thinning):
+@pytest.mark.parametrize("thinning, model", [([], "rsd_prior"),
+                                             (["split.thinning=true"], "rsd_prior"),
+                                             ([], "rsd_residual_torch")])
+def test_a_run_recovers_the_simulators_dark_counts(tmp_path, monkeypatch, thinning, model):
     """The background per bin the counts' EM finds is the simulator's dark-count floor
-    (0.5 photons a bin; half of it in half A with count splitting). Measured: 0.510 and
-    0.250."""
+    (0.5 photons a bin; half of it in half A with count splitting); the neural residual's
+    physics stage takes the counts too. Measured: 0.510 and 0.250."""
+    extra = [] if model == "rsd_prior" else ["model.network_steps=20"]
+    if extra:
+        pytest.importorskip("torch")
     status, fitted = _run(tmp_path, monkeypatch, "split.spectral=none",
-                          "model.counts_stop=likelihood", *thinning)
+                          "model.counts_stop=likelihood", *thinning, *extra, model=model)
     assert status == 0
     floor = 0.25 if thinning else 0.5
     assert fitted["counts_background"] == pytest.approx(floor, rel=0.1)
     assert fitted["counts_loglik_gain"] > 0 and fitted["counts_support_voxels"] > 0
+    if model != "rsd_prior":
+        return
     # the model file keeps the background's phasor, which a least-squares fit has none of
     model = RSDPriorFieldModel.load(tmp_path / "run" / "field_model.npz")
     assert model.background is not None and model.config.background == "none"

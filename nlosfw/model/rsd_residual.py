@@ -265,8 +265,9 @@ def _residual(prior: RSDPriorFieldModel, field: PhasorField) -> PhasorField:
 def _hold_out_points(field: PhasorField, fraction: float, seed: int
                      ) -> tuple[PhasorField, PhasorField | None]:
     """(training, validation): ``fraction`` of ``field``'s wall points, drawn by ``seed``,
-    with every frequency, as a (F, 1, N) validation field; no validation when fewer than
-    10 points would remain to train on."""
+    with every frequency, as a (F, 1, N) validation field (without the photon counts,
+    which only the physics stage takes); no validation when fewer than 10 points would
+    remain to train on."""
     n_f, n_y, n_x = field.values.shape
     n = n_y * n_x
     n_val = max(1, round(fraction * n))
@@ -277,7 +278,7 @@ def _hold_out_points(field: PhasorField, fraction: float, seed: int
     wall = field.wall_xyz.reshape(1, n, 3)
     var = None if field.variance is None else field.variance.reshape(n_f, 1, n)
     val, train = np.sort(order[:n_val]), np.sort(order[n_val:])
-    return (field.replace(values=values[:, :, train], wall_xyz=wall[:, train],
+    return (field.replace(values=values[:, :, train], wall_xyz=wall[:, train], counts=None,
                           variance=None if var is None else var[:, :, train]),
-            field.replace(values=values[:, :, val], wall_xyz=wall[:, val],
+            field.replace(values=values[:, :, val], wall_xyz=wall[:, val], counts=None,
                           variance=None if var is None else var[:, :, val]))
