@@ -24,13 +24,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from timing import machine
 
 from nlosfw.model.interface import TrainingStep
 from nlosfw.model.protocol import FieldSplit, field_metrics, parameter_data_ratio, split_field
@@ -167,8 +166,7 @@ def main() -> None:
     registry = load_plugins().registry
     names = [n for n in args.models.split(",") if n]
     results: dict[str, Any] = {
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version()},
+        "machine": machine(),
         "quick": args.quick, "resolution": resolution, "n_frequencies": n_freq,
         "photons": args.photons, "targets": TARGETS, "variants": {},
     }

@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 from pathlib import Path
 
 import nlosfw_torch.networks as networks
@@ -31,7 +30,7 @@ import torch
 from nlosfw_torch.hash_grid import HashGridEncoding, weighted_rows
 from rich.console import Console
 from rich.table import Table
-from timing import best_of
+from timing import best_of, machine
 
 from nlosfw.model import FieldMode, FieldShape, HashGridFieldConfig, hash_grid_layout
 from nlosfw.plugins import load_plugins
@@ -105,8 +104,7 @@ def main() -> None:
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_hash_grid",
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "torch": torch.__version__},
+        "machine": machine(torch=torch.__version__),
         "steps": args.steps, "repeats": args.repeats, "rows": rows}, indent=1) + "\n")
 
 

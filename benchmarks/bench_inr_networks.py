@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import time
 from dataclasses import dataclass
 from functools import cache
@@ -42,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from timing import machine
 
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
 from nlosfw.model.protocol import FieldSplit, field_metrics, split_field
@@ -209,9 +209,7 @@ def main() -> None:
     results: dict[str, Any] = {}
     if args.update and args.out.is_file():
         results = json.loads(args.out.read_text())
-    results["machine"] = {"cpus": os.cpu_count(), "platform": platform.platform(),
-                          "python": platform.python_version(),
-                          "note": "2 shared cores; timings are minima of repeats"}
+    results["machine"] = machine(note="2 shared cores; timings are minima of repeats")
     results["split"] = {"spatial_step": SPATIAL_STEP, "spectral": "interleaved",
                         "spectral_fraction": 0.1, "scenes": list(TUNING_SCENES)}
     if args.mode == "speed":

@@ -41,14 +41,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from timing import machine
 
 from nlosfw.capture import Capture, read_capture, write_capture
 from nlosfw.image import FFTImager, volume_voxels
@@ -302,8 +301,7 @@ def main() -> None:
     results: dict[str, Any] = {
         "benchmark": "bench_rsd_prior", "quick": args.quick, "groups": groups,
         "options": options,
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "numpy": np.__version__},
+        "machine": machine(numpy=np.__version__),
         "cases": [],
     }
     for case in cases(groups):

@@ -15,14 +15,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+from timing import machine
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.image import grid_layout
@@ -78,8 +77,7 @@ def main() -> None:
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_scene_operator",
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version(), "numpy": np.__version__},
+        "machine": machine(numpy=np.__version__),
         "runs": runs}, indent=1) + "\n")
 
 

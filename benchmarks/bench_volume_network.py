@@ -21,14 +21,13 @@ import argparse
 import importlib.util
 import json
 import os
-import platform
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 from rich.console import Console
 from rich.table import Table
-from timing import best_of
+from timing import best_of, machine
 
 from nlosfw.model import FieldMode, FieldShape, NetworkBuild, volume_coordinates
 from nlosfw.plugins import registered_network
@@ -139,8 +138,7 @@ def main() -> None:
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_volume_network",
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version()},
+        "machine": machine(),
         "voxels": int(np.prod(SHAPE)), "network": "siren 64 x 64", "threads": args.threads,
         "repeats": args.repeats, "rows": rows}, indent=1) + "\n")
 

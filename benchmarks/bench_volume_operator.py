@@ -29,7 +29,6 @@ import argparse
 import importlib.util
 import json
 import os
-import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+from timing import machine
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.image import grid_layout
@@ -164,8 +164,7 @@ def main() -> None:
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_volume_operator",
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version()},
+        "machine": machine(),
         "planes": args.planes, "frequencies": args.frequencies, "repeats": args.repeats,
         "backends": rows}, indent=1) + "\n")
 

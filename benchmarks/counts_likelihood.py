@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import tempfile
 from pathlib import Path
+
+from timing import machine
 
 ROOT = Path(__file__).resolve().parents[1]
 #: What runs: a likelihood, then ``model.`` options after colons.
@@ -90,8 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     print(_table(rows))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
-                    "python": platform.python_version()},
+        "machine": machine(),
         "rows": rows}, indent=1) + "\n")
     return 0
 

@@ -16,11 +16,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from timing import machine
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -78,9 +79,7 @@ def main() -> int:
                       f"{row['excess_db']:+10.2f}", flush=True)
     out = ROOT / "benchmarks" / "results" / f"fit_times_{args.label}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"machine": {"cpus": os.cpu_count(),
-                                           "platform": platform.platform(),
-                                           "python": platform.python_version()},
+    out.write_text(json.dumps({"machine": machine(),
                                "rows": rows}, indent=1) + "\n")
     print(f"wrote {out.relative_to(ROOT)}")
     return 0

@@ -1,11 +1,14 @@
-"""The one timing rule of the benchmarks: the best of several wall-clock runs.
+"""The one timing rule of the benchmarks: the best of several wall-clock runs; and the
+machine a result was measured on, as every results file records it.
 
 The machines' cores are shared, so the minimum over repeats is the least disturbed
-measurement. Scripts in this folder import it as ``from timing import best_of``.
+measurement. Scripts in this folder import them as ``from timing import best_of, machine``.
 """
 
 from __future__ import annotations
 
+import os
+import platform
 import time
 from collections.abc import Callable
 from typing import TypeVar
@@ -21,3 +24,10 @@ def best_of(call: Callable[[], T], repeat: int = 1) -> tuple[float, T]:
         result = call()
         seconds = min(seconds, time.perf_counter() - start)
     return seconds, result
+
+
+def machine(**extra: object) -> dict[str, object]:
+    """The machine of a results file: its CPUs, platform and Python, then ``extra`` (the
+    versions of the libraries measured, a note)."""
+    return {"cpus": os.cpu_count(), "platform": platform.platform(),
+            "python": platform.python_version(), **extra}
