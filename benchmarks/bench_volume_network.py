@@ -25,9 +25,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from rich.console import Console
-from rich.table import Table
-from timing import best_of, machine
+from timing import best_of, machine, print_speedups
 
 from nlosfw.model import FieldMode, FieldShape, NetworkBuild, volume_coordinates
 from nlosfw.plugins import registered_network
@@ -127,14 +125,9 @@ def main() -> None:
     rows = {"torch": torch_pass(args.repeats, args.threads)}
     if importlib.util.find_spec("nlosfw_jax"):
         rows["jax"] = jax_pass(args.repeats)
-    table = Table(title=f"the neural volume's SIREN over {np.prod(SHAPE)} voxels, forward "
-                        f"+ backward ({os.cpu_count()} cores)")
-    for column in ("backend", "whole (s)", "in pieces (s)", "speed-up", "gradient mismatch"):
-        table.add_column(column, justify="right")
-    for backend, row in rows.items():
-        table.add_row(backend, f"{row['baseline_s']:.3f}", f"{row['new_s']:.3f}",
-                      f"{row['speedup']:.2f}x", f"{row['gradient_mismatch']:.1e}")
-    Console().print(table)
+    print_speedups(f"the neural volume's SIREN over {np.prod(SHAPE)} voxels, forward + "
+                   f"backward ({os.cpu_count()} cores); baseline: the whole lattice at once",
+                   rows, ("in pieces (s)", "new_s"))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_volume_network",

@@ -35,9 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rich.console import Console
-from rich.table import Table
-from timing import machine
+from timing import machine, print_speedups
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.image import grid_layout
@@ -152,15 +150,9 @@ def main() -> None:
         rows["torch"]["baseline"] = args.torch_baseline
     if importlib.util.find_spec("nlosfw_jax") is not None:
         rows["jax"] = jax_pair(stack, albedo, args.repeats)
-    table = Table(title=f"neural volume operator, {args.planes} planes x "
-                        f"{args.frequencies} frequencies, forward + backward "
-                        f"({os.cpu_count()} cores)")
-    for column in ("backend", "baseline (s)", "operator (s)", "speed-up", "gradient mismatch"):
-        table.add_column(column, justify="right")
-    for backend, row in rows.items():
-        table.add_row(backend, f"{row['baseline_s']:.3f}", f"{row['operator_s']:.3f}",
-                      f"{row['speedup']:.2f}x", f"{row['gradient_mismatch']:.1e}")
-    Console().print(table)
+    print_speedups(f"neural volume operator, {args.planes} planes x {args.frequencies} "
+                   f"frequencies, forward + backward ({os.cpu_count()} cores)", rows,
+                   ("operator (s)", "operator_s"))
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_volume_operator",
