@@ -13,7 +13,7 @@ import scipy.fft
 
 from nlosfw.image import even_kernel
 from nlosfw.image.fft import FFTImager
-from nlosfw.image.plane_convolution import PlaneConvolution, lattice_axis
+from nlosfw.image.plane_convolution import PlaneConvolution, lattice_axis, read_points
 from nlosfw.image.rsd import RSDImager
 from nlosfw.testing import fixtures
 
@@ -65,6 +65,33 @@ def test_quarter_spectrum_is_the_fft_of_the_circular_kernel(n):
                                atol=1e-12 * np.abs(full).max())
     np.testing.assert_allclose(even_kernel.assemble(np.stack([np.stack([got] * 2)] * 2)), full,
                                rtol=0, atol=1e-12 * np.abs(full).max())
+
+
+@pytest.mark.parametrize("shape", [(8, 8), (12, 6), (2, 4)])
+def test_multiply_takes_the_even_spectrum_from_its_quarter(shape):
+    """Full spectra times an even spectrum given by its quarter: the quarter's four mirror
+    images assembled, times the spectra."""
+    rng = np.random.default_rng(3)
+    ly, lx = shape
+    quarter = rng.standard_normal((3, ly // 2 + 1, lx // 2 + 1)) + 0j
+    spectra = rng.standard_normal((3,) + shape) + 1j * rng.standard_normal((3,) + shape)
+    even = np.array([[quarter[:, min(p, ly - p), min(q, lx - q)] for q in range(lx)]
+                     for p in range(ly)]).transpose(2, 0, 1)
+    out = np.full_like(spectra, np.nan)
+    got = even_kernel.multiply(spectra, quarter, out=out)
+    assert got is out
+    np.testing.assert_array_equal(got, spectra * even)
+
+
+@pytest.mark.parametrize("region", [(slice(0, 5), slice(0, 6)), (slice(3, 9, 2), slice(4, 10)),
+                                    (slice(None), slice(None))])
+def test_inverse_fft_read_at_some_points_is_the_full_inverse_fft_there(region):
+    """The imagers' inverse FFTs read only the output rows after the first axis."""
+    rng = np.random.default_rng(4)
+    spectra = rng.standard_normal((3, 12, 10)) + 1j * rng.standard_normal((3, 12, 10))
+    expected = np.fft.ifft2(spectra)[(slice(None),) + region]
+    got = read_points(spectra.copy(), region, workers=1)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-15)
 
 
 def test_which_layouts_are_even():

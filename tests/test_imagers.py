@@ -420,6 +420,21 @@ def test_fft_refuses_voxels_it_cannot_convolve():
     assert "\n" not in str(info.value) and "rsd imager" in str(info.value)
 
 
+def test_fft_refuses_a_volume_with_one_bad_plane():
+    """A volume's planes share the first one's grid check, each has its own flatness
+    check: the error names the plane at fault, as plane by plane."""
+    field = random_field()
+    volume = fixtures.aligned_voxels(field.wall_xyz, [0.4, 0.5, 0.6])
+    tilted = volume.copy()
+    tilted[2, ..., 2] += 0.1 * tilted[2, ..., 0]
+    with pytest.raises(DataError, match="plane 2 is not parallel"):
+        FFTImager().reconstruct(field, tilted)
+    irregular = volume.copy()
+    irregular[1, 3, 0, 0] += 0.01                     # plane 1 has its own (bad) grid
+    with pytest.raises(DataError, match="plane 1 is not a regular"):
+        FFTImager().reconstruct(field, irregular)
+
+
 @pytest.mark.parametrize("imager", [RSDImager(), FFTImager()])
 def test_bad_fields_and_voxels(imager):
     field = random_field()

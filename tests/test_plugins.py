@@ -253,9 +253,9 @@ def test_plugins_name_shows_kind_distribution_options_capabilities_plan_and_exam
     assert "status        ok" in out
     # the options: type, default, unit and the first sentence of the field's docstring
     assert " ".join(_row(out, "chunk_mb")) == (
-        "chunk_mb float 512.0 MiB Memory budget: the field's spectrum is cached when it "
-        "fits in half of this; each thread works on blocks of at most a few MiB of "
-        "frequency planes.")
+        "chunk_mb float 512.0 MiB Memory budget: the field's spectrum (on frequencies or "
+        "time slices) is cached when it fits in half of this; the threads' blocks of "
+        "kernels stay within the other half.")
     assert " ".join(_row(out, "time")) == (
         "time float 0.0 m Virtual time (a path length) of the coherent image; 0 images the "
         "pulse as it focuses.")

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
-from nlosfw.image.plane_convolution import LatticeAxis, PlaneConvolution
+from nlosfw.image.plane_convolution import LatticeAxis, PlaneConvolution, read_points
 
 #: Largest |offset| between the two lattices, relative to the lattice step, taken as 0.
 OFFSET_RTOL = 1e-9
@@ -91,8 +91,17 @@ def quarters(spectra: np.ndarray) -> np.ndarray:
     the quarter grid: image (a, b) holds, at quarter index (p, q), the value at full index
     (p if a == 0 else L_y - p, q if b == 0 else L_x - q); zeros where that index is not
     one of the image's own (a mirror image never repeats a full index)."""
-    rows = _split(spectra, spectra.ndim - 2)
-    return np.stack([np.stack(_split(part, part.ndim - 1)) for part in rows])
+    ly, lx = spectra.shape[-2:]
+    hy, hx = ly // 2 + 1, lx // 2 + 1
+    out = np.zeros((2, 2) + spectra.shape[:-2] + (hy, hx), dtype=spectra.dtype)
+    rows = (slice(0, hy), slice(ly - 1, ly // 2, -1))         # p, and L_y - p for p >= 1
+    cols = (slice(0, hx), slice(lx - 1, lx // 2, -1))
+    own_rows = (slice(0, hy), slice(1, hy - 1))
+    own_cols = (slice(0, hx), slice(1, hx - 1))
+    for a in range(2):
+        for b in range(2):
+            out[a, b, ..., own_rows[a], own_cols[b]] = spectra[..., rows[a], cols[b]]
+    return out
 
 
 def assemble(sums: np.ndarray) -> np.ndarray:
@@ -104,26 +113,27 @@ def assemble(sums: np.ndarray) -> np.ndarray:
 
 def read_outputs(conv: PlaneConvolution, product: np.ndarray) -> np.ndarray:
     """Inverse FFT of full products (batch, L_y, L_x), read at the output points (from
-    index 0: the kernel's offset 0 sits at index 0)."""
-    out = scipy.fft.ifft2(product, overwrite_x=True, workers=conv.workers)
-    return out[:, 0:conv.ay.n_out_lattice:conv.ay.stride_out,
-               0:conv.ax.n_out_lattice:conv.ax.stride_out]
+    index 0: the kernel's offset 0 sits at index 0; may overwrite ``product``)."""
+    return read_points(product, (slice(0, conv.ay.n_out_lattice, conv.ay.stride_out),
+                                 slice(0, conv.ax.n_out_lattice, conv.ax.stride_out)),
+                       conv.workers)
 
 
-def _split(a: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray]:
-    """(indices 0 ... L/2, and L - p at p = 1 ... L/2 - 1 with zeros at p = 0 and L/2)."""
-    length = a.shape[axis]
-    half = length // 2
-    direct = np.take(a, np.arange(half + 1), axis=axis)
-    mirrored = np.zeros_like(direct)
-    index = [slice(None)] * a.ndim
-    index[axis] = slice(1, half)
-    mirrored[tuple(index)] = np.take(a, length - np.arange(1, half), axis=axis)
-    return direct, mirrored
+def multiply(spectra: np.ndarray, quarter: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``out`` = full spectra (batch, L_y, L_x) times the even spectra whose quarter
+    (batch, hy, hx) is given (:func:`kernel_spectrum`): the quarter mirrored into ``out``,
+    then one product."""
+    ly, lx = spectra.shape[-2:]
+    hy, hx = ly // 2 + 1, lx // 2 + 1
+    out[..., :hy, :hx] = quarter
+    out[..., :hy, hx:] = quarter[..., hx - 2:0:-1]                  # columns L_x - q
+    out[..., hy:, :] = out[..., hy - 2:0:-1, :]                      # rows L_y - p
+    return np.multiply(out, spectra, out=out)
 
 
 def _join(direct: np.ndarray, mirrored: np.ndarray, axis: int) -> np.ndarray:
-    """Inverse of :func:`_split` along ``axis``."""
+    """The full axis (L) from its indices 0 ... L/2 (``direct``) and the mirror image
+    ``mirrored`` holding L - p at p = 1 ... L/2 - 1 (zeros at p = 0 and L/2)."""
     half = direct.shape[axis] - 1
     tail = np.take(mirrored, np.arange(half - 1, 0, -1), axis=axis)     # L/2 + 1 ... L - 1
     return np.concatenate([direct, tail], axis=axis)

@@ -19,10 +19,11 @@ voxels); the ``rsd_prior`` field model propagates voxel planes to the wall and b
 (input: voxels, output: wall). Grids may come in any orientation (x along either array
 axis, increasing or decreasing): :func:`grid_layout` finds the canonical order (x along
 axis 1, y along axis 0, both increasing) and :func:`to_canonical` /
-:func:`from_canonical` move arrays in and out of it. :func:`wall_layout` and
-:func:`plane_layout` are the imagers' checked versions (the ``fft`` imager and the
-classical ``lct``/``fk``/``fbp`` imagers of :mod:`nlosfw.image.transient`): a one-line
-DataError for a wall or voxel plane that is not such a grid.
+:func:`from_canonical` move arrays in and out of it. :func:`wall_layout`,
+:func:`plane_layout` and :func:`plane_layouts` (a volume's) are the imagers' checked
+versions (the ``fft`` imager and the classical ``lct``/``fk``/``fbp`` imagers of
+:mod:`nlosfw.image.transient`): a one-line DataError for a wall or voxel plane that is not
+such a grid.
 """
 
 from __future__ import annotations
@@ -133,18 +134,42 @@ def wall_layout(field: PhasorField) -> GridLayout:
 def plane_layout(plane: np.ndarray, index: int) -> tuple[GridLayout, float]:
     """(canonical layout, depth z) of voxel plane ``index`` (Y, X, 3); DataError unless it
     is a regular x-y grid parallel to the wall."""
-    z = plane[..., 2]
-    scale = max(1.0, float(np.abs(z).max()), float(np.ptp(plane[..., :2])))
+    z = _depth(plane[..., 2], float(np.ptp(plane[..., :2])), index)
+    return _grid(plane, index), z
+
+
+def plane_layouts(planes: np.ndarray) -> list[tuple[GridLayout, float]]:
+    """:func:`plane_layout` of every plane of ``planes`` (Z, Y, X, 3); when all of them
+    have the first one's x-y points (a volume of depth planes) its grid is checked once."""
+    if planes.shape[0] < 2 or not np.array_equal(planes[1:, ..., :2], np.broadcast_to(
+            planes[:1, ..., :2], planes[1:, ..., :2].shape)):
+        return [plane_layout(plane, i) for i, plane in enumerate(planes)]
+    first, z0 = plane_layout(planes[0], 0)
+    extent = float(np.ptp(planes[0, ..., :2]))
+    return [(first, z0)] + [(first, _depth(plane[..., 2], extent, i))
+                            for i, plane in enumerate(planes[1:], start=1)]
+
+
+def _depth(z: np.ndarray, extent: float, index: int) -> float:
+    """The depth of voxel plane ``index`` from its z (Y, X) and the extent of its x-y
+    points; DataError unless it is flat."""
+    scale = max(1.0, float(np.abs(z).max()), extent)
     if np.ptp(z) > FLATNESS_RTOL * scale:
         raise DataError(f"voxels: plane {index} is not parallel to the wall (z from "
                         f"{z.min():.6g} to {z.max():.6g} m); the imager needs planes of "
                         "constant z on a regular x-y grid; use the rsd imager for other voxels")
+    return float(z.mean())
+
+
+def _grid(plane: np.ndarray, index: int) -> GridLayout:
+    """The canonical layout of voxel plane ``index``'s x-y points; DataError unless they
+    form a regular axis-aligned grid."""
     layout = grid_layout(plane[..., :2])
     if layout is None:
         raise DataError(f"voxels: plane {index} is not a regular axis-aligned x-y grid; the "
                         "imager needs regularly spaced planes parallel to the wall; use the "
                         "rsd imager for other voxels")
-    return layout, float(z.mean())
+    return layout
 
 
 @dataclass(frozen=True)
@@ -256,6 +281,12 @@ class PlaneConvolution:
         dy, dx = self.ay.offsets(), self.ax.offsets()
         return np.sqrt(dy[:, None] ** 2 + dx[None, :] ** 2 + z * z)
 
+    def distance_bounds(self, z: float) -> tuple[float, float]:
+        """(smallest, largest) of :meth:`distances` ``(z)``."""
+        dy, dx = np.abs(self.ay.offsets()), np.abs(self.ax.offsets())
+        return (float(np.sqrt(dy.min() ** 2 + dx.min() ** 2 + z * z)),
+                float(np.sqrt(dy.max() ** 2 + dx.max() ** 2 + z * z)))
+
     def padded(self, batch: int, dtype: type) -> np.ndarray:
         """A zeroed padded array (batch, *shape)."""
         return np.zeros((batch,) + self.shape, dtype=dtype)
@@ -288,12 +319,19 @@ class PlaneConvolution:
         return scipy.fft.fft2(work, overwrite_x=True, workers=self.workers)
 
     def read_outputs(self, product: np.ndarray) -> np.ndarray:
-        """Inverse FFT of spectrum products (batch, *shape), read at the output points."""
-        out = scipy.fft.ifft2(product, overwrite_x=True, workers=self.workers)
-        return out[(slice(None),) + self.output_region]
+        """Inverse FFT of spectrum products (batch, *shape), read at the output points (may
+        overwrite ``product``)."""
+        return read_points(product, self.output_region, self.workers)
 
     def read_inputs(self, product: np.ndarray, workers: int | None = None) -> np.ndarray:
         """Inverse FFT of (conjugate-kernel) products, read at the input points (adjoint;
-        on ``workers`` threads, None: the layout's)."""
-        out = scipy.fft.ifft2(product, overwrite_x=True, workers=workers or self.workers)
-        return out[(slice(None),) + self.input_region]
+        on ``workers`` threads, None: the layout's; may overwrite ``product``)."""
+        return read_points(product, self.input_region, workers or self.workers)
+
+
+def read_points(spectra: np.ndarray, region: tuple[slice, slice], workers: int) -> np.ndarray:
+    """The inverse 2-D FFT of ``spectra`` (batch, L_y, L_x) at the points ``region`` (rows,
+    columns) only: along y, then along x on the rows read alone (may overwrite
+    ``spectra``)."""
+    rows = scipy.fft.ifft(spectra, axis=-2, overwrite_x=True, workers=workers)[..., region[0], :]
+    return scipy.fft.ifft(rows, axis=-1, overwrite_x=True, workers=workers)[..., region[1]]
