@@ -144,10 +144,14 @@ def plane_layouts(planes: np.ndarray) -> list[tuple[GridLayout, float]]:
     if planes.shape[0] < 2 or not np.array_equal(planes[1:, ..., :2], np.broadcast_to(
             planes[:1, ..., :2], planes[1:, ..., :2].shape)):
         return [plane_layout(plane, i) for i, plane in enumerate(planes)]
-    first, z0 = plane_layout(planes[0], 0)
+    first, _ = plane_layout(planes[0], 0)
     extent = float(np.ptp(planes[0, ..., :2]))
-    return [(first, z0)] + [(first, _depth(plane[..., 2], extent, i))
-                            for i, plane in enumerate(planes[1:], start=1)]
+    z = planes[..., 2]
+    low, high = z.min(axis=(1, 2)), z.max(axis=(1, 2))
+    scale = np.maximum(np.maximum(np.abs(low), np.abs(high)), max(1.0, extent))
+    for i in np.flatnonzero(high - low > FLATNESS_RTOL * scale):
+        _depth(z[i], extent, int(i))                                # the error of plane i
+    return [(first, float(depth)) for depth in z.mean(axis=(1, 2))]
 
 
 def _depth(z: np.ndarray, extent: float, index: int) -> float:
