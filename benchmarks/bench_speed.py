@@ -1,17 +1,18 @@
-"""Speed of the volume imagers against the work they cannot avoid (issue 11).
+"""Speed of the volume imagers against a per-plane baseline, and at real size.
 
 Every ratio is against a baseline measured in the same process, on the same field:
 
-* ``confocal``: the ``fft`` imager on a confocal field against the plain numpy minimum
-  (one forward FFT per frequency; per plane, every frequency's spectrum times a
-  depth-step propagator, a sum over frequencies in the Fourier domain and one inverse
-  FFT), 64 x 64 (151 frequencies, 96 planes, 128 x 128 padded) and 128 x 128
-  (128 planes, 256 x 256 padded);
+* ``confocal``: the ``fft`` imager on a confocal field against a per-plane baseline,
+  ``plain_minimum`` (one forward FFT per frequency; per plane, every frequency's spectrum
+  times a depth-step propagator, a sum over frequencies with coefficients by ``einsum``,
+  one inverse FFT and abs()^2: several times the minimal work, which
+  ``bench_fft_minimum.py`` times instead), 64 x 64 (151 frequencies, 96 planes,
+  128 x 128 padded) and 128 x 128 (128 planes, 256 x 256 padded);
 * ``off the wall grid``: the confocal case with the voxel planes moved half a wall
   spacing (the general path; on the wall's own grid the kernel is even and its spectrum
   a quarter-size DCT);
-* ``single_spot``: the same against its minimum (the laser leg differs per voxel and
-  frequency: one inverse FFT per frequency and plane);
+* ``single_spot``: the same against its per-plane baseline (the laser leg differs per
+  voxel and frequency: one inverse FFT per frequency and plane);
 * ``real size``: a 64 x 64 x 2048 confocal capture (0.7 m scan, 4 ps bins from 0.2 m
   of path, a letter 0.9 m away), automatic band and depths: the transform plus ``fft``
   imaging, and the ``lct``, ``fk`` and ``fbp`` imagers on the same field and voxels.
@@ -64,9 +65,10 @@ def point_field(n: int, confocal: bool) -> PhasorField:
 
 
 def plain_minimum(field: PhasorField, depths: np.ndarray, confocal: bool) -> np.ndarray:
-    """The unavoidable work written plainly: forward FFTs once, a depth-step propagator per
-    plane; confocal sums frequencies before one inverse FFT, single-spot needs one inverse
-    FFT per frequency and plane (times the per-voxel laser phase)."""
+    """A per-plane baseline written plainly: forward FFTs once, a depth-step propagator per
+    plane; confocal sums frequencies with coefficients (``einsum``) before one inverse FFT
+    per plane, single-spot needs one inverse FFT per frequency and plane (times a stand-in
+    for the per-voxel laser phase). Not the minimal work: see ``bench_fft_minimum.py``."""
     n_f, ny, nx = field.values.shape
     shape = (scipy.fft.next_fast_len(2 * ny - 1), scipy.fft.next_fast_len(2 * nx - 1))
     dy, dx = field.grid_spacing() or (1.0, 1.0)
@@ -184,9 +186,9 @@ def report(results: dict[str, Any]) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"fft imager vs the plain minimum (min of {results['repeat']} runs, "
-                        f"{results['machine']['cpus']} cores)")
-    for col in ("case", "imager s", "plain minimum s", "ratio", "target", "1 thread s",
+    table = Table(title=f"fft imager vs the per-plane baseline plain_minimum (min of "
+                        f"{results['repeat']} runs, {results['machine']['cpus']} cores)")
+    for col in ("case", "imager s", "plain_minimum s", "ratio", "target", "1 thread s",
                 "ratio", "error"):
         table.add_column(col, justify="left" if col == "case" else "right")
     for name, row in results["imagers"].items():
