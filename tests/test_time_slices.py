@@ -9,6 +9,8 @@ peak, double precision (every frequency's kernel, the exact path) at 1e-10.
 
 from __future__ import annotations
 
+import tracemalloc
+
 import numpy as np
 import pytest
 import scipy.fft
@@ -104,7 +106,7 @@ def test_slices_sum_is_the_frequencies_sum(n_f):
     expected = np.sum(spectra * scipy.fft.dctn(kernels, type=1, axes=(1, 2)), axis=0)
     grid = time_slices.time_slices(freqs, 2, float(r.min()), float(r.max()))
     assert grid is not None
-    rows = time_slices.time_spectra(grid, spectra, axis=0)
+    rows = time_slices.time_spectra(grid, lambda sel: spectra[sel], axis=0, block=7)
     first, last = grid.span(float(r.min()), float(r.max()))
     work = np.zeros((last - first + 1, n + 1, n + 1), dtype=complex)
     got = np.zeros((n + 1, n + 1), dtype=complex)
@@ -237,3 +239,21 @@ def test_fast_path_on_the_real_captures_is_the_exact_paths_image(name, slice_blo
     exact = FFTImager({"precision": "double"}).reconstruct(field, voxels).intensity
     assert np.corrcoef(fast.ravel(), exact.ravel())[0, 1] >= 0.999
     assert np.max(np.abs(fast - exact)) <= 1e-4 * exact.max()
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_fast_path_stays_within_its_memory_budget(workers, slice_blocks):
+    """chunk_mb = 5 MiB holds the slices' spectra (2.2 MiB with a block of frequencies'
+    while they are computed): the fast path runs, and the imaging's peak of allocated
+    memory stays within the budget (measured: 2.7 MiB)."""
+    field, voxels = point_volume()
+    imager = FFTImager({"chunk_mb": 5.0, "workers": workers})
+    imager.reconstruct(field, voxels)                        # imports, plans, caches
+    tracemalloc.start()
+    try:
+        imager.reconstruct(field, voxels)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert slice_blocks
+    assert peak <= 5 * 2**20, f"peak {peak / 2**20:.2f} MiB"

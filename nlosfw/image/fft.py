@@ -36,7 +36,7 @@ sum to rounding.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -220,10 +220,9 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
         counts = [last - first + 1 for first, last in (grid.span(*b) for b in bounds)]
         if np.mean(counts) > _SLICES_PER_FREQUENCY * freqs.size:
             return None
-        # the slices' spectra, and while they are computed the frequencies' (twice)
-        values = sum(grid.n * _spectrum_size(layout) for layout in _distinct(layouts))
-        values += 2 * freqs.size * max(layout.conv.shape[0] * layout.conv.shape[1]
-                                       for layout in layouts)
+        # the slices' spectra, and while they are computed a block of the frequencies'
+        values = sum((grid.n + 2 * _SPECTRUM_BLOCK) * _spectrum_size(layout)
+                     for layout in _distinct(layouts))
         if 8 * values > self.config.chunk_mb * 2**20 / 2:
             return None
         return grid
@@ -242,8 +241,8 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
             spectrum = None
             if slices is not None:
                 spectrum = time_slices.time_spectra(
-                    slices, _spectrum(values, layout, weights, workers),
-                    axis=2 if layout.folded else 0, workers=workers)
+                    slices, _block_spectra(values, layout, weights, workers),
+                    axis=2 if layout.folded else 0, block=_SPECTRUM_BLOCK, workers=workers)
             elif nbytes <= budget:
                 spectrum = _spectrum(values, layout, weights, workers)
                 budget -= nbytes
@@ -397,6 +396,16 @@ def _spectrum(values: np.ndarray, layout: _Plane, weights: np.ndarray | None,
     return even_kernel.quarters(spectrum) if layout.folded else spectrum
 
 
+def _block_spectra(values: np.ndarray, layout: _Plane, weights: np.ndarray | None,
+                   workers: int) -> Callable[[slice], np.ndarray]:
+    """:func:`_spectrum` of the frequencies ``sel``, as a function of ``sel``."""
+    def spectra(sel: slice) -> np.ndarray:
+        return _spectrum(values[sel], layout, None if weights is None else weights[sel],
+                         workers)
+
+    return spectra
+
+
 def _plane(wall: GridLayout, plane: np.ndarray, located: tuple[GridLayout, float],
            index: int, workers: int, fold: bool) -> _Plane:
     """The layout of voxel plane ``index`` (its grid and depth ``located``:
@@ -425,6 +434,8 @@ def _same_blocks(first: Iterator[slice], second: Iterator[slice]) -> Iterator[sl
 _BLOCK_BYTES = 2**19
 #: Time slices are used when the planes have on average at most this many per frequency.
 _SLICES_PER_FREQUENCY = 0.75
+#: Frequencies whose spectra are computed at once for the time slices' spectra.
+_SPECTRUM_BLOCK = 16
 
 
 def _axis(n_wall: int, wall_step: float, n_vox: int, vox_step: float, offset: float,

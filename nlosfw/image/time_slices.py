@@ -27,7 +27,7 @@ frequencies. Every frequency's phasor is interpolated to 1.4e-7, complex64's rou
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -172,23 +172,25 @@ def time_slices(frequencies: np.ndarray, multiplier: int, r_min: float,
     return TimeSlices(f, multiplier, n, first)
 
 
-def time_spectra(grid: TimeSlices, spectra: np.ndarray, axis: int,
-                 workers: int | None = None) -> np.ndarray:
-    """V: rows (N along ``axis``) of the spectra (F along ``axis``), each S_j times
-    :meth:`TimeSlices.weights` (see the module docstring); the spectra's dtype."""
-    factor = grid.weights().astype(spectra.dtype).reshape(
-        [-1 if i == axis else 1 for i in range(spectra.ndim)])
-    shape = list(spectra.shape)
-    shape[axis] = grid.n
-    out = np.zeros(shape, dtype=spectra.dtype)
-    c = grid.centre                       # j' >= 0 at rows 0 ..., j' < 0 at rows N - c ...
-
-    def part(a: np.ndarray, start: int, stop: int) -> np.ndarray:
-        index = [slice(None)] * a.ndim
-        index[axis] = slice(start, stop)
-        return a[tuple(index)]
-
-    f = spectra.shape[axis]
-    np.multiply(part(spectra, c, f), part(factor, c, f), out=part(out, 0, f - c))
-    np.multiply(part(spectra, 0, c), part(factor, 0, c), out=part(out, grid.n - c, grid.n))
+def time_spectra(grid: TimeSlices, spectra: Callable[[slice], np.ndarray], axis: int,
+                 block: int = 16, workers: int | None = None) -> np.ndarray:
+    """V: the rows (N along ``axis``) of spectra S_j given ``block`` frequencies at a time
+    (``spectra(frequencies)``: F_block along ``axis``), each times
+    :meth:`TimeSlices.weights` (see the module docstring); their dtype. Holds V and one
+    block of S_j at a time."""
+    factor = grid.weights()
+    out: np.ndarray | None = None
+    for start in range(0, grid.frequencies.size, block):
+        sel = slice(start, min(grid.frequencies.size, start + block))
+        part = spectra(sel)
+        if out is None:
+            shape = list(part.shape)
+            shape[axis] = grid.n
+            out = np.zeros(shape, dtype=part.dtype)
+        index: list[slice | np.ndarray] = [slice(None)] * part.ndim
+        index[axis] = grid.offsets[sel] % grid.n
+        out[tuple(index)] = part * factor[sel].astype(part.dtype).reshape(
+            [-1 if i == axis else 1 for i in range(part.ndim)])
+    if out is None:
+        raise ValueError("time_spectra: no frequencies")
     return scipy.fft.ifft(out, axis=axis, norm="forward", overwrite_x=True, workers=workers)
