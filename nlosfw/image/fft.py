@@ -259,13 +259,14 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
     def _rows_per_block(self, volume: _Volume, layout: _Plane) -> int:
         """Kernels transformed at once: :meth:`_block_size` frequencies, or all of the
         plane's time slices (one scatter of the kernel's samples) within the threads' share
-        of the half of ``chunk_mb`` the spectra leave: per slice, its kernel and the four
-        products on the quarter grid, or its kernel and product on the full grid."""
+        of the half of ``chunk_mb`` the spectra leave: per slice, its kernel and its DCT's
+        real and imaginary parts on the quarter grid, or its kernel (transformed in place)
+        and product on the full grid."""
         if volume.slices is None:
             return self._block_size(layout.conv, volume.cdtype)
         first, last = volume.slices.span(*layout.conv.distance_bounds(layout.z))
         ly, lx = layout.conv.shape
-        values = 5 * (ly // 2 + 1) * (lx // 2 + 1) if layout.even else 2 * ly * lx
+        values = 3 * (ly // 2 + 1) * (lx // 2 + 1) if layout.even else 2 * ly * lx
         share = self.config.chunk_mb * 2**20 / (2 * volume.threads)
         return max(1, min(last - first + 1,
                           int(share // (values * np.dtype(volume.cdtype).itemsize))))
@@ -338,7 +339,8 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
         kernels = work[(slice(None),) + even_kernel.kernel_region(conv)]
         spectrum = volume.spectra[layout.spectrum_key]
         sums = np.zeros((2, 2, coeffs.shape[0]) + quarter, dtype=cdtype)
-        products = np.empty((2, 2, work.shape[0]) + quarter, dtype=cdtype)
+        step = min(work.shape[0], _PRODUCT_ROWS)          # products in cache-sized parts
+        products = np.empty((2, 2, step) + quarter, dtype=cdtype)
         rows: np.ndarray = coeffs.astype(cdtype)
         for sel in _kernel_blocks(volume, layout, kernels):
             k = _count(sel)
@@ -346,11 +348,14 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
             images = (spectrum[:, :, sel] if spectrum is not None
                       else _spectrum(volume.values[sel], layout,
                                      coeffs[0, sel] if volume.weighted else None))
-            product = np.multiply(images, block, out=products[:, :, :k])  # (2, 2, k, hy, hx)
-            if volume.weighted:
-                sums[:, :, 0] += product.sum(axis=2)
-            else:
-                sums += np.einsum("tf,abfyx->abtyx", rows[:, sel], product)
+            for a in range(0, k, step):
+                b = min(k, a + step)
+                product = np.multiply(images[:, :, a:b], block[a:b],
+                                      out=products[:, :, :b - a])  # (2, 2, b - a, hy, hx)
+                if volume.weighted:
+                    sums[:, :, 0] += product.sum(axis=2)
+                else:
+                    sums += np.einsum("tf,abfyx->abtyx", rows[:, sel][:, a:b], product)
             even_kernel.clear_padding(conv, work)
         acc = FrequencySum(coeffs, self.config.combine, (conv.ay.n_out, conv.ax.n_out))
         acc.add_amplitude(even_kernel.read_outputs(conv, even_kernel.assemble(sums)))
@@ -434,6 +439,8 @@ def _same_blocks(first: Iterator[slice], second: Iterator[slice]) -> Iterator[sl
 _BLOCK_BYTES = 2**19
 #: Time slices are used when the planes have on average at most this many per frequency.
 _SLICES_PER_FREQUENCY = 0.75
+#: Kernels multiplied with the spectrum's four mirror images at once (a few hundred KiB).
+_PRODUCT_ROWS = 8
 #: Frequencies whose spectra are computed at once for the time slices' spectra.
 _SPECTRUM_BLOCK = 16
 
