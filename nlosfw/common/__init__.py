@@ -11,6 +11,8 @@ from nlosfw.common.config import (
     config_to_dict,
     require,
     require_finite,
+    require_seed,
+    require_threads,
 )
 from nlosfw.common.cores import available_cores
 from nlosfw.common.errors import (
@@ -44,6 +46,8 @@ __all__ = [
     "ProgressCallback",
     "require",
     "require_finite",
+    "require_seed",
+    "require_threads",
     "USER_ERROR_EXIT_STATUS",
     "write_text",
 ]

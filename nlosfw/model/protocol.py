@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.common.config import Choice
+from nlosfw.common.config import MAX_SEED, Choice, is_seed
 from nlosfw.common.errors import DataError
 from nlosfw.transform.field import PhasorField
 
@@ -71,6 +71,9 @@ class SpatialSampling:
         if self.fraction is not None and not 0 < self.fraction <= 1:
             raise DataError(f"spatial sampling: fraction must be in (0, 1], got "
                             f"{self.fraction}")
+        if not is_seed(self.seed):
+            raise DataError(f"spatial sampling: seed must be an integer from 0 to {MAX_SEED}, "
+                            f"got {self.seed!r}")
 
     @property
     def kept_fraction(self) -> float:

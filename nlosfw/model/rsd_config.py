@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from nlosfw.common.config import require
+from nlosfw.common.config import require, require_threads
 from nlosfw.image.fft import Precision
 from nlosfw.model.interface import FieldModelConfig
 from nlosfw.model.rsd_background import Background
@@ -141,8 +141,7 @@ class RSDPriorConfig(FieldModelConfig):
                 f"must be >= 1, got {self.power_iterations}")
         require(0 < self.step <= 1, "step", f"must be in (0, 1], got {self.step}")
         require(0 <= self.tolerance < 1, "tolerance", f"must be in [0, 1), got {self.tolerance}")
-        require(self.workers == -1 or self.workers >= 1, "workers",
-                f"must be -1 (all cores) or >= 1, got {self.workers}")
+        require_threads(self.workers, "workers", -1, "all cores")
         require(self.cache_mb >= 0, "cache_mb", f"must be >= 0 MiB, got {self.cache_mb}")
         require(isinstance(self.time_offset, bool), "time_offset",
                 f"must be true or false, got {self.time_offset!r}")

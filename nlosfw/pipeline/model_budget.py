@@ -7,7 +7,8 @@ and a batch's activations, gradients and Adam state. The backend of a model is r
 what its plugin declares it needs (``requires``: ``torch``, ``jax``), so nothing is imported
 to estimate it. For a model whose backend is B, with N = F·S·L training samples (F
 frequencies, S sensor points, L laser points), a batch of b samples and hidden layers of
-widths w₁ … wₖ (``hidden``, or ``network_hidden`` for a residual network):
+widths w₁ … wₖ (``hidden``, or ``network_hidden`` for a residual network; a Fourier-feature
+encoding's 2·``features`` outputs count as one more):
 
 ===================  =======================================================================
 the runtime          IMPORT[B] when B is not imported yet (once it is, the program's
@@ -115,6 +116,7 @@ def training_bytes(options: Mapping[str, object], backend: str, samples: float
     figures = BACKENDS[backend]
     hidden = options.get("hidden", options.get("network_hidden")) or ()
     widths = sum(_int(w, 0) for w in hidden) if isinstance(hidden, Iterable) else 0
+    widths += 2 * max(0, _int(options.get("features"), 0))
     batch = _int(options.get("batch_size", options.get("network_batch_size")), 0)
     batch = min(batch, int(samples)) if batch > 0 else int(samples)
     return figures.per_sample * samples, figures.per_activation * batch * widths
