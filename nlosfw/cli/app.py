@@ -126,8 +126,8 @@ class PreflightCallback(Callback):
     every configuration a command will run before Hydra writes anything.
 
     A mistake is reported in one line and ends the command with ``SystemExit`` (exit
-    status 2): Hydra turns a callback's exceptions into warnings and goes on, but lets
-    ``SystemExit`` through.
+    status 2), and so does a check that fails for any other reason: Hydra turns a
+    callback's exceptions into warnings and goes on, but lets ``SystemExit`` through.
     """
 
     def on_run_start(self, config: DictConfig, **kwargs: object) -> None:
@@ -138,22 +138,33 @@ class PreflightCallback(Callback):
 
 
 def _check(config: DictConfig, multirun: bool) -> None:
+    """Every check of :func:`~nlosfw.compose.preflight`; any failure ends the command with
+    one line and ``SystemExit`` (Hydra would turn an exception into a warning and start the
+    run): a mistake with its exit status, a check that could not decide (an exception that
+    is not an NlosfwError: a bug, in nlosfw or a plugin) with 2, nothing written."""
     from omegaconf import OmegaConf
 
     from nlosfw.plugins import load_plugins
 
-    given = config.hydra.overrides
-    hydra = [str(o) for o in OmegaConf.to_container(given.hydra, resolve=False) or []]
-    task = [str(o) for o in OmegaConf.to_container(given.task, resolve=False) or []]
-    # the user's hydra.* overrides (hydra.run.dir, ...) and the task's, as on the command
-    # line; hydra.mode is Hydra's own record of -m
-    overrides = [o for o in hydra if not o.startswith("hydra.mode=")] + task
-    config_name = str(config.hydra.job.config_name or "config")
     try:
+        given = config.hydra.overrides
+        hydra = [str(o) for o in OmegaConf.to_container(given.hydra, resolve=False) or []]
+        task = [str(o) for o in OmegaConf.to_container(given.task, resolve=False) or []]
+        # the user's hydra.* overrides (hydra.run.dir, ...) and the task's, as on the command
+        # line; hydra.mode is Hydra's own record of -m
+        overrides = [o for o in hydra if not o.startswith("hydra.mode=")] + task
+        config_name = str(config.hydra.job.config_name or "config")
         preflight(overrides, load_plugins(), config_name, multirun)
     except NlosfwError as err:
         report_user_error(err)
         raise SystemExit(err.exit_status) from None
+    except Exception as err:  # Hydra would warn and start the run: stop here instead
+        failure = NlosfwError(f"the checks before the run failed: {type(err).__name__}: "
+                              f"{one_line(err, whole=True)} (a bug in nlosfw or a plugin; "
+                              "nothing was written; the traceback with --debug)")
+        failure.__traceback__ = err.__traceback__
+        report_user_error(failure)
+        raise SystemExit(failure.exit_status) from None
 
 
 def _task(cfg: DictConfig) -> float | None:
