@@ -164,17 +164,6 @@ def prepare(capture: Capture, options: Preprocessing, from_format: frozenset[str
     return Prepared(result, steps, material)
 
 
-def check_files(options: Preprocessing, formats: FormatCatalogue) -> None:
-    """The files the options name exist and are readable (a simulated run's preflight:
-    their shapes are checked against the capture once it is simulated)."""
-    if options.tofgrid:
-        from nlosfw.capture.fk import read_tofgrid
-
-        read_tofgrid(_existing(options.tofgrid, "tofgrid"))
-    if options.background:
-        read_capture_file(_existing(options.background, "background"), None, formats)
-
-
 def _existing(value: str, option: str) -> Path:
     return regular_file(value, f"capture.{option}")
 
