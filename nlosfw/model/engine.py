@@ -117,6 +117,13 @@ class Engine(ABC, Generic[NetT, ArrT, LossT, SnapT]):
         self.place(template, self._checked(state, own))
         self._check_outputs()
 
+    @classmethod
+    def check_device(cls, name: str) -> None:
+        """A one-line ConfigError for ``model.device`` when this backend cannot use device
+        ``name`` on this machine; called before a run, so it must not start training or
+        hold the device (a sweep's workers need it). Default: every name is accepted here
+        (the engine refuses it when it starts)."""
+
     # ------------------------------------------------------------------ backend: building
     @abstractmethod
     def make_network(self, index: int) -> NetT:

@@ -12,9 +12,9 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any, TypedDict
+from typing import Any, TypedDict, TypeVar
 
-from nlosfw.common.config import Choice, require
+from nlosfw.common.config import Choice, config_from_mapping, require, require_threads
 from nlosfw.common.errors import ConfigError
 from nlosfw.model.interface import FieldModelConfig
 from nlosfw.transform.field import PhasorField
@@ -47,6 +47,11 @@ def set_choice(config: Any, option: str, choices: type[Enum]) -> None:
         valid = ", ".join(m.value for m in choices)
         raise ConfigError(option, f"must be one of {valid}, got {value!r}") from None
     object.__setattr__(config, option, member)
+
+
+#: The most wall points of the smoothness penalty per step (a thousand times the default;
+#: each is evaluated at every frequency of its difference stencil every step).
+MAX_SMOOTHNESS_POINTS = 65536
 
 
 @dataclass(frozen=True)
@@ -124,12 +129,31 @@ class NeuralFieldConfig(FieldModelConfig):
                 f"must be in (0, 1) so data stay in the open interval (-1, 1), got {self.margin}")
         require(self.divergence_factor > 1, "divergence_factor",
                 f"must be > 1, got {self.divergence_factor}")
-        require(self.threads >= 0, "threads", f"must be >= 0, got {self.threads}")
+        require_threads(self.threads, "threads", 0, "the backend's default")
         require(self.frequency_smoothness >= 0 and math.isfinite(self.frequency_smoothness),
                 "frequency_smoothness", f"must be >= 0 (0: off), got "
                 f"{self.frequency_smoothness}")
-        require(self.smoothness_points >= 1, "smoothness_points",
-                f"must be >= 1, got {self.smoothness_points}")
+        require(1 <= self.smoothness_points <= MAX_SMOOTHNESS_POINTS, "smoothness_points",
+                f"must be 1 to {MAX_SMOOTHNESS_POINTS}, got {self.smoothness_points}")
+
+
+C = TypeVar("C")
+
+
+def wrapped_network_config(config_class: type[C], options: Mapping[str, object],
+                           names: Mapping[str, str], others: str = "") -> C:
+    """The config of a network another model wraps (a residual, a volume's albedo), built
+    from ``options``; an error names the option as the user spells it: ``model.<name>``
+    for the network options ``names`` maps to the wrapping model's own, else
+    ``model.<others>.<option>`` (``others``: where the wrapping model takes the network's
+    own options)."""
+    try:
+        return config_from_mapping(config_class, options)
+    except ConfigError as err:
+        head, dot, rest = err.option.partition(".")
+        name = names.get(head) or ".".join(p for p in (others, head) if p)
+        raise ConfigError(".".join(p for p in ("model", name) if p) + dot + rest,
+                          err.problem) from None
 
 
 class FieldShapeDict(TypedDict):

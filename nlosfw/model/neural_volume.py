@@ -58,7 +58,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from nlosfw.common.config import config_from_mapping, require
+from nlosfw.common.config import require, require_threads
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.files import format_bytes
 from nlosfw.common.memory import available_memory
@@ -73,7 +73,12 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
+from nlosfw.model.neural_config import (
+    FieldMode,
+    FieldShape,
+    NeuralFieldConfig,
+    wrapped_network_config,
+)
 from nlosfw.model.rsd_depths import fitted_frequencies
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
 from nlosfw.model.rsd_sampling import training_values
@@ -89,9 +94,12 @@ from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
-#: The network options the neural volume sets from its own.
-_VOLUME_SETS = frozenset({"seed", "device", "hidden", "steps", "lr", "threads",
-                          "validation_fraction"})
+#: The network options the neural volume sets from its own: by the network's name, the
+#: name of this model's option.
+_VOLUME_NAMES = {"seed": "seed", "device": "device", "hidden": "network_hidden",
+                 "steps": "steps", "lr": "lr", "threads": "threads",
+                 "validation_fraction": "validation_fraction"}
+_VOLUME_SETS = frozenset(_VOLUME_NAMES)
 #: Inputs of the network are scaled into [-MARGIN, MARGIN] per axis.
 MARGIN = 0.9
 
@@ -171,14 +179,15 @@ class NeuralVolumeConfig(FieldModelConfig):
                 "network_hidden", f"must be one or more widths >= 1, got "
                 f"{list(self.network_hidden)}")
         require(self.steps >= 1, "steps", f"must be >= 1, got {self.steps}")
-        require(self.lr > 0, "lr", f"must be > 0, got {self.lr}")
+        require(self.lr > 0 and np.isfinite(self.lr), "lr",
+                f"must be > 0 and finite, got {self.lr}")
         require(0 < self.lr_final <= 1, "lr_final", f"must be in (0, 1], got {self.lr_final}")
         require(0 <= self.validation_fraction < 0.5, "validation_fraction",
                 f"must be in [0, 0.5), got {self.validation_fraction}")
         require(self.patience >= 0, "patience", f"must be >= 0, got {self.patience}")
         require(0 < self.albedo_start < 1, "albedo_start",
                 f"must be in (0, 1), got {self.albedo_start}")
-        require(self.threads >= 0, "threads", f"must be >= 0, got {self.threads}")
+        require_threads(self.threads, "threads", 0, "torch's default")
         self.prior_config()                 # the lattice options, checked by rsd_prior
 
     def prior_config(self) -> RSDPriorConfig:
@@ -360,20 +369,23 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
 
     @classmethod
     def check_config(cls, config: NeuralVolumeConfig) -> None:
-        """The network must be registered for this backend and take ``network_options``."""
-        cls.network_config(cls.network_class(config.network), config)
+        """The network must be registered for this backend, take ``network_options`` and
+        the device."""
+        network = cls.network_class(config.network)
+        network.check_config(cls.network_config(network, config))
 
     @staticmethod
     def network_config(network: type[NeuralFieldModel], config: NeuralVolumeConfig
                        ) -> NeuralFieldConfig:
         """The albedo network's config: ``config``'s widths, seed, device, steps, learning
-        rate and threads, and its ``network_options`` (errors name them)."""
+        rate and threads, and its ``network_options`` (errors name them as the user does:
+        ``model.lr``, ``model.network_options.levels``)."""
         options = {"seed": config.seed, "device": config.device,
                    "hidden": list(config.network_hidden), "steps": config.steps,
                    "lr": config.lr, "threads": config.threads, "validation_fraction": 0.0,
                    **config.network_options}
-        built: NeuralFieldConfig = config_from_mapping(network.config_class, options,
-                                                       "model.network_options")
+        built: NeuralFieldConfig = wrapped_network_config(
+            network.config_class, options, _VOLUME_NAMES, "network_options")
         return built
 
     # ------------------------------------------------------------------ predict

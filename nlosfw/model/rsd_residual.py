@@ -38,7 +38,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from nlosfw.common.config import require
+from nlosfw.common.config import require, require_threads
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.model.interface import (
     FieldModel,
@@ -48,6 +48,7 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.neural_config import NeuralFieldConfig, wrapped_network_config
 from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
 from nlosfw.model.trainer import NeuralFieldModel
 from nlosfw.transform.field import PhasorField
@@ -99,15 +100,15 @@ class RSDResidualConfig(RSDPriorConfig):
                 f"{list(self.network_hidden)}")
         require(self.network_steps >= 1, "network_steps",
                 f"must be >= 1, got {self.network_steps}")
-        require(self.network_lr > 0, "network_lr", f"must be > 0, got {self.network_lr}")
+        require(self.network_lr > 0 and np.isfinite(self.network_lr), "network_lr",
+                f"must be > 0 and finite, got {self.network_lr}")
         require(self.network_batch_size >= 0, "network_batch_size",
                 f"must be >= 0 (0: full batch), got {self.network_batch_size}")
         require(0 <= self.network_validation_fraction < 1, "network_validation_fraction",
                 f"must be in [0, 1), got {self.network_validation_fraction}")
         require(self.network_patience >= 0, "network_patience",
                 f"must be >= 0, got {self.network_patience}")
-        require(self.network_threads >= 0, "network_threads",
-                f"must be >= 0, got {self.network_threads}")
+        require_threads(self.network_threads, "network_threads", 0, "the backend's default")
 
     def prior_config(self) -> RSDPriorConfig:
         """The physics stage's options (this config's rsd_prior fields)."""
@@ -122,6 +123,20 @@ class RSDResidualConfig(RSDPriorConfig):
                 "validation_fraction": 0.0, "patience": self.network_patience,
                 "eval_every": max(1, min(50, self.network_steps // 10)),
                 "threads": self.network_threads}
+
+
+#: The residual network's options this model sets from its own, by the network's name.
+_NETWORK_NAMES = {"hidden": "network_hidden", "steps": "network_steps", "lr": "network_lr",
+                  "batch_size": "network_batch_size", "patience": "network_patience",
+                  "threads": "network_threads", "seed": "seed", "device": "device"}
+
+
+def _network_config(network: type[NeuralFieldModel], config: RSDResidualConfig
+                    ) -> NeuralFieldConfig:
+    """The residual network's config (errors name this model's options)."""
+    built: NeuralFieldConfig = wrapped_network_config(
+        network.config_class, config.network_options(), _NETWORK_NAMES)
+    return built
 
 
 class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
@@ -152,12 +167,16 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
 
     @classmethod
     def check_config(cls, config: RSDResidualConfig) -> None:
-        """The network must be registered for this backend (``model.network``)."""
-        cls.network_class(config.network)
+        """The network must be registered for this backend (``model.network``), take this
+        model's network options and the device (errors name ``model.network_lr``, ...)."""
+        network = cls.network_class(config.network)
+        network.check_config(_network_config(network, config))
 
     def _network_model(self) -> NeuralFieldModel:
-        cls = self.network_class(self.config.network)
-        return cls(self.config.network_options())
+        network = self.network_class(self.config.network)
+        model = network(_network_config(network, self.config))
+        model.lr_option = f"model.{_NETWORK_NAMES['lr']}"
+        return model
 
     # ------------------------------------------------------------------ fit
     def fit(self, field: PhasorField, validation: PhasorField | None = None,

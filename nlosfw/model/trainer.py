@@ -119,12 +119,20 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
         self._engine: Engine | None = None
         self._train_frequencies: np.ndarray | None = None
         self.report: FitReport | None = None
+        self.lr_option = "model.lr"
+        """The option that sets ``lr`` as the user names it (in errors); a model wrapping
+        this network names its own (``model.network_lr``)."""
 
     # ------------------------------------------------------------------ naming
     @classmethod
     def model_name(cls) -> str:
         """The registered name, e.g. ``siren_torch`` (also the tag in saved files)."""
         return f"{cls.family}_{cls.backend}"
+
+    @classmethod
+    def check_config(cls, config: NeuralFieldConfig) -> None:
+        """Before a run: the engine can use ``config.device`` on this machine."""
+        cls.engine_class.check_device(config.device)
 
     @classmethod
     def presets(cls) -> dict[str, Preset]:
@@ -311,7 +319,7 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
         limit = self.config.divergence_factor * first_loss
         if not math.isfinite(loss) or loss > limit:
             raise FitError(f"{self.model_name()}: training diverged at step {step} (loss "
-                           f"{loss:.3g}, first loss {first_loss:.3g}); lower model.lr "
+                           f"{loss:.3g}, first loss {first_loss:.3g}); lower {self.lr_option} "
                            f"(now {self.config.lr:g})")
 
     # ------------------------------------------------------------------ prediction

@@ -29,6 +29,7 @@ import optax
 
 from nlosfw.common import ConfigError, FitError, one_line
 from nlosfw.model import Engine, NetworkBuild, SmoothnessBatch
+from nlosfw_jax.devices import check_device
 
 #: Adam exactly as torch.optim.Adam with its defaults (eps outside the square root).
 _ADAM = optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8)
@@ -141,6 +142,10 @@ def _forward(params: Any, rest: Any, x: jax.Array, single: bool) -> jax.Array:
 
 class JaxEngine(Engine):
     """An equinox module's arrays and optax Adam's state on one device (float32)."""
+
+    @classmethod
+    def check_device(cls, name: str) -> None:
+        check_device(name)
 
     def __init__(self, build: NetworkBuild, state: Mapping[str, np.ndarray] | None = None
                  ) -> None:

@@ -44,8 +44,37 @@ def resolve_device(name: str) -> torch.device:
     return device
 
 
+def check_device(name: str) -> None:
+    """A ConfigError for ``model.device`` unless torch can use device ``name`` on this
+    machine, checked without using it: a CUDA device must be one torch counts (no CUDA
+    context is created, nothing allocated), the CPU always is; another kind (mps, ...) is
+    tried as :func:`resolve_device` tries it."""
+    if name == "auto":
+        return
+    try:
+        device = torch.device(name)
+    except (RuntimeError, ValueError) as err:
+        raise ConfigError("model.device", f"torch does not know device {name!r} "
+                          f"({one_line(err)}); valid: auto, cpu, cuda, cuda:N") from None
+    if device.type == "cpu":
+        return
+    if device.type != "cuda":
+        resolve_device(name)
+        return
+    count = torch.cuda.device_count()
+    if (device.index or 0) >= count:
+        valid = f"auto, cpu, cuda, cuda:0 to cuda:{count - 1}" if count else "auto, cpu"
+        raise ConfigError("model.device", f"torch cannot use device {name!r}: it sees "
+                          f"{count or 'no'} CUDA device{'' if count == 1 else 's'} on this "
+                          f"machine; valid: {valid}")
+
+
 class TorchEngine(Engine):
     """A torch module's state and Adam's on one device (float32)."""
+
+    @classmethod
+    def check_device(cls, name: str) -> None:
+        check_device(name)
 
     def __init__(self, build: NetworkBuild, state: Mapping[str, np.ndarray] | None = None
                  ) -> None:
