@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import ConfigError, FitError
-from nlosfw.model import (
+from nlosfw.model.neural import (
     FieldMode,
     FieldShape,
     FinerFieldConfig,
@@ -111,7 +111,7 @@ def test_parameter_counts_match_hand_computed_formulas(engine, network, options,
     _engine_module(engine)
     model = load_plugins().registry.get("model", f"{network}_{engine}").load()
     config = model.config_class(**{**options, "mode": shape.mode, "device": "cpu"})
-    built = model.engine_class(NetworkBuild(model.network_factory, config, shape))
+    built = model.backend_class(NetworkBuild(model.network_factory, config, shape))
     assert built.parameters_per_network == expected
     assert sum(p.size for p in built.parameters()) == expected
 
@@ -337,7 +337,7 @@ def _engines(network, options, mode, n_networks):
         model = registry.get("model", f"{network}_{engine}").load()
         config = model.config_class(**{**options, "mode": mode, "device": "cpu", "seed": 5})
         shape = FieldShape(config.mode, (8, 8), 6)
-        built.append(model.engine_class(NetworkBuild(model.network_factory, config, shape,
+        built.append(model.backend_class(NetworkBuild(model.network_factory, config, shape,
                                                      n_networks)))
     return built
 

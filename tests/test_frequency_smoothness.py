@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from nlosfw.model import split_field
+from nlosfw.model.neural.smoothness import FrequencySmoothness, second_difference_matrix
 from nlosfw.model.protocol import error_metrics
-from nlosfw.model.smoothness import FrequencySmoothness, second_difference_matrix
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 

@@ -1,5 +1,5 @@
 """``rsd_prior``'s exact Poisson likelihood of the photon counts (``likelihood:
-poisson_counts``, :mod:`nlosfw.model.rsd_counts`): a time-domain forward model of the
+poisson_counts``, :mod:`nlosfw.model.physics.counts`): a time-domain forward model of the
 whole spectrum, fitted by EM on the counts of every time bin."""
 
 from __future__ import annotations
@@ -9,18 +9,18 @@ import pytest
 
 from nlosfw.cli import main
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.model.protocol import scattered_field, split_field
-from nlosfw.model.rsd_config import RSDPriorConfig
-from nlosfw.model.rsd_counts import (
+from nlosfw.model.physics.config import RSDPriorConfig
+from nlosfw.model.physics.counts import (
     CountsScene,
     counts_operator,
     fit_counts,
     log_likelihood,
     stopping_iteration,
 )
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
-from nlosfw.model.rsd_response import SystemResponse
-from nlosfw.model.scene_operator import OperatorOptions, VoxelLattice
+from nlosfw.model.physics.operator import OperatorOptions, VoxelLattice
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.physics.response import SystemResponse
+from nlosfw.model.protocol import scattered_field, split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.counts import bin_counts
 from nlosfw.transform.field import PhasorField, PhotonCounts

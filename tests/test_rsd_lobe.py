@@ -9,14 +9,14 @@ import pytest
 
 from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.image.plane_convolution import grid_layout
-from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
-from nlosfw.model.scene_operator import (
+from nlosfw.model.physics.operator import (
     OperatorOptions,
     SceneOperator,
     VoxelLattice,
     direct_fields,
 )
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.protocol import split_field
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.physics import three_bounce
 from nlosfw.simulate.scene import GeometryItem, scene_from_config

@@ -11,16 +11,17 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.plane_convolution import grid_layout
-from nlosfw.model.fista import FistaProblem, lipschitz, smoothed_tv, solve
-from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import fit_frequency_indices, voxel_lattice
-from nlosfw.model.scene_operator import (
+from nlosfw.model.physics.frequencies import fit_frequency_indices
+from nlosfw.model.physics.lattice import voxel_lattice
+from nlosfw.model.physics.operator import (
     OperatorOptions,
     SceneOperator,
     VoxelLattice,
     direct_fields,
 )
+from nlosfw.model.physics.prior import RSDPriorConfig, RSDPriorFieldModel
+from nlosfw.model.physics.solver import FistaProblem, lipschitz, smoothed_tv, solve
+from nlosfw.model.protocol import split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
 

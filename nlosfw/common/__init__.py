@@ -13,6 +13,7 @@ from nlosfw.common.config import (
     require_finite,
 )
 from nlosfw.common.cores import available_cores
+from nlosfw.common.deprecation import moved_names
 from nlosfw.common.errors import (
     USER_ERROR_EXIT_STATUS,
     ConfigError,
@@ -38,6 +39,7 @@ __all__ = [
     "Configurable",
     "DataError",
     "FitError",
+    "moved_names",
     "NlosfwError",
     "one_line",
     "PluginError",

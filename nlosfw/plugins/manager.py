@@ -21,7 +21,7 @@ from nlosfw.plugins.networks import NetworkRegistrar, NetworkSpec
 from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
 
 if TYPE_CHECKING:
-    from nlosfw.model.trainer import NeuralFieldModel
+    from nlosfw.model.neural.trainer import NeuralFieldModel
 
 log = logging.getLogger(__name__)
 

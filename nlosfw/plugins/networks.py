@@ -8,7 +8,7 @@ A plugin module registers a network in its ``register_networks(register)`` hook:
              description="Fourier-feature MLP")
 
 and the registry then holds the field-model plugin ``example_fourier_torch``: a
-:class:`~nlosfw.model.NeuralFieldModel` bound to that network and to the engine,
+:class:`~nlosfw.model.neural.NeuralFieldModel` bound to that network and to the engine,
 selectable as ``model=example_fourier_torch`` and checked by the conformance kit.
 Nothing is imported at registration: the factory, and with it torch or JAX, is
 imported when the model is first used.
@@ -22,10 +22,14 @@ from enum import Enum
 from typing import TYPE_CHECKING, Any, TypedDict
 
 from nlosfw.common.errors import PluginError
-from nlosfw.model.inr_networks import FIELD_NETWORKS
-from nlosfw.model.neural_config import NeuralFieldConfig, Preset
-from nlosfw.model.thesis_networks import THESIS_NETWORKS, THESIS_TEST_CONFIG, presets_of
-from nlosfw.model.trainer import NeuralFieldModel
+from nlosfw.model.neural.catalogue import (
+    FIELD_NETWORKS,
+    THESIS_NETWORKS,
+    THESIS_TEST_CONFIG,
+    presets_of,
+)
+from nlosfw.model.neural.config import NeuralFieldConfig, Preset
+from nlosfw.model.neural.trainer import NeuralFieldModel
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import (
     LazyFactory,
@@ -49,9 +53,9 @@ class NetworkEngine(str, Enum):
 
 #: Engine class and the (module, pip requirement) pairs it needs, per engine.
 ENGINES: dict[NetworkEngine, tuple[str, Mapping[str, str]]] = {
-    NetworkEngine.torch: ("nlosfw_torch.engine:TorchEngine",
+    NetworkEngine.torch: ("nlosfw_torch.backend:TorchBackend",
                           {"nlosfw_torch": "nlosfw-torch", "torch": "torch==2.13.0"}),
-    NetworkEngine.jax: ("nlosfw_jax.engine:JaxEngine",
+    NetworkEngine.jax: ("nlosfw_jax.backend:JaxBackend",
                         {"nlosfw_jax": "nlosfw-jax", "jax": "jax", "optax": "optax",
                          "equinox": "equinox"}),
 }
@@ -114,7 +118,7 @@ def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
                                        "engine.",
         "__module__": __name__,
         "config_class": config, "family": spec.name, "backend": spec.engine.value,
-        "engine_class": engine, "network_factory": staticmethod(factory),
+        "backend_class": engine, "network_factory": staticmethod(factory),
         "network_presets": dict(spec.presets),
     })
 
@@ -198,7 +202,7 @@ _THESIS_KNOWN_FAILURES = {
 
 def register_thesis_networks(register: Callable[..., None], engine: str, factory: str) -> None:
     """Register tanh, pe and siren for ``engine``, all built by ``factory`` (which reads the
-    network from its config's class, see :func:`nlosfw.model.thesis_architecture`)."""
+    network from its config's class, see :func:`nlosfw.model.neural.thesis_architecture`)."""
     for name, network in THESIS_NETWORKS.items():
         register(name, engine=engine, factory=factory, config=network.config,
                  description=f"{network.description}, {_ENGINE_TITLES[engine]}",
@@ -238,10 +242,10 @@ RSD_RESIDUAL_TEST_CONFIG: Mapping[str, object] = {
 def register_rsd_residual(register: Callable[..., None], engine: str, factory: str) -> None:
     """Register ``rsd_residual_<engine>`` (``register`` is a ``register_field_models``
     hook's): rsd_prior's field plus a penalised residual network, the class ``factory``
-    (a subclass of :class:`nlosfw.model.RSDResidualFieldModel` for ``engine``)."""
+    (a subclass of :class:`nlosfw.model.hybrid.RSDResidualFieldModel` for ``engine``)."""
     register(
         f"rsd_residual_{engine}", factory,
-        config="nlosfw.model.rsd_residual:RSDResidualConfig",
+        config="nlosfw.model.hybrid.residual:RSDResidualConfig",
         requires=dict(ENGINES[NetworkEngine(engine)][1]),
         description=f"rsd_prior's field plus a small penalised residual network, "
                     f"{_ENGINE_TITLES[engine]}",
@@ -260,11 +264,11 @@ NEURAL_VOLUME_TEST_CONFIG: Mapping[str, object] = {
 def register_neural_volume(register: Callable[..., None], engine: str, factory: str) -> None:
     """Register ``neural_volume_<engine>`` (``register`` is a ``register_field_models``
     hook's): a registered network's non-negative albedo on rsd_prior's lattice, propagated
-    by RSD, the class ``factory`` (a subclass of :class:`nlosfw.model.NeuralVolumeFieldModel`
+    by RSD, the class ``factory`` (a subclass of :class:`nlosfw.model.hybrid.NeuralVolumeFieldModel`
     for ``engine``)."""
     register(
         f"neural_volume_{engine}", factory,
-        config="nlosfw.model.neural_volume:NeuralVolumeConfig",
+        config="nlosfw.model.hybrid.volume:NeuralVolumeConfig",
         requires=dict(ENGINES[NetworkEngine(engine)][1]),
         description=f"a network's non-negative hidden albedo propagated to the wall by RSD, "
                     f"{_ENGINE_TITLES[engine]}",

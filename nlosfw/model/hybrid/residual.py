@@ -2,7 +2,7 @@
 
 The fit runs in two stages on the kept wall samples P (every training frequency):
 
-1. the physics: :class:`~nlosfw.model.rsd_prior.RSDPriorFieldModel` (a non-negative hidden
+1. the physics: :class:`~nlosfw.model.physics.prior.RSDPriorFieldModel` (a non-negative hidden
    albedo fitted by FISTA, propagated to the wall by RSD) with this config's ``rsd_prior``
    options; its field at the kept samples is Q;
 2. the residual: a registered network (``network``, any of the ``register_networks``
@@ -22,7 +22,7 @@ The fit runs in two stages on the kept wall samples P (every training frequency)
    predicting unseen wall points is its job.
 
 The backend is the subclass's (``nlosfw-torch``: ``rsd_residual_torch``, ``nlosfw-jax``:
-``rsd_residual_jax``): it names the engine and finds the network class in the registry.
+``rsd_residual_jax``): it names the backend and finds the network class in the registry.
 Both stages are stored in one model file (each stage's own file, embedded as bytes).
 """
 
@@ -48,8 +48,8 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.trainer import NeuralFieldModel
+from nlosfw.model.neural.trainer import NeuralFieldModel
+from nlosfw.model.physics.prior import RSDPriorConfig, RSDPriorFieldModel
 from nlosfw.transform.field import PhasorField
 
 #: The stored stage files' names inside the model file.
@@ -132,7 +132,7 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
     config_class = RSDResidualConfig
     family = "rsd_residual"
     backend: ClassVar[str] = ""
-    """The engine of the residual network (``torch``, ``jax``)."""
+    """The backend of the residual network (``torch``, ``jax``)."""
 
     def __init__(self, config: RSDResidualConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)

@@ -1,6 +1,6 @@
-"""What the neural hidden volume's backends train with: the operator's constants stacked
-over voxel planes (and their size, known before they are built), and the validation split
-and kept step of the training (:mod:`nlosfw.model.neural_volume`)."""
+"""The scene operator's constants stacked over voxel planes, which the neural hidden
+volume's backends (:mod:`nlosfw.model.hybrid.volume`) write the operator from, and their
+size, known before they are built."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosfw.common.errors import DataError
-from nlosfw.model.scene_operator import SceneOperator
+from nlosfw.model.physics.operator import SceneOperator
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,59 +74,3 @@ def stack_bytes(op: SceneOperator) -> int:
     ly, lx = op.conv.shape
     legs = 0 if op.confocal else int(np.prod(op.lattice.shape))
     return z * n_f * (ly * lx + legs) * itemsize
-
-
-def validation_split(shape: tuple[int, int], fraction: float, seed: int,
-                     sampled: np.ndarray | None = None
-                     ) -> tuple[np.ndarray, np.ndarray | None]:
-    """(train, validation) weights (ny, nx), float32 0/1: ``fraction`` of the sampled wall
-    points (``sampled`` True, (ny, nx); None: every point), chosen at random with ``seed``,
-    are validation points (none below 10 points or at 0); both are 0 where not sampled."""
-    points = (np.arange(shape[0] * shape[1]) if sampled is None
-              else np.flatnonzero(np.asarray(sampled, dtype=bool)))
-    train = np.zeros(shape[0] * shape[1], np.float32)
-    train[points] = 1
-    n_val = int(round(fraction * points.size))
-    if fraction <= 0 or points.size < 10 or n_val < 1:
-        return train.reshape(shape), None
-    chosen = points[np.random.default_rng(seed).permutation(points.size)[:n_val]]
-    validation = np.zeros_like(train)
-    validation[chosen] = 1
-    train[chosen] = 0
-    return train.reshape(shape), validation.reshape(shape)
-
-
-def history_entry(step: int, loss: float, validation: float | None) -> dict[str, float]:
-    """A fit-history entry of the backends' loops: the step, the training loss and, with
-    validation points, their error (``val_loss``)."""
-    entry: dict[str, float] = {"step": step, "loss": loss}
-    if validation is not None:
-        entry["val_loss"] = validation
-    return entry
-
-
-@dataclass
-class BestStep:
-    """The step with the lowest validation error so far (no validation: the latest) and its
-    albedo (a backend array), for :meth:`NeuralVolumeFieldModel.train`'s loops."""
-
-    patience: int
-    step: int = 0
-    error: float = float("inf")
-    albedo: object = None
-
-    def offer(self, step: int, error: float | None, albedo: object) -> None:
-        """Keep ``albedo`` (the state before step ``step``'s update) if it is the best."""
-        if error is None or error < self.error:
-            self.step, self.error, self.albedo = step, math.inf if error is None else error, \
-                albedo
-
-    @property
-    def validation(self) -> float | None:
-        """The kept step's validation error (None: no validation)."""
-        return self.error if math.isfinite(self.error) else None
-
-    def stop(self, step: int) -> bool:
-        """Whether ``patience`` steps passed without a better validation error."""
-        return self.patience > 0 and math.isfinite(self.error) and \
-            step - self.step >= self.patience

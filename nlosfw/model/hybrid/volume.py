@@ -2,7 +2,7 @@
 
 Like ``rsd_prior`` the field is explained by a hidden scene on voxel planes parallel to
 the wall (the same lattice, depth planes, frequencies, device legs and normalisation, set up
-as :class:`~nlosfw.model.rsd_prior.RSDPriorFieldModel` does, its quick coarse fit finding
+as :class:`~nlosfw.model.physics.prior.RSDPriorFieldModel` does, its quick coarse fit finding
 the depth planes when ``depth_range`` is not given), but the albedo is not
 a free array: it is a registered network (``network``, any of the ``register_networks``
 API, on the subclass's backend) evaluated at the voxel centres,
@@ -21,7 +21,7 @@ wall samples (every training frequency, full batch) by least squares,
 
 with the operator A written once per backend (torch, JAX: differentiable, native FFTs)
 from the numpy kernel spectra and laser legs of
-:class:`~nlosfw.model.scene_operator.SceneOperator` (:func:`plane_stack`). The network's
+:class:`~nlosfw.model.physics.operator.SceneOperator` (:func:`plane_stack`). The network's
 smoothness is the prior: no L1 or TV term. The fitted albedo predicts the field anywhere
 ``rsd_prior`` can (through :meth:`RSDPriorFieldModel.from_albedo`).
 
@@ -64,6 +64,7 @@ from nlosfw.common.files import format_bytes
 from nlosfw.common.memory import available_memory
 from nlosfw.image.fft import Precision
 from nlosfw.image.rsd_kernel import check_geometry
+from nlosfw.model.hybrid.stack import PlaneStack, plane_stack, stack_bytes
 from nlosfw.model.interface import (
     FieldModel,
     FieldModelConfig,
@@ -73,18 +74,12 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.neural_config import FieldMode, FieldShape, NeuralFieldConfig
-from nlosfw.model.rsd_depths import fitted_frequencies
-from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import training_values
-from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
-from nlosfw.model.trainer import NeuralFieldModel, learning_rate
-from nlosfw.model.volume_training import (
-    PlaneStack,
-    plane_stack,
-    stack_bytes,
-    validation_split,
-)
+from nlosfw.model.neural.config import FieldMode, FieldShape, NeuralFieldConfig
+from nlosfw.model.neural.trainer import NeuralFieldModel, learning_rate
+from nlosfw.model.physics.lattice import fitted_frequencies
+from nlosfw.model.physics.operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
+from nlosfw.model.physics.prior import RSDPriorConfig, RSDPriorFieldModel
+from nlosfw.model.physics.wall import training_values, validation_split
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
@@ -248,7 +243,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
     config_class = NeuralVolumeConfig
     family = "neural_volume"
     backend: ClassVar[str] = ""
-    """The engine of the network (``torch``, ``jax``)."""
+    """The backend of the network (``torch``, ``jax``)."""
 
     def __init__(self, config: NeuralVolumeConfig | Mapping[str, object] | None = None
                  ) -> None:

@@ -98,7 +98,7 @@ class NeuralFieldConfig(FieldModelConfig):
     difference of the normalised field between neighbouring frequencies (at the mean
     training spacing), at random wall points, added to the loss. The field is smooth
     in frequency; this keeps a network from wiggling between training frequencies
-    (:mod:`nlosfw.model.smoothness`). Needs 3 or more training frequencies."""
+    (:mod:`nlosfw.model.neural.smoothness`). Needs 3 or more training frequencies."""
     smoothness_points: int = 64
     """Random wall points of that penalty per step (multi mode: each at its own random
     frequency of the band; single mode: every network at the same points)."""

@@ -1,4 +1,4 @@
-"""The options of the ``rsd_prior`` field model (:mod:`nlosfw.model.rsd_prior`)."""
+"""The options of the ``rsd_prior`` field model (:mod:`nlosfw.model.physics.prior`)."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ from dataclasses import dataclass
 from nlosfw.common.config import require
 from nlosfw.image.fft import Precision
 from nlosfw.model.interface import FieldModelConfig
-from nlosfw.model.rsd_background import Background
-from nlosfw.model.rsd_counts import CountsStop
-from nlosfw.model.rsd_likelihood import Likelihood
-from nlosfw.model.rsd_response import TemporalResponse
-from nlosfw.model.scene_operator import Amplitude
+from nlosfw.model.physics.background import Background
+from nlosfw.model.physics.counts import CountsStop
+from nlosfw.model.physics.likelihood import Likelihood
+from nlosfw.model.physics.operator import Amplitude
+from nlosfw.model.physics.response import TemporalResponse
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class RSDPriorConfig(FieldModelConfig):
     only; 0: Lambertian)."""
     fit_lobe: bool = False
     """Fit k jointly with the albedo over [0, ``lobe_max``] instead
-    (:mod:`nlosfw.model.rsd_lobe`)."""
+    (:mod:`nlosfw.model.physics.lobe`)."""
     lobe_max: float = 20.0
     """``fit_lobe``: the largest k searched."""
     lobe_tolerance: float = 0.25
@@ -71,7 +71,7 @@ class RSDPriorConfig(FieldModelConfig):
     frequency, the same over the wall: ambient light, dark counts, a late tail)."""
     temporal_response: TemporalResponse = TemporalResponse.none
     """System temporal response fitted jointly: none, or gaussian (timing jitter, the gain
-    exp(-(2 pi f sigma)^2 / 2)); :mod:`nlosfw.model.rsd_response`."""
+    exp(-(2 pi f sigma)^2 / 2)); :mod:`nlosfw.model.physics.response`."""
     time_offset: bool = False
     """Fit the capture's time-origin offset tau jointly (the phase ramp exp(-2 pi i f tau))."""
     response_rounds: int = 5
@@ -81,11 +81,11 @@ class RSDPriorConfig(FieldModelConfig):
     likelihood: Likelihood = Likelihood.least_squares
     """The data term: least_squares; poisson (each wall point weighted by the inverse
     Poisson variance of its samples, from the capture's photon counts;
-    :mod:`nlosfw.model.rsd_likelihood`); or poisson_counts (the least-squares albedo
+    :mod:`nlosfw.model.physics.likelihood`); or poisson_counts (the least-squares albedo
     refined by the exact Poisson likelihood of the counts in every time bin, with a
     background per bin; needs ``split.spectral=none``, and
     ``transform.remove_device_legs=false`` when the capture's times include the device
-    legs; :mod:`nlosfw.model.rsd_counts`)."""
+    legs; :mod:`nlosfw.model.physics.counts`)."""
     counts_iterations: int = 100
     """``poisson_counts``: the most EM iterations on the counts."""
     counts_stop: CountsStop = CountsStop.likelihood

@@ -49,14 +49,14 @@ from scipy.special import ndtr
 from nlosfw.capture.geometry import CaptureGeometry, CaptureKind
 from nlosfw.common.config import Choice
 from nlosfw.common.errors import ConfigError, FitError
-from nlosfw.model.rsd_background import WallBackground
-from nlosfw.model.rsd_response import SystemResponse
-from nlosfw.model.scene_operator import OperatorOptions, VoxelLattice, leg_amplitude
+from nlosfw.model.physics.background import WallBackground
+from nlosfw.model.physics.operator import OperatorOptions, VoxelLattice, leg_amplitude
+from nlosfw.model.physics.response import SystemResponse
 from nlosfw.transform.counts import BinnedCounts, bin_counts
 from nlosfw.transform.field import PhasorField
 
 if TYPE_CHECKING:
-    from nlosfw.model.rsd_config import RSDPriorConfig
+    from nlosfw.model.physics.config import RSDPriorConfig
 
 #: The pulse is cut this many standard deviations either side of its centre.
 _TAIL = 4.0

@@ -1,5 +1,6 @@
-"""Where ``rsd_prior`` puts its voxels: the depth planes (given, or found by a quick coarse
-fit) and the lateral lattice, and which frequencies its fit uses.
+"""Where the physics-constrained fit puts its voxels: the depth planes (given, or found by a
+quick coarse fit) and the lateral lattice (:func:`plan_lattice`, which also picks the
+frequencies the fit uses, :mod:`nlosfw.model.physics.frequencies`).
 
 Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a coarse
 lattice (the training spacing laterally, planes a quarter of the shortest wavelength of the
@@ -13,22 +14,24 @@ separate clusters of planes, not the whole depth range between them.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 
 import numpy as np
 
-from nlosfw.common.errors import FitError
+from nlosfw.common.config import number
+from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.image.depths import field_depth_range
+from nlosfw.image.plane_convolution import GridLayout
 from nlosfw.image.rsd_kernel import path_multiplier
-from nlosfw.model.rsd_config import RSDPriorConfig
-from nlosfw.model.rsd_sampling import (
-    WallSamples,
-    deepest_path,
+from nlosfw.model.physics.config import RSDPriorConfig
+from nlosfw.model.physics.frequencies import (
     enough_frequencies,
     fit_frequency_indices,
-    voxel_lattice,
+    fitted_frequencies,
 )
-from nlosfw.model.scene_operator import OperatorOptions, SceneOperator, VoxelLattice
+from nlosfw.model.physics.operator import OperatorOptions, SceneOperator, VoxelLattice
+from nlosfw.model.physics.wall import WallSamples
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
@@ -53,14 +56,6 @@ def plan_lattice(config: RSDPriorConfig, values: np.ndarray, samples: WallSample
     lateral = config.lateral_step or shortest / (2 * path_multiplier(field.geometry))
     return (voxel_lattice(samples.layout, lateral, depths),
             fitted_frequencies(config.fit_frequencies, field, depths))
-
-
-def fitted_frequencies(count: int, field: PhasorField, depths: np.ndarray) -> np.ndarray:
-    """The indices of the frequencies a fit on voxel planes at ``depths`` uses: at least
-    ``count`` (0: all) evenly spread, and enough that the planes' span does not alias."""
-    span = float(depths.max() - depths.min())
-    return fit_frequency_indices(field.frequencies, enough_frequencies(
-        field.frequencies, count, span))
 
 
 def depth_step(config: RSDPriorConfig, field: PhasorField) -> float:
@@ -100,3 +95,36 @@ def depth_planes(config: RSDPriorConfig, values: np.ndarray, samples: WallSample
     log.info("rsd_prior: the coarse fit's %d planes (%.3f-%.3f m) find the scene on %d in "
              "%.3f-%.3f m", depths.size, depths[0], depths[-1], found.size, *found[[0, -1]])
     return grid[near]
+
+
+def voxel_lattice(wall: GridLayout, lateral_step: float, depths: np.ndarray) -> VoxelLattice:
+    """Voxel planes at ``depths`` whose spacing divides the training spacing (at most
+    ``lateral_step``) and covering the training grid plus half a training spacing."""
+    origin, step, shape = [], [], []
+    for axis in (0, 1):
+        spacing, n = wall.spacing[axis], wall.shape[axis]
+        k = max(1, math.ceil(spacing / lateral_step - 1e-6))
+        pad = k // 2
+        step.append(spacing / k)
+        origin.append(wall.origin[axis] - pad * spacing / k)
+        shape.append(k * (n - 1) + 1 + 2 * pad)
+    return VoxelLattice(np.asarray(depths, dtype=float), (origin[0], origin[1]),
+                        (step[0], step[1]), (shape[0], shape[1]))
+
+
+def deepest_path(field: PhasorField) -> float:
+    """Half the longest path the field can hold: the capture's time span (from the
+    transform's metadata) or the unambiguous range 1/df of the frequency spacing."""
+    meta = field.metadata
+    try:
+        t_start, n_bins, delta_t = (number(meta[k]) for k in ("t_start", "n_bins", "delta_t"))
+        end = t_start + int(n_bins) * delta_t
+        if end > 0:
+            return end / 2
+    except (KeyError, TypeError, ValueError):
+        pass
+    f = np.sort(np.unique(field.frequencies))
+    if f.size < 2:
+        raise ConfigError("model.depth_range", "give [near, far] (m): one frequency and no "
+                          "capture time span in the field's metadata cannot place the scene")
+    return 1.0 / (2.0 * float(np.min(np.diff(f))))

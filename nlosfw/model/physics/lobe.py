@@ -29,10 +29,10 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from nlosfw.common.errors import FitError
-from nlosfw.model.rsd_background import Background
-from nlosfw.model.rsd_config import RSDPriorConfig
-from nlosfw.model.scene_operator import SceneOperator
-from nlosfw.model.volume_training import validation_split
+from nlosfw.model.physics.background import Background
+from nlosfw.model.physics.config import RSDPriorConfig
+from nlosfw.model.physics.operator import SceneOperator
+from nlosfw.model.physics.wall import validation_split
 
 log = logging.getLogger(__name__)
 

@@ -2,19 +2,19 @@
 
 Instead of a generic function of (x, y, f), the field is explained by a hidden scene: a
 non-negative albedo a on voxel planes parallel to the wall, the same at every frequency,
-propagated to the wall by the physics of :mod:`nlosfw.model.scene_operator` (laser spot
+propagated to the wall by the physics of :mod:`nlosfw.model.physics.operator` (laser spot
 -> voxel -> wall, or the doubled path of confocal scans). Fitting solves
 
     min_{a >= 0}  1/2 sum_f ||A_f a - P_f||^2 + l1 sum_v n_v a_v + tv TV(n a)
 
 over the sparse wall samples P_f (``fit_frequencies`` of the field's frequencies, evenly
-spread), n_v = ||A e_v|| being the column norms: FISTA (monotone, :mod:`nlosfw.model.fista`)
-runs on x = n a, so every column has unit norm (much faster convergence) and a weak,
-distant voxel pays the same L1 price as a bright near one for the same contribution to
-the data. The step is 1/L from a power iteration. The weights are relative:
-l1 = ``l1_weight`` * max Re(A_n^H P), the smallest weight at which the solution is zero
-(A_n the normalised operator); TV is a smoothed total variation of x within each plane
-(off by default).
+spread), n_v = ||A e_v|| being the column norms: FISTA (monotone,
+:mod:`nlosfw.model.physics.solver`) runs on x = n a, so every column has unit norm (much
+faster convergence) and a weak, distant voxel pays the same L1 price as a bright near one
+for the same contribution to the data. The step is 1/L from a power iteration. The weights
+are relative: l1 = ``l1_weight`` * max Re(A_n^H P), the smallest weight at which the
+solution is zero (A_n the normalised operator); TV is a smoothed total variation of x
+within each plane (off by default).
 The fitted albedo then predicts the field anywhere on the wall and at any frequency: on
 a regular grid whose spacing and the voxels' are whole multiples of one another by FFT
 convolution, elsewhere by a direct sum over the non-zero voxels.
@@ -28,20 +28,20 @@ training spacing beyond. Enough frequencies are fitted that paths over twice the
 span do not alias in time.
 
 A random scan (scattered samples) is fitted on the grid its points came from
-(:func:`~nlosfw.model.rsd_sampling.wall_samples`), the operator masked to the kept points.
+(:func:`~nlosfw.model.physics.wall.wall_samples`), the operator masked to the kept points.
 
 Automatic depth planes: a quick coarse fit finds where the scene is
-(:mod:`nlosfw.model.rsd_depths`).
+(:mod:`nlosfw.model.physics.lattice`).
 
 Terms of real systems, each fitted jointly and reported in the fit report: ``background:
 constant``, a complex offset per frequency, constant over the wall (minimised out exactly:
-:mod:`nlosfw.model.rsd_background`); ``temporal_response: gaussian`` and ``time_offset``,
-a gain per frequency (jitter, a time-origin offset in ps; :mod:`nlosfw.model.rsd_response`);
-``fit_lobe``, a glossy lobe's exponent (:mod:`nlosfw.model.rsd_lobe`; or a fixed ``lobe``).
+:mod:`nlosfw.model.physics.background`); ``temporal_response: gaussian`` and ``time_offset``,
+a gain per frequency (jitter, a time-origin offset in ps; :mod:`nlosfw.model.physics.response`);
+``fit_lobe``, a glossy lobe's exponent (:mod:`nlosfw.model.physics.lobe`; or a fixed ``lobe``).
 ``likelihood: poisson`` weighs each wall point by the inverse Poisson variance of its
-samples (:mod:`nlosfw.model.rsd_likelihood`); ``likelihood: poisson_counts`` refines the
+samples (:mod:`nlosfw.model.physics.likelihood`); ``likelihood: poisson_counts`` refines the
 albedo by the exact Poisson likelihood of the photon counts in every time bin, with a
-background per bin (:mod:`nlosfw.model.rsd_counts`).
+background per bin (:mod:`nlosfw.model.physics.counts`).
 
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
@@ -64,7 +64,6 @@ from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout
 from nlosfw.image.rsd_kernel import check_geometry
-from nlosfw.model.fista import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
 from nlosfw.model.interface import (
     FieldModel,
     FitReport,
@@ -73,31 +72,32 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.rsd_background import (
+from nlosfw.model.physics.background import (
     BackgroundProjection,
     WallBackground,
     background_projection,
     fit_offsets,
 )
-from nlosfw.model.rsd_config import RSDPriorConfig
-from nlosfw.model.rsd_counts import CountsScene, refine_by_counts
-from nlosfw.model.rsd_depths import plan_lattice
-from nlosfw.model.rsd_likelihood import sample_weights, weight_summary
-from nlosfw.model.rsd_lobe import fit_lobe
-from nlosfw.model.rsd_response import (
+from nlosfw.model.physics.config import RSDPriorConfig
+from nlosfw.model.physics.counts import CountsScene, refine_by_counts
+from nlosfw.model.physics.lattice import plan_lattice
+from nlosfw.model.physics.likelihood import sample_weights, weight_summary
+from nlosfw.model.physics.lobe import fit_lobe
+from nlosfw.model.physics.operator import (
+    OperatorOptions,
+    SceneOperator,
+    VoxelLattice,
+    direct_fields,
+)
+from nlosfw.model.physics.response import (
     SystemResponse,
     TemporalResponse,
     estimate_response,
     search_response,
     with_gains,
 )
-from nlosfw.model.rsd_sampling import WallSamples, training_values
-from nlosfw.model.scene_operator import (
-    OperatorOptions,
-    SceneOperator,
-    VoxelLattice,
-    direct_fields,
-)
+from nlosfw.model.physics.solver import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
+from nlosfw.model.physics.wall import WallSamples, training_values
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.temporal_dft import unit_phasor
 
@@ -270,7 +270,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
     def plan_lattice(self, values: np.ndarray, samples: WallSamples, field: PhasorField
                      ) -> tuple[VoxelLattice, np.ndarray]:
         """The voxel lattice a fit of ``field`` uses and the indices of the frequencies it
-        fits (:func:`~nlosfw.model.rsd_depths.plan_lattice`); ``values``: the field without
+        fits (:func:`~nlosfw.model.physics.lattice.plan_lattice`); ``values``: the field without
         device legs on the wall grid of ``samples``, divided by its RMS."""
         return plan_lattice(self.config, values, samples, field, self._options(),
                             lambda op, data, n: self._solve(op, data, n)[0])
@@ -278,7 +278,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
     def search_lobe(self, field: PhasorField, values: np.ndarray, samples: WallSamples,
                     lattice: VoxelLattice, chosen: np.ndarray) -> float:
         """The lobe exponent k fitted on the kept samples (``fit_lobe``'s held-out search,
-        :func:`~nlosfw.model.rsd_lobe.fit_lobe`) on ``lattice`` at the frequencies
+        :func:`~nlosfw.model.physics.lobe.fit_lobe`) on ``lattice`` at the frequencies
         ``chosen``; arguments as for :meth:`plan_lattice`."""
         freqs = field.frequencies[chosen]
 

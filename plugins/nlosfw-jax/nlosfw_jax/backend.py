@@ -28,7 +28,7 @@ import numpy as np
 import optax
 
 from nlosfw.common import ConfigError, FitError, one_line
-from nlosfw.model import Engine, NetworkBuild, SmoothnessBatch
+from nlosfw.model.neural import Backend, NetworkBuild, SmoothnessBatch
 
 #: Adam exactly as torch.optim.Adam with its defaults (eps outside the square root).
 _ADAM = optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8)
@@ -139,7 +139,7 @@ def _forward(params: Any, rest: Any, x: jax.Array, single: bool) -> jax.Array:
     return _apply(params, rest, x, single)
 
 
-class JaxEngine(Engine):
+class JaxBackend(Backend):
     """An equinox module's arrays and optax Adam's state on one device (float32)."""
 
     def __init__(self, build: NetworkBuild, state: Mapping[str, np.ndarray] | None = None

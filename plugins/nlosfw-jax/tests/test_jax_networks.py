@@ -13,7 +13,7 @@ eqx = pytest.importorskip("equinox")
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from nlosfw_jax.engine import Fixed  # noqa: E402
+from nlosfw_jax.backend import Fixed  # noqa: E402
 
 from nlosfw.common import FitError  # noqa: E402
 from nlosfw.model import NeuralFieldConfig  # noqa: E402

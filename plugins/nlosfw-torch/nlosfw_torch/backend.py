@@ -19,7 +19,7 @@ import numpy as np
 import torch
 
 from nlosfw.common import ConfigError, FitError, one_line
-from nlosfw.model import Engine, NetworkBuild, SmoothnessBatch
+from nlosfw.model.neural import Backend, NetworkBuild, SmoothnessBatch
 
 #: torch's own CPU thread count (one per core), read before any model changes it.
 DEFAULT_THREADS = torch.get_num_threads()
@@ -44,7 +44,7 @@ def resolve_device(name: str) -> torch.device:
     return device
 
 
-class TorchEngine(Engine):
+class TorchBackend(Backend):
     """A torch module's state and Adam's on one device (float32)."""
 
     def __init__(self, build: NetworkBuild, state: Mapping[str, np.ndarray] | None = None

@@ -1,8 +1,9 @@
 """``neural_volume_torch``: a registered torch network's non-negative albedo on rsd_prior's
-lattice, propagated to the wall by RSD in torch (:class:`nlosfw.model.NeuralVolumeFieldModel`).
+lattice, propagated to the wall by RSD in torch
+(:class:`nlosfw.model.hybrid.NeuralVolumeFieldModel`).
 
 :class:`TorchPlaneOperator` is ``SceneOperator.forward`` in torch (differentiable,
-``torch.fft``), from the numpy constants of :func:`nlosfw.model.plane_stack`.
+``torch.fft``), from the numpy constants of :func:`nlosfw.model.hybrid.plane_stack`.
 """
 
 from __future__ import annotations
@@ -16,21 +17,20 @@ import torch
 from torch.utils.checkpoint import checkpoint
 
 from nlosfw.common import FitError
-from nlosfw.model import (
+from nlosfw.model import TrainingStep
+from nlosfw.model.hybrid import (
     BestStep,
     FoldedSpectra,
-    NetworkBuild,
-    NeuralFieldModel,
     NeuralVolumeFieldModel,
     PlaneStack,
     TrainedVolume,
-    TrainingStep,
     VolumeProblem,
     fold_spectra,
     history_entry,
 )
+from nlosfw.model.neural import NetworkBuild, NeuralFieldModel
 from nlosfw.plugins import registered_network
-from nlosfw_torch.engine import TorchEngine, resolve_device
+from nlosfw_torch.backend import TorchBackend, resolve_device
 
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
@@ -62,7 +62,7 @@ class _SpectraProduct(torch.autograd.Function):
 
 class TorchPlaneOperator:
     """A a for an albedo a (Z, Y, X), real: the wall fields (F, ny, nx), complex, on
-    ``device`` (see :class:`nlosfw.model.PlaneStack`).
+    ``device`` (see :class:`nlosfw.model.hybrid.PlaneStack`).
 
     A confocal scan on the CPU sums over planes as one batched matrix product per lattice
     point (the spectra reordered once as (Ly Lx, F, Z), a copy as large as the product the
@@ -72,7 +72,7 @@ class TorchPlaneOperator:
     GPU and the single-spot case keep that sum (measured on the H200; each plane's laser
     leg makes the inputs differ per frequency there).
 
-    Where the confocal spectra have the symmetry of :func:`nlosfw.model.fold_spectra`
+    Where the confocal spectra have the symmetry of :func:`nlosfw.model.hybrid.fold_spectra`
     (``rsd_prior``'s lattices around a regular grid of kept points do), the product is one
     per orbit of up to 8 lattice points instead of one per point (``fold=False``: per
     point): forward and backward 0.13 s against 0.61 to 0.76 s on 2 cores (two runs;
@@ -176,7 +176,7 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         """Adam on the relative squared error of the propagated albedo (full batch)."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
-        engine = TorchEngine(NetworkBuild(problem.network.network_factory,
+        engine = TorchBackend(NetworkBuild(problem.network.network_factory,
                                           problem.network_config, problem.network_shape,
                                           who=who))
         device = engine.device

@@ -13,23 +13,19 @@ import pytest
 pytest.importorskip("torch")
 
 import torch
-from nlosfw_torch.engine import TorchEngine
+from nlosfw_torch.backend import TorchBackend
 from nlosfw_torch.neural_volume import TorchPlaneOperator, volume_albedo
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.common import ConfigError, FitError
 from nlosfw.image import grid_layout
-from nlosfw.model import (
-    FieldMode,
-    FieldShape,
-    NetworkBuild,
+from nlosfw.model import SpatialSampling, split_field
+from nlosfw.model.hybrid import plane_stack, stack_bytes
+from nlosfw.model.neural import FieldMode, FieldShape, NetworkBuild
+from nlosfw.model.physics import (
     OperatorOptions,
     SceneOperator,
-    SpatialSampling,
     VoxelLattice,
-    plane_stack,
-    split_field,
-    stack_bytes,
     training_grid,
     validation_split,
     voxel_lattice,
@@ -158,7 +154,7 @@ def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
     network = registered_network(name, "torch")
     build = NetworkBuild(network.network_factory, network.config_class(
         seed=3, hidden=[32, 32], device="cpu", steps=10), FieldShape(FieldMode.multi, (23, 31), 4))
-    engine = TorchEngine(build)
+    engine = TorchBackend(build)
     state = {**engine.fixed, **engine.params}
     sizes: list[int] = []
 
@@ -356,7 +352,7 @@ def test_a_confocal_fit_is_refused_without_room_for_both_copies(backend, sparse_
         sizes.append(stack_bytes(op))
         return sizes[-1]
 
-    core = "nlosfw.model.neural_volume"
+    core = "nlosfw.model.hybrid.volume"
     monkeypatch.setattr(f"{core}.stack_bytes", counted)
     monkeypatch.setattr(f"{core}.available_memory", lambda: int(1.5 * sizes[-1]))
     monkeypatch.setattr(f"{core}.plane_stack", lambda op: pytest.fail("stack built"))

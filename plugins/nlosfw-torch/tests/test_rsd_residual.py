@@ -102,7 +102,7 @@ def test_the_residual_learns_a_smooth_term_the_physics_cannot_represent(backend,
 
 def test_the_penalty_scales_the_residual_by_one_over_one_plus_the_weight(scene):
     """Same seed, weights 0 and 3: the second's departure from rsd_prior is a quarter of
-    the first's at every point (the penalised minimiser, see nlosfw.model.rsd_residual)."""
+    the first's at every point (the penalised minimiser, see nlosfw.model.hybrid.residual)."""
     full, train, _, physics = scene
     departures = []
     for weight in (0.0, 3.0):

@@ -13,13 +13,12 @@ torch = pytest.importorskip("torch")
 from nlosfw_torch.models import PETorch, SirenTorch  # noqa: E402
 
 from nlosfw.common import DataError, FitError, PluginError  # noqa: E402
-from nlosfw.model import (  # noqa: E402
+from nlosfw.model import NeuralFieldConfig, preset_config  # noqa: E402
+from nlosfw.model.neural import (  # noqa: E402
     FieldNormalisation,
-    NeuralFieldConfig,
     forward_numpy,
     init_parameters,
     network_inputs,
-    preset_config,
     resolve_architecture,
 )
 from nlosfw.plugins import NetworkEngine, hookimpl, load_plugins  # noqa: E402
