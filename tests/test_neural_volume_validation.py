@@ -68,7 +68,7 @@ def test_an_operator_larger_than_the_memory_left_is_refused_in_one_line(monkeypa
         model.fit(fit_fixture(physical=True))
     message = str(err.value)
     assert "\n" not in message and "but 1.0 kB are available" in message, message
-    assert "model.fit_frequencies" in message and "depth planes" in message, message
+    assert "model.prior.fit_frequencies" in message and "depth planes" in message, message
 
 
 @pytest.mark.parametrize("shape, dtype", [((3, 5, 7), np.complex64), ((1,), np.complex128),

@@ -119,9 +119,9 @@ def test_random_scan_predicts_a_point_scatterer_at_the_points_it_never_saw(confo
     full = _field(_point_field(target, wall, freqs, confocal), wall, freqs, confocal)
     split = split_field(full, SpatialSampling(pattern="random", step=2, seed=5))
     assert split.train_field.grid_shape == (1, 64)
-    options = {"amplitude": "point", "lateral_step": 1 / 16, "depth_range": [0.45, 0.55],
-               "depth_step": 0.025, "l1_weight": 1e-3, "iterations": 700,
-               "precision": "double"}
+    options = {"amplitude": "point", "lateral_step": 1 / 16,
+               "depth": {"range": [0.45, 0.55], "step": 0.025}, "l1_weight": 1e-3,
+               "iterations": 700, "precision": "double"}
     model = RSDPriorFieldModel(options)
     model.fit(split.train_field)
     pred = model.predict(wall[..., :2], freqs)

@@ -17,6 +17,10 @@ mapping against the same twin:
    with ``+key=value`` and NaN numbers, makes tuples (checking fixed lengths), and runs
    each dataclass's ``__post_init__`` range checks with the option's dotted name
    prefixed to their errors.
+
+An option a config dataclass has renamed (its ``renamed_options``,
+:func:`renamed_option`) is refused in one line that gives the new
+name, wherever it is written: the command line, a preset, a Python mapping.
 """
 
 from __future__ import annotations
@@ -221,9 +225,11 @@ def _set(parent: Any, key: Any, value: Any, where: str, given: Any) -> None:
                 raise
             _set(parent, key, int(value), where, given)     # 2.0 is the integer 2
     except (ConfigKeyError, ConfigAttributeError):
-        raise ConfigError(where, f"unknown option; valid options: {_keys(parent)}") from None
+        raise ConfigError(where, renamed(parent, str(key), where, given)
+                          or f"unknown option; valid options: {_keys(parent)}") from None
     except OmegaConfBaseException as err:
-        raise ConfigError(where, problem(err, given)) from None
+        raise ConfigError(where, renamed(parent, str(key), where, given)
+                          or problem(err, given)) from None
 
 
 # --------------------------------------------------------------------------- building
@@ -241,7 +247,9 @@ def build(cls: type, node: DictConfig, where: str) -> Any:
     for key in node:
         if str(key) not in known:
             valid = ", ".join(sorted(f.name for f in fields)) or "(none)"
-            raise ConfigError(_join(where, str(key)), f"unknown option; valid options: {valid}")
+            option = _join(where, str(key))
+            raise ConfigError(option, renamed(node, str(key), option)
+                              or f"unknown option; valid options: {valid}")
     hints = get_type_hints(cls)
     kwargs = {f.name: _python(_value(node, f.name, where), hints[f.name], _join(where, f.name))
               for f in fields}
@@ -288,10 +296,42 @@ def _python(value: Any, tp: Any, where: str) -> Any:
 
 
 # --------------------------------------------------------------------------- errors
+def renamed_option(cls: type, name: str) -> str | None:
+    """The name option ``name`` of config dataclass ``cls`` has now, if it was renamed (the
+    class's ``renamed_options``: old name -> new dotted name, e.g. ``depth_range`` ->
+    ``depth.range``), else None. An option that became a group of the same name
+    (``lobe`` -> ``lobe.exponent``) counts when it is given a plain value."""
+    table: Mapping[str, str] = getattr(cls, "renamed_options", None) or {}
+    return table.get(name)
+
+
+def renamed(parent: object, key: str, where: str, value: object = None) -> str | None:
+    """The refusal of option ``key`` of the schema node ``parent`` (written at the dotted
+    ``where``) when its config renamed it: the name to write instead; None otherwise. An
+    option that became a group of the same name counts only when given a plain value."""
+    if not isinstance(parent, DictConfig):
+        return None
+    schema_of = getattr(OmegaConf.get_type(parent), "schema_of", None)
+    new = renamed_option(schema_of, key) if isinstance(schema_of, type) else None
+    if new is None:
+        return None
+    prefix = where[:-len(key)] if where.endswith(key) else ""
+    if new.startswith(f"{key}."):
+        if isinstance(value, (Mapping, DictConfig)):
+            return None
+        return (f"is a group of options now; write {prefix}{new} (the option it was) or "
+                f"{prefix}{key}.<option>")
+    return f"was renamed; write {prefix}{new} instead"
+
+
 def problem(err: OmegaConfBaseException, value: Any) -> str:
     """What is wrong, in words, for OmegaConf's error ``err`` about ``value``."""
     if isinstance(err, MissingMandatoryValue):
         return "is required"
+    if err.key is not None and err.full_key:
+        moved = renamed(err.parent_node, str(err.key), str(err.full_key), value)
+        if moved is not None:
+            return moved
     if isinstance(err, (ConfigKeyError, ConfigAttributeError)) and isinstance(
             err.parent_node, DictConfig):
         if not dataclasses.is_dataclass(OmegaConf.get_type(err.parent_node)):

@@ -26,7 +26,7 @@ from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
     from nlosfw.model.hybrid.residual import RSDResidualConfig
-    from nlosfw.model.hybrid.volume import NeuralVolumeConfig
+    from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig
     from nlosfw.model.interface import (
         FieldModel,
         FieldModelConfig,

@@ -258,7 +258,10 @@ def _differs(run_dir: Path, config: Mapping[str, object]) -> ConfigError:
     if found is None:
         return ConfigError("", f"{run_dir}: {hint}")
     key, before, now = found
-    return ConfigError(key, f"is {now!r} but {before!r} in the run in {run_dir}; {hint}")
+    new = key not in _flatten(_result_options(old))     # an option added or renamed since
+    return ConfigError(key, (f"is an option the run in {run_dir} did not have (options "
+                             "renamed since: nlosfw's changelog)" if new else
+                             f"is {now!r} but {before!r} in the run in {run_dir}") + f"; {hint}")
 
 
 # --------------------------------------------------------------------------- holding

@@ -233,8 +233,9 @@ def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFie
 #: Small, fast options of ``rsd_residual_<engine>`` for the conformance kit: a short physics
 #: fit (the kit's plane-wave field is no hidden scene's) and a small network for the rest.
 RSD_RESIDUAL_TEST_CONFIG: Mapping[str, object] = {
-    "iterations": 10, "amplitude": "point", "l1_weight": 0.2, "workers": 1,
-    "depth_range": [0.3, 0.7], "depth_step": 0.1, "fit_frequencies": 0, "power_iterations": 5,
+    "prior": {"iterations": 10, "amplitude": "point", "l1_weight": 0.2, "workers": 1,
+              "depth": {"range": [0.3, 0.7], "step": 0.1}, "fit_frequencies": 0,
+              "power_iterations": 5},
     "residual_weight": 0.0, "network_steps": 150, "network_lr": 2e-3, "network_batch_size": 0,
     "network_validation_fraction": 0.0}
 
@@ -257,7 +258,7 @@ def register_rsd_residual(register: Callable[..., None], engine: str, factory: s
 #: Small, fast options of ``neural_volume_<engine>`` for the conformance kit (the kit's
 #: point scatterer at 0.5 m, amplitude "point"): a few planes, a small network.
 NEURAL_VOLUME_TEST_CONFIG: Mapping[str, object] = {
-    "amplitude": "point", "depth_range": [0.4, 0.6], "depth_step": 0.05, "workers": 1,
+    "prior": {"amplitude": "point", "depth": {"range": [0.4, 0.6], "step": 0.05}, "workers": 1},
     "network_hidden": [32, 32], "steps": 200, "device": "cpu"}
 
 
@@ -268,7 +269,7 @@ def register_neural_volume(register: Callable[..., None], engine: str, factory: 
     for ``engine``)."""
     register(
         f"neural_volume_{engine}", factory,
-        config="nlosfw.model.hybrid.volume:NeuralVolumeConfig",
+        config="nlosfw.model.hybrid.volume_config:NeuralVolumeConfig",
         requires=dict(ENGINES[NetworkEngine(engine)][1]),
         description=f"a network's non-negative hidden albedo propagated to the wall by RSD, "
                     f"{_ENGINE_TITLES[engine]}",

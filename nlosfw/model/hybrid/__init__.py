@@ -20,12 +20,12 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.model.hybrid.stack import PlaneStack, aligned_empty, plane_stack, stack_bytes
     from nlosfw.model.hybrid.training import BestStep, history_entry
     from nlosfw.model.hybrid.volume import (
-        NeuralVolumeConfig,
         NeuralVolumeFieldModel,
         TrainedVolume,
         VolumeProblem,
         volume_coordinates,
     )
+    from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig, VolumePriorOptions
 
 __all__ = [
     "aligned_empty",
@@ -42,6 +42,7 @@ __all__ = [
     "stack_bytes",
     "TrainedVolume",
     "volume_coordinates",
+    "VolumePriorOptions",
     "VolumeProblem",
 ]
 __getattr__, __dir__ = lazy_exports(__name__, __file__)

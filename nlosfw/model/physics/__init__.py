@@ -13,7 +13,14 @@ from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
     from nlosfw.model.physics.background import Background, WallBackground
-    from nlosfw.model.physics.config import RSDPriorConfig
+    from nlosfw.model.physics.config import (
+        CountsOptions,
+        DepthOptions,
+        LobeOptions,
+        PriorOptions,
+        ResponseOptions,
+        RSDPriorConfig,
+    )
     from nlosfw.model.physics.counts import CountsStop
     from nlosfw.model.physics.frequencies import fitted_frequencies
     from nlosfw.model.physics.lattice import plan_lattice, voxel_lattice
@@ -38,12 +45,17 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
 __all__ = [
     "Amplitude",
     "Background",
+    "CountsOptions",
     "CountsStop",
+    "DepthOptions",
     "direct_fields",
     "fitted_frequencies",
     "Likelihood",
+    "LobeOptions",
     "OperatorOptions",
     "plan_lattice",
+    "PriorOptions",
+    "ResponseOptions",
     "RSDPriorConfig",
     "RSDPriorFieldModel",
     "SceneOperator",

@@ -2,12 +2,12 @@
 quick coarse fit) and the lateral lattice (:func:`plan_lattice`, which also picks the
 frequencies the fit uses, :mod:`nlosfw.model.physics.frequencies`).
 
-Automatic depth planes: a quick fit of the same problem (``depth_iterations``) on a coarse
+Automatic depth planes: a quick fit of the same problem (``depth.iterations``) on a coarse
 lattice (the training spacing laterally, planes a quarter of the shortest wavelength of the
 lower half of the band apart, from the wall to half the capture's time span, within the
 run's depth range if the field carries it) finds the depths where a plane's largest
-contribution ||A e_v|| a_v reaches ``depth_threshold`` of the largest; the fine planes are
-those within ``depth_margin`` (plus half a coarse step) of them. Separate objects thus cost
+contribution ||A e_v|| a_v reaches ``depth.threshold`` of the largest; the fine planes are
+those within ``depth.margin`` (plus half a coarse step) of them. Separate objects thus cost
 separate clusters of planes, not the whole depth range between them.
 """
 
@@ -43,12 +43,12 @@ Solve = Callable[[SceneOperator, np.ndarray, int], np.ndarray]
 def plan_lattice(config: RSDPriorConfig, values: np.ndarray, samples: WallSamples,
                  field: PhasorField, options: OperatorOptions, solve: Solve
                  ) -> tuple[VoxelLattice, np.ndarray]:
-    """The voxel lattice a fit of ``field`` uses (planes over ``depth_range`` or from
-    :func:`depth_planes`, ``depth_step`` apart; ``lateral_step``) and the indices of the
+    """The voxel lattice a fit of ``field`` uses (planes over ``depth.range`` or from
+    :func:`depth_planes`, ``depth.step`` apart; ``lateral_step``) and the indices of the
     frequencies it fits; ``values`` as for :func:`depth_planes`."""
     shortest = 1.0 / float(field.frequencies.max())
-    if config.depth_range:
-        near, far = (float(v) for v in config.depth_range)
+    if config.depth.range:
+        near, far = (float(v) for v in config.depth.range)
         step = depth_step(config, field)
         depths = np.arange(near, far + step / 2, step)
     else:
@@ -59,14 +59,14 @@ def plan_lattice(config: RSDPriorConfig, values: np.ndarray, samples: WallSample
 
 
 def depth_step(config: RSDPriorConfig, field: PhasorField) -> float:
-    """The distance between voxel planes: ``depth_step``, or a fifth of the field's shortest
+    """The distance between voxel planes: ``depth.step``, or a fifth of the field's shortest
     wavelength."""
-    return config.depth_step or 1.0 / (5.0 * float(field.frequencies.max()))
+    return config.depth.step or 1.0 / (5.0 * float(field.frequencies.max()))
 
 
 def depth_planes(config: RSDPriorConfig, values: np.ndarray, samples: WallSamples,
                  field: PhasorField, options: OperatorOptions, solve: Solve) -> np.ndarray:
-    """Planes :func:`depth_step` apart within ``depth_margin`` of the planes where a quick fit on a
+    """Planes :func:`depth_step` apart within ``depth.margin`` of the planes where a quick fit on a
     coarse lattice finds the scene (see the module docstring); ``values``: the field
     without device legs on the wall grid of ``samples`` (canonical order, zero where not
     sampled), divided by its RMS; ``options``: the operator's."""
@@ -83,13 +83,13 @@ def depth_planes(config: RSDPriorConfig, values: np.ndarray, samples: WallSample
     wall = samples.layout
     lattice = voxel_lattice(wall, max(wall.spacing), depths)
     op = SceneOperator(lattice, wall, field.geometry, freqs, options, samples.mask)
-    albedo = solve(op, values[chosen], config.depth_iterations)
+    albedo = solve(op, values[chosen], config.depth.iterations)
     contribution = albedo * op.column_norms()
     profile = contribution.reshape(depths.size, -1).max(axis=1)
     if not profile.max() > 0:
-        raise FitError("rsd_prior: the coarse fit found no scene; give model.depth_range")
-    found = depths[profile >= config.depth_threshold * profile.max()]
-    reach = config.depth_margin + coarse / 2
+        raise FitError("rsd_prior: the coarse fit found no scene; give model.depth.range")
+    found = depths[profile >= config.depth.threshold * profile.max()]
+    reach = config.depth.margin + coarse / 2
     grid = np.arange(max(step, found.min() - reach), found.max() + reach + step / 2, step)
     near = np.abs(grid[:, None] - found[None, :]).min(axis=1) <= reach
     log.info("rsd_prior: the coarse fit's %d planes (%.3f-%.3f m) find the scene on %d in "
@@ -125,6 +125,6 @@ def deepest_path(field: PhasorField) -> float:
         pass
     f = np.sort(np.unique(field.frequencies))
     if f.size < 2:
-        raise ConfigError("model.depth_range", "give [near, far] (m): one frequency and no "
+        raise ConfigError("model.depth.range", "give [near, far] (m): one frequency and no "
                           "capture time span in the field's metadata cannot place the scene")
     return 1.0 / (2.0 * float(np.min(np.diff(f))))

@@ -19,8 +19,8 @@ The fitted albedo then predicts the field anywhere on the wall and at any freque
 a regular grid whose spacing and the voxels' are whole multiples of one another by FFT
 convolution, elsewhere by a direct sum over the non-zero voxels.
 
-Voxels: planes ``depth_step`` apart (default a fifth of the shortest wavelength; the
-feasibility study found about 1.3 cm necessary, 3.9 cm stalls) over ``depth_range``, or
+Voxels: planes ``depth.step`` apart (default a fifth of the shortest wavelength; the
+feasibility study found about 1.3 cm necessary, 3.9 cm stalls) over ``depth.range``, or
 chosen from the data (below), on a lateral lattice of spacing ``lateral_step`` (default
 half the shortest wavelength, a quarter for confocal scans, rounded down so that the
 training spacing is a whole multiple of it) covering the training grid and half a
@@ -35,9 +35,10 @@ Automatic depth planes: a quick coarse fit finds where the scene is
 
 Terms of real systems, each fitted jointly and reported in the fit report: ``background:
 constant``, a complex offset per frequency, constant over the wall (minimised out exactly:
-:mod:`nlosfw.model.physics.background`); ``temporal_response: gaussian`` and ``time_offset``,
-a gain per frequency (jitter, a time-origin offset in ps; :mod:`nlosfw.model.physics.response`);
-``fit_lobe``, a glossy lobe's exponent (:mod:`nlosfw.model.physics.lobe`; or a fixed ``lobe``).
+:mod:`nlosfw.model.physics.background`); ``response.temporal: gaussian`` and
+``response.time_offset``, a gain per frequency (jitter, a time-origin offset in ps;
+:mod:`nlosfw.model.physics.response`); ``lobe.fit``, a glossy lobe's exponent
+(:mod:`nlosfw.model.physics.lobe`; or a fixed ``lobe.exponent``).
 ``likelihood: poisson`` weighs each wall point by the inverse Poisson variance of its
 samples (:mod:`nlosfw.model.physics.likelihood`); ``likelihood: poisson_counts`` refines the
 albedo by the exact Poisson likelihood of the photon counts in every time bin, with a
@@ -71,7 +72,7 @@ from nlosfw.model.interface import (
     check_query,
     check_training_field,
 )
-from nlosfw.model.model_files import read_model_file, write_model_file
+from nlosfw.model.model_files import read_model_file, stored_config, write_model_file
 from nlosfw.model.physics.background import (
     BackgroundProjection,
     WallBackground,
@@ -153,8 +154,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         def operator(k: float, f: np.ndarray = freqs) -> SceneOperator:
             return SceneOperator(lattice, wall, field.geometry, f, self._options(lobe=k), mask)
 
-        lobe = (self.search_lobe(field, values, samples, lattice, chosen) if cfg.fit_lobe
-                else cfg.lobe)
+        lobe = (self.search_lobe(field, values, samples, lattice, chosen) if cfg.lobe.fit
+                else cfg.lobe.exponent)
         log.info("rsd_prior: %d planes in %.3f-%.3f m, %d x %d voxels, %d frequencies",
                  depths.size, depths.min(), depths.max(), *lattice.shape, freqs.size)
         history: list[dict[str, float]] = []
@@ -181,7 +182,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                                background, response, lobe)
         fitted = {**({} if background is None else background.summary(scale)),
                   **({} if response is None else response.summary()),
-                  **({"lobe_exponent": lobe} if cfg.fit_lobe else {}),
+                  **({"lobe_exponent": lobe} if cfg.lobe.fit else {}),
                   **({} if self._weights is None else weight_summary(self._weights, mask)),
                   **({} if counts is None else counts.summary)}
         return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
@@ -195,14 +196,14 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         the albedo fixed to start, then a search on the residual of albedos fitted again
         (``iterations`` / 4 from the best so far; :func:`search_response`)."""
         cfg = self.config
-        gaussian = cfg.temporal_response == TemporalResponse.gaussian
-        if not (gaussian or cfg.time_offset):
+        gaussian = cfg.response.temporal == TemporalResponse.gaussian
+        if not (gaussian or cfg.response.time_offset):
             albedo, result = self._solve(op, data, cfg.iterations, report)
             return albedo, None, result
         project = self._projector(op.frequencies)
         albedo, _ = self._solve(op, data, cfg.iterations)
         start = estimate_response(project(op.forward(albedo)), project(data), op.frequencies,
-                                  gaussian, cfg.time_offset)
+                                  gaussian, cfg.response.time_offset)
         best_value, best_albedo = math.inf, albedo     # the lowest residual so far
 
         def residual(response: SystemResponse) -> float:
@@ -217,7 +218,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             return value
 
         response = search_response(residual, start, float(np.abs(op.frequencies).max()),
-                                   cfg.response_rounds)
+                                   cfg.response.rounds)
         log.info("rsd_prior: system response %s", response.summary())
         albedo, result = self._solve(op, data, cfg.iterations, report,
                                      response.gains(op.frequencies, True), best_albedo)
@@ -277,7 +278,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
 
     def search_lobe(self, field: PhasorField, values: np.ndarray, samples: WallSamples,
                     lattice: VoxelLattice, chosen: np.ndarray) -> float:
-        """The lobe exponent k fitted on the kept samples (``fit_lobe``'s held-out search,
+        """The lobe exponent k fitted on the kept samples (``lobe.fit``'s held-out search,
         :func:`~nlosfw.model.physics.lobe.fit_lobe`) on ``lattice`` at the frequencies
         ``chosen``; arguments as for :meth:`plan_lattice`."""
         freqs = field.frequencies[chosen]
@@ -294,7 +295,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
         return OperatorOptions(amplitude=cfg.amplitude, dtype=dtype, workers=cfg.workers,
                                cache_mb=cfg.cache_mb if cache else 0.0,
-                               lobe=cfg.lobe if lobe is None else lobe)
+                               lobe=cfg.lobe.exponent if lobe is None else lobe)
 
     # ------------------------------------------------------------------ predict
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
@@ -353,7 +354,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         divided by ``scale`` (``neural_volume`` predicts through it)."""
         model = cls(config)
         model._fitted = _Fitted(lattice, np.asarray(albedo, dtype=np.float32), geometry, scale,
-                                lobe=config.lobe)
+                                lobe=config.lobe.exponent)
         return model
 
     @property
@@ -395,11 +396,9 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
 
     @classmethod
     def load(cls, path: str | Path) -> RSDPriorFieldModel:
-        from nlosfw.common.config import config_from_mapping
-
         header, arrays = read_model_file(path, MODEL_NAME)
         try:
-            model = cls(config_from_mapping(RSDPriorConfig, header["config"], "model"))
+            model = cls(stored_config(RSDPriorConfig, header))
             depths = np.asarray(arrays["depths"], dtype=float)
             lattice = VoxelLattice(depths, _pair(header["origin"]), _pair(header["step"]),
                                    (int(header["shape"][0]), int(header["shape"][1])))
@@ -411,7 +410,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                 np.asarray(arrays["background"], np.complex128))
             response = (SystemResponse.from_dict(header["response"]) if "response" in header
                         else None)
-            lobe = float(header.get("lobe", model.config.lobe))
+            lobe = float(header.get("lobe", model.config.lobe.exponent))
         except (KeyError, TypeError, ValueError, IndexError, ConfigError, DataError) as err:
             raise DataError(f"model file {path}: invalid {MODEL_NAME} file "
                             f"({type(err).__name__})") from None

@@ -186,8 +186,8 @@ FREQUENCIES = np.linspace(3.0, 6.0, 10)
 DEPTHS = [0.4, 0.6]
 #: Bright voxels (row, column of the lattice) on the plane at 0.5 m; the first is brightest.
 BRIGHT = [((12, 20), 1.0), ((22, 9), 0.4), ((8, 8), 0.3)]
-OPTIONS = {"depth_range": DEPTHS, "depth_step": 0.05, "lateral_step": 1 / N,
-           "workers": 1, "device": "cpu"}
+OPTIONS = {"prior": {"depth": {"range": DEPTHS, "step": 0.05}, "lateral_step": 1 / N,
+                     "workers": 1}, "device": "cpu"}
 
 
 @pytest.fixture(scope="module")
@@ -250,9 +250,13 @@ def test_bad_options_are_one_line_errors_naming_the_option(sparse_scene):
     with pytest.raises(ConfigError, match=r"model\.network.*no_such_network.*valid: .*siren"):
         model.fit(train)
     for option, value in (("steps", 0), ("network_hidden", []), ("albedo_start", 1.5),
-                          ("depth_range", [0.5])):
-        with pytest.raises(ConfigError, match=option):
-            load_plugins().registry.create("model", "neural_volume_torch", {option: value})
+                          ("prior.depth.range", [0.5]), ("prior.likelihood", "poisson")):
+        *groups, name = option.split(".")
+        options: dict = {name: value}
+        for group in reversed(groups):
+            options = {group: options}
+        with pytest.raises(ConfigError, match=option.replace(".", r"\.")):
+            load_plugins().registry.create("model", "neural_volume_torch", options)
 
 
 @pytest.fixture(scope="module")
@@ -430,7 +434,7 @@ def test_a_random_scan_fits_like_a_grid(backend, sparse_scene):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_fitted_lobe_carries_into_the_network(backend):
     """An 8 cm patch with a k = 8 lobe (analytic simulator, confocal 16 x 16 scan, every
-    other point kept): with ``fit_lobe`` rsd_prior's search finds k (7.3) and the network
+    other point kept): with ``lobe.fit`` rsd_prior's search finds k (7.3) and the network
     trains through the operator with it, predicting the held-out points far better than
     the Lambertian volume (measured, torch and JAX: -20.3 against -9.0 dB)."""
     from nlosfw.simulate import AnalyticSimulator, scene_from_config
@@ -445,11 +449,11 @@ def test_a_fitted_lobe_carries_into_the_network(backend):
     split = split_field(field, spatial_step=2, spectral="none")
     unseen = ~split.spatial_mask
     host = load_plugins()
-    options = {"depth_range": [0.5, 0.5], "lateral_step": 1 / 32, "workers": 1,
-               "device": "cpu", "seed": 1}
+    prior = {"depth": {"range": [0.5, 0.5]}, "lateral_step": 1 / 32, "workers": 1}
     errors, fitted = {}, {}
-    for name, extra in (("lambertian", {}), ("fitted", {"fit_lobe": True})):
-        model = host.registry.create("model", f"neural_volume_{backend}", {**options, **extra})
+    for name, lobe in (("lambertian", {}), ("fitted", {"lobe": {"fit": True}})):
+        model = host.registry.create("model", f"neural_volume_{backend}",
+                                     {"prior": {**prior, **lobe}, "device": "cpu", "seed": 1})
         fitted[name] = model.fit(split.train_field).fitted
         errors[name] = _heldout_nmse_db(field, unseen, model.predict(field.wall_xyz[..., :2],
                                                                      field.frequencies))

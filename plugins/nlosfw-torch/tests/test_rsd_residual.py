@@ -24,7 +24,7 @@ N = 12                                   # 12 x 12 wall points, 1/12 m apart
 FREQUENCIES = np.linspace(2.0, 4.0, 8)
 #: rsd_prior's options (a point scatterer in 0.3-0.7 m) and a small, short network.
 PRIOR = {"iterations": 60, "amplitude": "point", "l1_weight": 0.001, "workers": 1,
-         "depth_range": [0.3, 0.7]}
+         "depth": {"range": [0.3, 0.7]}}
 NETWORK = {"network_steps": 200, "network_lr": 2e-3, "network_batch_size": 0,
            "network_validation_fraction": 0.0, "network_hidden": [16, 16], "device": "cpu"}
 
@@ -54,7 +54,7 @@ def scene():
 
 def _residual_model(backend: str, **options):
     return load_plugins().registry.create("model", f"rsd_residual_{backend}",
-                                          {**PRIOR, **NETWORK, **options})
+                                          {"prior": PRIOR, **NETWORK, **options})
 
 
 def _heldout_nmse_db(full, held, predicted) -> float:
