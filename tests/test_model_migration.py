@@ -188,6 +188,20 @@ def test_the_testing_kits_engine_names_are_the_backend_names_with_a_warning():
         assert testing.assert_engine_matches_numpy is testing.assert_backend_matches_numpy
 
 
+def test_the_plugin_systems_engine_names_are_the_backend_names_with_a_warning():
+    import nlosfw.plugins as plugins
+    from nlosfw.plugins import BACKENDS, NetworkBackend, NetworkSpec
+
+    with pytest.warns(DeprecationWarning, match="use nlosfw.plugins.networks.NetworkBackend"):
+        assert plugins.NetworkEngine is NetworkBackend
+    with pytest.warns(DeprecationWarning, match="use nlosfw.plugins.networks.BACKENDS"):
+        assert plugins.ENGINES is BACKENDS
+    spec = NetworkSpec("pairs", NetworkBackend.jax, "x:y", "x:Y")
+    with pytest.warns(DeprecationWarning, match="NetworkSpec.backend"):
+        assert spec.engine is NetworkBackend.jax
+    assert spec.model_name == "pairs_jax"
+
+
 # ------------------------------------------------------------------ resumed sweeps
 def test_a_resumed_sweep_job_says_an_option_is_new_to_its_earlier_run(tmp_path):
     """A job run before the grouping (config.yaml with ``model.depth_range``) and resumed

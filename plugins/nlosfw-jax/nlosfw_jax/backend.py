@@ -1,4 +1,4 @@
-"""The JAX engine: runs any equinox module under the shared trainer, with optax's Adam.
+"""The JAX backend: runs any equinox module under the shared trainer, with optax's Adam.
 
 Why equinox: its modules are plain JAX pytrees (dataclasses of arrays), so one
 jitted step (``jax.value_and_grad`` + ``optax``) and ``vmap`` over a stacked batch of
@@ -70,7 +70,7 @@ def _name(path: tuple[Any, ...]) -> str:
 
 def _arrays(tree: Any) -> dict[str, Any]:
     """The arrays of ``tree`` by dotted path; a :class:`Fixed` array by the path of its
-    wrapper (``features.B``, as torch names a buffer), so files load across engines."""
+    wrapper (``features.B``, as torch names a buffer), so files load across backends."""
     found = {}
     for path, leaf in jax.tree_util.tree_leaves_with_path(tree, is_leaf=_is_fixed):
         value = leaf.value if _is_fixed(leaf) else leaf

@@ -33,5 +33,5 @@ class RSDResidualJax(RSDResidualFieldModel):
 
 
 __all__ = ["JaxBackend", "PEJax", "RSDResidualJax", "SirenJax", "TanhJax"]
-#: ``JaxEngine``, this module's name for the backend before "engine" meant the run engine only.
+#: ``JaxEngine``, the backend's name here before "engine" meant the run engine only.
 __getattr__ = moved_names(__name__, {"JaxEngine": "nlosfw_jax.backend:JaxBackend"})

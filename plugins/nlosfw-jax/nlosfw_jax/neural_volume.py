@@ -36,7 +36,7 @@ from nlosfw_jax.backend import Fixed, JaxBackend, resolve_device
 
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
-#: Adam as torch.optim.Adam with its defaults (the engine's).
+#: Adam as torch.optim.Adam with its defaults (the backend's).
 _ADAM = optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8)
 #: Voxels per piece of the network's pass on the CPU (see :func:`volume_albedo`).
 CPU_CHUNK = 4096
@@ -135,10 +135,10 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         """Adam on the relative squared error of the propagated albedo (full batch)."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
-        engine = JaxBackend(NetworkBuild(problem.network.network_factory,
+        net = JaxBackend(NetworkBuild(problem.network.network_factory,
                                         problem.network_config, problem.network_shape,
                                         who=who))
-        device = engine.device
+        device = net.device
         op = JaxPlaneOperator(problem.stack, device)
         coords, gain, data, train = (
             jax.device_put(a, device)
@@ -175,7 +175,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
             params = jax.tree.map(lambda p, u: p - lr * u, params, updates)
             return params, opt_state, loss, error, current
 
-        params, rest = engine.params, engine.rest
+        params, rest = net.params, net.rest
         opt_state = _ADAM.init(params)
         history: list[dict[str, float]] = []
         best = BestStep(cfg.patience)
@@ -201,7 +201,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         _, (error, current) = jax.jit(loss_of)(params, rest, constants)
         best.offer(k + 1, float(error) if has_val else None, current)
         fitted = np.asarray(jax.device_get(best.albedo))
-        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network,
+        return TrainedVolume(fitted, history, loss_value, net.parameters_per_network,
                              steps=k + 1, best_validation=best.validation)
 
 

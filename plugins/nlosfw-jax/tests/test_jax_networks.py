@@ -50,7 +50,7 @@ def _registry(**networks):
     @hookimpl
     def register_networks(register):
         for name, factory in networks.items():
-            register(name, engine="jax", factory=factory, config=NeuralFieldConfig)
+            register(name, backend="jax", factory=factory, config=NeuralFieldConfig)
 
     module = types.ModuleType("in_process_jax_networks")
     module.register_networks = register_networks

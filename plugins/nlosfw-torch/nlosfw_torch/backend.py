@@ -1,4 +1,4 @@
-"""The torch engine: runs any ``torch.nn.Module`` under the shared trainer.
+"""The torch backend: runs any ``torch.nn.Module`` under the shared trainer.
 
 The module maps normalised inputs (N, in_dim) float32 to (N, 2) = (Re, Im) or to a
 complex (N,). Its trainable arrays are its parameters with ``requires_grad``; its
@@ -116,7 +116,7 @@ class TorchBackend(Backend):
 
     def set_data(self, x: np.ndarray, y: np.ndarray, val_x: np.ndarray | None,
                  val_y: np.ndarray | None) -> None:
-        """As :meth:`Engine.set_data`; a network with ``precompute_inputs(x)`` (what its
+        """As :meth:`Backend.set_data`; a network with ``precompute_inputs(x)`` (what its
         forward can take instead of inputs it sees again and again, or None) gets that
         in place of the training and validation inputs."""
         super().set_data(x, y, val_x, val_y)

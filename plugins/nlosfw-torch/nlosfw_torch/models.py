@@ -33,5 +33,5 @@ class RSDResidualTorch(RSDResidualFieldModel):
 
 
 __all__ = ["PETorch", "RSDResidualTorch", "SirenTorch", "TanhTorch", "TorchBackend"]
-#: ``TorchEngine``, this module's name for the backend before "engine" meant the run engine only.
+#: ``TorchEngine``, the backend's name here before "engine" meant the run engine only.
 __getattr__ = moved_names(__name__, {"TorchEngine": "nlosfw_torch.backend:TorchBackend"})

@@ -176,10 +176,10 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         """Adam on the relative squared error of the propagated albedo (full batch)."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
-        engine = TorchBackend(NetworkBuild(problem.network.network_factory,
+        net = TorchBackend(NetworkBuild(problem.network.network_factory,
                                           problem.network_config, problem.network_shape,
                                           who=who))
-        device = engine.device
+        device = net.device
         op = TorchPlaneOperator(problem.stack, device)
         coords = torch.from_numpy(problem.coords).to(device)
         gain = torch.from_numpy(problem.gain).to(device)
@@ -190,12 +190,12 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         power = torch.abs(data) ** 2
         train_power = float(torch.sum(power * train).item())
         val_power = None if val is None else float(torch.sum(power * val).item())
-        state = {**engine.fixed, **engine.params}
-        opt = torch.optim.Adam(list(engine.params.values()), lr=cfg.lr)
+        state = {**net.fixed, **net.params}
+        opt = torch.optim.Adam(list(net.params.values()), lr=cfg.lr)
         chunk = CPU_CHUNK if device.type == "cpu" else None
 
         def network(x: torch.Tensor) -> torch.Tensor:
-            return cast(torch.Tensor, torch.func.functional_call(engine.network, state, (x,)))
+            return cast(torch.Tensor, torch.func.functional_call(net.network, state, (x,)))
 
         def albedo() -> torch.Tensor:
             return volume_albedo(network, coords, gain, problem.shift, chunk)
@@ -242,7 +242,7 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                 fitted = cast(torch.Tensor, best.albedo).cpu().numpy()
         finally:
             torch.set_num_threads(before)
-        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network,
+        return TrainedVolume(fitted, history, loss_value, net.parameters_per_network,
                              steps=k + 1, best_validation=best.validation)
 
 
