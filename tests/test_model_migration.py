@@ -202,6 +202,18 @@ def test_the_plugin_systems_engine_names_are_the_backend_names_with_a_warning():
     assert spec.model_name == "pairs_jax"
 
 
+def test_a_network_model_setting_engine_class_gets_it_as_backend_class():
+    from nlosfw.model.neural import Backend, NeuralFieldModel
+
+    class Mine(Backend):             # never instantiated here
+        pass
+
+    with pytest.warns(DeprecationWarning, match="Old.engine_class is deprecated"):
+        class Old(NeuralFieldModel):
+            engine_class = Mine
+    assert Old.backend_class is Mine
+
+
 # ------------------------------------------------------------------ resumed sweeps
 def test_a_resumed_sweep_job_says_an_option_is_new_to_its_earlier_run(tmp_path):
     """A job run before the grouping (config.yaml with ``model.depth_range``) and resumed

@@ -22,7 +22,8 @@ from nlosfw.model.neural.mlp import (
     network_inputs,
     thesis_architecture,
 )
-from nlosfw.model.neural.trainer import NeuralFieldModel, field_inputs
+from nlosfw.model.neural.steps import field_inputs
+from nlosfw.model.neural.trainer import NeuralFieldModel
 
 #: (family, mode) pairs every backend must evaluate like the numpy reference.
 BACKEND_CASES = [(family, mode) for family in ("tanh", "pe", "siren")

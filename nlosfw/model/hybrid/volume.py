@@ -75,7 +75,8 @@ from nlosfw.model.interface import (
 )
 from nlosfw.model.model_files import read_model_file, stored_config, write_model_file
 from nlosfw.model.neural.config import FieldMode, FieldShape, NeuralFieldConfig
-from nlosfw.model.neural.trainer import NeuralFieldModel, learning_rate
+from nlosfw.model.neural.steps import learning_rate
+from nlosfw.model.neural.trainer import NeuralFieldModel
 from nlosfw.model.physics.config import RSDPriorConfig, options_in_group
 from nlosfw.model.physics.frequencies import fitted_frequencies
 from nlosfw.model.physics.operator import OperatorOptions, SceneOperator, VoxelLattice

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -21,6 +22,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from nlosfw.common.config import config_from_mapping
+from nlosfw.common.deprecation import REMOVED_IN
 from nlosfw.common.errors import DataError, FitError
 from nlosfw.model.interface import (
     FieldModel,
@@ -34,65 +36,15 @@ from nlosfw.model.neural.backend import PREDICT_CHUNK, Backend, NetworkBuild
 from nlosfw.model.neural.config import (
     FieldMode,
     FieldShape,
-    LRSchedule,
     NeuralFieldConfig,
     Preset,
 )
 from nlosfw.model.neural.normalisation import FieldNormalisation
 from nlosfw.model.neural.smoothness import FrequencySmoothness
+from nlosfw.model.neural.steps import BatchStream, field_inputs, learning_rate
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
-
-
-def learning_rate(config: NeuralFieldConfig, step: int) -> float:
-    """Learning rate of (0-based) ``step``: linear warm-up, then the configured decay."""
-    lr, total = config.lr, config.steps
-    if step < config.warmup_steps:
-        return lr * (0.01 + 0.99 * step / config.warmup_steps)
-    span = max(1, total - config.warmup_steps - 1)
-    t = min(1.0, (step - config.warmup_steps) / span)
-    if config.lr_schedule == LRSchedule.cosine:
-        return lr * (config.lr_final + (1 - config.lr_final) * 0.5 * (1 + math.cos(math.pi * t)))
-    if config.lr_schedule == LRSchedule.exponential:
-        return lr * config.lr_final ** t
-    return lr
-
-
-
-def field_inputs(xy: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
-    """Network inputs (float32) from normalised coordinates (P, 2) and frequencies (F,).
-
-    Single mode (``f`` None): (P, 2) = x, y. Multi mode: (F * P, 3) = x, y, f,
-    frequency-major (row ``k * P + p`` is point p at frequency k).
-    """
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    if f is None:
-        return xy.astype(np.float32)
-    f = np.asarray(f, dtype=np.float64).reshape(-1, 1)
-    n_f, n_p = f.shape[0], xy.shape[0]
-    return np.concatenate([np.tile(xy, (n_f, 1)), np.repeat(f, n_p, axis=0)],
-                          axis=1).astype(np.float32)
-
-
-class _IndexStream:
-    """Batches of sample indices: consecutive slices of fresh random permutations."""
-
-    def __init__(self, n: int, batch: int, rng: np.random.Generator) -> None:
-        self.n, self.batch, self.rng = n, batch, rng
-        self.perm = rng.permutation(n)
-        self.pos = 0
-
-    def next(self) -> np.ndarray:
-        parts, need = [], self.batch
-        while need > 0:
-            if self.pos >= self.n:
-                self.perm, self.pos = self.rng.permutation(self.n), 0
-            take = self.perm[self.pos:self.pos + need]
-            parts.append(take)
-            self.pos += take.size
-            need -= take.size
-        return np.concatenate(parts).astype(np.int64)
 
 
 class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
@@ -111,6 +63,17 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
     backend_class: ClassVar[type[Backend]]
     network_factory: ClassVar[Callable[..., Any]]
     network_presets: ClassVar[Mapping[str, Preset]] = {}
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        """A subclass that sets ``engine_class``, ``backend_class``'s old name, gets it as
+        ``backend_class`` (with a DeprecationWarning)."""
+        super().__init_subclass__(**kwargs)
+        old = cls.__dict__.get("engine_class")
+        if old is not None and "backend_class" not in cls.__dict__:
+            warnings.warn(f"{cls.__name__}.engine_class is deprecated and will be removed in "
+                          f"nlosfw {REMOVED_IN}: set backend_class", DeprecationWarning,
+                          stacklevel=2)
+            cls.backend_class = old
 
     def __init__(self, config: NeuralFieldConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
@@ -255,7 +218,7 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
                smooth: FrequencySmoothness | None = None) -> FitReport:
         cfg: NeuralFieldConfig = self.config
         batch = cfg.batch_size if 0 < cfg.batch_size < n_train else 0
-        stream = _IndexStream(n_train, batch, rng) if batch else None
+        stream = BatchStream(n_train, batch, rng) if batch else None
         start = time.perf_counter()
         history: list[dict[str, float]] = []
         handles: list[Any] = []
