@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-from nlosfw.common.errors import DataError, StorageError
+from nlosfw.common.errors import ConfigError, DataError, StorageError
 
 #: errno values meaning "the disk (or the quota) is full".
 _FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
@@ -85,6 +85,23 @@ def storage_error(path: Path, err: OSError, written: int | None = None) -> Stora
         reason = "read-only file system" if err.errno == errno.EROFS else "permission denied"
         return StorageError(f"{path.parent}: cannot write there ({reason})")
     return None
+
+
+def output_error(err: OSError, option: str, path: Path | None = None
+                 ) -> ConfigError | StorageError | None:
+    """The one-line error of ``err`` writing to ``path`` (else ``err.filename``) in the
+    output location ``option`` names: when it cannot be written (EROFS, EACCES, EPERM) a
+    refusal (:class:`ConfigError`, exit status 2) naming the nearest existing folder on the
+    way; a full disk's :func:`storage_error`; None for any other error."""
+    where = Path(path if path is not None else err.filename or ".")
+    if err.errno not in _UNWRITABLE:
+        return storage_error(where, err)
+    target = Path(os.path.abspath(where))
+    while not target.exists() and target != target.parent:
+        target = target.parent
+    reason = "read-only file system" if err.errno == errno.EROFS else "permission denied"
+    return ConfigError(option, f"{target} cannot be written ({reason}); choose another "
+                               "output directory")
 
 
 @contextlib.contextmanager
