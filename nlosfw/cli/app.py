@@ -27,6 +27,7 @@ from hydra.experimental.callback import Callback
 
 from nlosfw.cli import outcomes, workers
 from nlosfw.cli.errors import report_job_failure, report_user_error, unexpected_error
+from nlosfw.cli.flags import refuse_flags
 from nlosfw.cli.reporter import ConsoleReporter
 from nlosfw.common.errors import ConfigError, NlosfwError, one_line
 from nlosfw.common.files import output_error
@@ -46,9 +47,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: Hydra flags nlosfw refuses: ``--experimental-rerun`` unpickles a file (code would run).
-REFUSED_FLAGS = ("--experimental-rerun",)
-
 
 def main(argv: Sequence[str]) -> int:
     """Run the Hydra app with ``argv`` (without the program name); return the exit status."""
@@ -56,13 +54,9 @@ def main(argv: Sequence[str]) -> int:
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    refuse_flags(argv)  # before Hydra's parser sees them, in any spelling it accepts
     argv = normalise_overrides(argv)
     check_override_shapes(argv)
-    for arg in argv:
-        if arg.split("=", 1)[0] in REFUSED_FLAGS:
-            raise ConfigError("", f"{arg.split('=', 1)[0]} is not supported: it unpickles a "
-                                  "file, which can run any code; run the configuration "
-                                  "again from its overrides instead")
     from nlosfw.plugins import load_plugins
 
     host = load_plugins()

@@ -1,8 +1,9 @@
 """Untrusted text (file names, scene names, metadata of capture files) made safe for each
 output it reaches: terminals, rich markup, matplotlib titles, HTML links, CSV cells,
-Markdown, JSON. Pure functions of strings, no third-party imports (rich and matplotlib
-are not loaded by ``import nlosfw``); each output calls its neutraliser on every piece
-of text that came from input.
+Markdown, JSON, and Hydra overrides and OmegaConf values (where it stays literal text,
+never an interpolation or override syntax). Pure functions of strings, no third-party
+imports (rich and matplotlib are not loaded by ``import nlosfw``); each output calls its
+neutraliser on every piece of text that came from input.
 """
 
 from __future__ import annotations
@@ -24,6 +25,10 @@ _MARKUP = re.compile(r"(\\*)(\[[a-zA-Z#/@][^\[]*?\]|\[/\])")
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 #: Markdown that could make a link, code, a table cell's end or a backslash escape.
 _MARKDOWN_SPECIAL = re.compile(r"([\\`|\[\]])")
+#: The start of an OmegaConf interpolation, with the backslashes before it.
+_INTERPOLATION = re.compile(r"(\\*)\$\{")
+#: A single quote with the backslashes before it.
+_QUOTE = re.compile(r"(\\*)'")
 
 
 def controls_visible(text: str) -> str:
@@ -85,6 +90,24 @@ def markdown(text: object) -> str:
     backslash-escaped."""
     escaped = html.escape(visible(str(text)), quote=False)
     return _MARKDOWN_SPECIAL.sub(r"\\\1", escaped)
+
+
+def omegaconf_literal(text: str) -> str:
+    """``text`` as an OmegaConf string value that resolves to ``text`` itself: each ``${``
+    escaped (``\\${``, the backslashes before it doubled), so no part of it is ever an
+    interpolation (``${oc.env:NAME}`` would read an environment variable)."""
+    return _INTERPOLATION.sub(lambda m: m.group(1) * 2 + "\\${", text)
+
+
+def override_value(text: str) -> str:
+    """``text`` as the value of a Hydra override (``key=VALUE``) that composes to ``text``
+    itself, whatever it holds (quotes, backslashes, ``${``, ``=``, ``,``, brackets,
+    spaces, newlines): single-quoted, as :func:`omegaconf_literal`, a quote escaped and
+    the backslashes before a quote (the closing one included) doubled, the only
+    backslashes Hydra's grammar un-escapes in a quoted value."""
+    inner = _QUOTE.sub(lambda m: m.group(1) * 2 + "\\'", omegaconf_literal(text))
+    trailing = len(inner) - len(inner.rstrip("\\"))
+    return "'" + inner + "\\" * trailing + "'"
 
 
 def json_safe(value: object) -> object:
