@@ -43,6 +43,22 @@ def is_regular_file(path: str | Path, follow: bool = True) -> bool:
     return stat.S_ISREG(info.st_mode)
 
 
+def unwritable_reason(folder: str | Path) -> str | None:
+    """Why nothing can be created in the existing folder ``folder`` (``permission denied``,
+    ``read-only file system``), or None when it can."""
+    if os.access(folder, os.W_OK | os.X_OK):
+        return None
+    try:  # tell a read-only file system from missing permissions
+        probe = os.open(folder, os.O_RDONLY)
+        os.close(probe)
+        reason = "permission denied"
+        if hasattr(os, "statvfs") and os.statvfs(folder).f_flag & os.ST_RDONLY:
+            reason = "read-only file system"
+    except OSError as err:
+        reason = os.strerror(err.errno or errno.EACCES)
+    return reason
+
+
 def format_bytes(n: float) -> str:
     """``n`` bytes in a short human form: ``512 B``, ``1.5 MB`` (decimal units, as ``ls -h
     --si`` and file browsers show them)."""
