@@ -152,6 +152,37 @@ def test_override_value_composes_to_the_text_itself():
                                       resolve=True)["key"] == text, repr(text)
 
 
+@pytest.mark.parametrize("script", ["sparsity_study.py", "sparsity_real.py"])
+def test_the_study_benchmarks_pass_capture_and_sweep_names_literally(tmp_path, monkeypatch,
+                                                                     script):
+    """A capture named as the Zaragoza dataset names its files (brackets, commas), with a
+    quote and an interpolation, and a sweep folder with a comma: the command the benchmark
+    runs composes both as written."""
+    import importlib.util
+    import sys
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from omegaconf import OmegaConf
+
+    benchmarks = Path(__file__).resolve().parents[2] / "benchmarks"
+    monkeypatch.syspath_prepend(str(benchmarks))   # sparsity_real imports sparsity_study
+    spec = importlib.util.spec_from_file_location(f"under_test_{script[:-3]}",
+                                                  benchmarks / script)
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, module)
+    spec.loader.exec_module(module)
+    capture = tmp_path / "bunny_l[0.00,-0.50,0.00]_r[1.57] it's ${oc.env:HOME}.mat"
+    sweep = tmp_path / "sweeps, 1"
+    command = module.sweep_command(sweep, capture, [])
+    given = {}
+    for override in OverridesParser.create().parse_overrides(command[5:]):
+        value = override.value()
+        given[override.key_or_group] = OmegaConf.to_container(
+            OmegaConf.create({"v": getattr(value, "text", value)}), resolve=True)["v"]
+    assert given["capture.path"] == str(capture)
+    assert given["hydra.sweep.dir"] == str(sweep)
+
+
 # ------------------------------------------------------------------ Python API
 def test_a_mapping_s_text_is_never_an_interpolation(secret):
     """A scene mapping given to the Python API keeps its text as written."""
