@@ -34,7 +34,7 @@ class RunRecord:
     overrides: tuple[str, ...] = ()
     thesis: Mapping[str, Any] = field(default_factory=dict)
     """The run's ``thesis`` config (reference values of a thesis preset), if any."""
-    config: Mapping[str, Any] = field(default_factory=dict)
+    config: Mapping[str, object] = field(default_factory=dict)
     """The run's resolved configuration (its config.yaml), if it has one."""
 
 

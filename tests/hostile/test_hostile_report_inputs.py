@@ -270,3 +270,28 @@ def test_a_full_disk_is_one_line_exit_1(workdir, runs, small_disk):
     assert "no space left on device" in lines[0] or "not enough disk space" in lines[0]
     assert "Traceback" not in result.stderr
     assert not (disk.path / "report").exists()          # no half-written report left
+
+
+# ------------------------------------------------------------------ the run's own log
+def test_escape_sequences_in_a_capture_name_reach_no_run_log(workdir, tools):
+    """The command line's run.log and the Python API's both show a file name's control
+    characters as text."""
+    import h5py
+
+    from nlosfw.capture.hdf5 import write_capture
+    from nlosfw.common.text import override_value
+    from nlosfw.testing import fixtures
+
+    path = write_capture(workdir / f"c{ESCAPES}.hdf5", fixtures.tiny_capture())
+    with h5py.File(path, "a") as f:     # the reader logs the file's name: "assuming +z"
+        del f["sensor_grid_normals"]
+    quick = ("model=interp", "imager=fft", "figures.enabled=false",
+             "transform.n_frequencies=21", "reconstruction.n_depths=4", "stop_after=capture")
+    result = tools.run(f"capture.path={override_value(str(path))}", *quick, "hydra.run.dir=cli")
+    assert result.returncode == 0, result.stderr
+    nlosfw.run([f"capture.path={override_value(str(path))}", *quick],
+               output_dir=workdir / "api")
+    for run_dir in (workdir / "cli", workdir / "api"):
+        log = (run_dir / "run.log").read_text(encoding="utf-8")
+        assert "c\\x1b]0;pwned\\x07\\x9b31m.hdf5" in log, log
+        assert not {ESC, BEL, CSI} & set(log)
