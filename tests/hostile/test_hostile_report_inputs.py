@@ -225,29 +225,33 @@ def test_a_dangling_link_where_the_report_goes_is_one_line(workdir, tools, runs)
     assert (runs / "report").is_symlink() and not (workdir / "nowhere").exists()
 
 
+def _quiet(*cmd: str) -> bool:
+    return subprocess.run(list(cmd), capture_output=True, check=False).returncode == 0
+
+
 @pytest.fixture()
 def unwritable():
     """``unwritable(path)``: the folder ``path`` made impossible to write into for this
-    process (immutable for root, whom permissions do not stop; read-only otherwise)."""
-    made: list[tuple[Path, bool]] = []
+    process: read-only for a user; for root, whom permissions do not stop, immutable
+    (``chattr +i``) or else mounted read-only over itself (skips when neither is allowed)."""
+    undo: list[tuple[str, ...]] = []
 
     def make(path: Path) -> None:
-        if os.geteuid() == 0:
-            done = subprocess.run(["chattr", "+i", str(path)], capture_output=True,
-                                  check=False)
-            if done.returncode != 0:
-                pytest.skip(f"cannot make a folder immutable here: {done.stderr.strip()}")
-            made.append((path, True))
-        else:
+        if os.geteuid() != 0:
             path.chmod(0o555)
-            made.append((path, False))
+            undo.append(("chmod", "755", str(path)))
+        elif _quiet("chattr", "+i", str(path)):
+            undo.append(("chattr", "-i", str(path)))
+        elif _quiet("mount", "--bind", str(path), str(path)):
+            undo.append(("umount", "-l", str(path)))
+            if not _quiet("mount", "-o", "remount,ro,bind", str(path)):
+                pytest.skip("cannot make a folder read-only here (no remount)")
+        else:
+            pytest.skip("cannot make a folder unwritable for root here (no chattr, no mount)")
 
     yield make
-    for path, immutable in made:
-        if immutable:
-            subprocess.run(["chattr", "-i", str(path)], check=False)
-        else:
-            path.chmod(0o755)
+    for command in reversed(undo):
+        subprocess.run(list(command), capture_output=True, check=False)
 
 
 def test_a_folder_that_cannot_be_written_is_one_line_exit_2(workdir, tools, runs,
@@ -255,8 +259,9 @@ def test_a_folder_that_cannot_be_written_is_one_line_exit_2(workdir, tools, runs
     unwritable(runs)
     result = tools.run("report", str(runs))
     assert result.returncode == 2
-    assert tools.one_error_line(result) == (
-        f"error: {runs}: a report cannot be written there (permission denied)")
+    assert tools.one_error_line(result) in (
+        f"error: {runs}: a report cannot be written there ({reason})"
+        for reason in ("permission denied", "read-only file system"))
     assert nothing_written(runs)
 
 
