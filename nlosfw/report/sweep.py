@@ -1,7 +1,8 @@
 """A sweep's report (``python -m nlosfw report DIR``): every run under DIR in one report.
 
-Writes into ``DIR/report/`` (or ``report-2``, ... if that exists: earlier reports are
-never overwritten):
+Reads only regular files inside DIR, each bounded (:mod:`nlosfw.report.inputs`), and
+writes into a new ``DIR/report/`` (or ``report-2``, ... if that exists: earlier reports
+are never overwritten; a report that fails leaves no folder behind):
 
 * ``report.csv``: one row per run (its scene or capture file, sparsity, seed, field
   errors and reconstruction scores);
