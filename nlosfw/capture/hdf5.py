@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 from collections.abc import Iterable
 from enum import IntEnum
 from pathlib import Path
@@ -25,7 +26,7 @@ from nlosfw.capture.data import YTAL_FIELDS, Capture
 from nlosfw.capture.dataset_shapes import FIXED, ytal_shapes, znlos_shapes
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.common import yaml_safe
-from nlosfw.common.errors import DataError, one_line
+from nlosfw.common.errors import ConfigError, DataError, one_line
 from nlosfw.common.hdf5 import new_file, write_header
 from nlosfw.common.hdf5_guard import (
     Expected,
@@ -72,8 +73,16 @@ def write_capture(path: str | Path, capture: Capture, compression: int = 0,
     never replaced unless ``overwrite``. ``nlosfw_attributes`` marks the file as
     nlosfw's own (root attributes only: the datasets are y-tal's either way).
     """
-    if not 0 <= compression <= 9:
-        raise DataError(f"compression: must be a gzip level 0-9, got {compression}")
+    path = _path(path)
+    if not isinstance(capture, Capture):
+        raise ConfigError("capture", f"write_capture needs a Capture, got "
+                                     f"{type(capture).__name__}")
+    if isinstance(compression, bool) or not isinstance(compression, (int, np.integer)) or \
+            not 0 <= compression <= 9:
+        raise ConfigError("compression", f"must be a gzip level 0-9, got {compression!r}")
+    for option, value in (("overwrite", overwrite), ("nlosfw_attributes", nlosfw_attributes)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(option, f"must be true or false, got {value!r}")
     with new_file(path, overwrite=overwrite) as f:
         if nlosfw_attributes:
             write_header(f, NLOSFW_CAPTURE_TYPE)
@@ -88,13 +97,21 @@ def read_capture(path: str | Path) -> Capture:
     Every problem (not HDF5, truncated, missing or malformed field, NaN in H,
     mismatched grids) raises :class:`DataError` naming the file and the field.
     """
-    path = Path(path)
+    path = _path(path)
     raw = read_fields(path)
     if "data" in raw and "H" not in raw:
         from nlosfw.capture.znlos_layout import znlos_to_ytal
 
         raw = znlos_to_ytal(raw, path)
     return capture_from_fields(raw, path)
+
+
+def _path(path: object) -> Path:
+    """A file path given as ``str`` or ``os.PathLike``; a ConfigError naming ``path`` else."""
+    if isinstance(path, os.PathLike) or (isinstance(path, str) and path):
+        return Path(path)
+    raise ConfigError("path", f"expected a path (str or pathlib.Path), got {path!r} "
+                              f"({type(path).__name__})")
 
 
 def read_fields(path: Path, names: Iterable[str] | None = None) -> dict[str, Any]:
