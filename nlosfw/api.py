@@ -97,7 +97,8 @@ _FILES = ("tofgrid", "background")
 def _preprocessing_value(key: str, value: object) -> object:
     """``value`` of preprocessing option ``key`` as ``capture.*`` takes it."""
     if key in _FILES:
-        return str(_file_path(value, f"capture.{key}"))
+        empty = isinstance(value, str) and not value                       # '': none
+        return "" if empty else _file_path(value, f"capture.{key}")
     if key in _SHORTHAND and not isinstance(value, Mapping) and not \
             dataclasses.is_dataclass(value):
         plain = list(value) if isinstance(value, (tuple, list, np.ndarray)) else value
@@ -105,10 +106,10 @@ def _preprocessing_value(key: str, value: object) -> object:
     return value
 
 
-def _file_path(value: object, option: str) -> str | Path:
+def _file_path(value: object, option: str) -> str:
     """A path given as ``str`` or ``os.PathLike``; a ConfigError naming ``option`` else."""
     if isinstance(value, os.PathLike):
-        return Path(os.fspath(value))
+        value = os.fspath(value)
     if not isinstance(value, str) or not value:
         raise ConfigError(option, f"expected a path (str or pathlib.Path), got "
                                   f"{_shown(value)}")

@@ -154,6 +154,7 @@ def test_time_crop_and_a_path_object_work(data, tmp_path):
     assert nlosfw.load_capture(data["path"], time_crop=[100, 300]).H.shape[0] == 200
     with pytest.raises(nlosfw.ConfigError, match=r"^capture\.background: file not found"):
         nlosfw.load_capture(data["path"], background=tmp_path / "missing.hdf5")
+    assert nlosfw.load_capture(data["path"], tofgrid="").H.shape[0] == 1024   # '': none
 
 
 def test_an_unknown_plugin_name_is_a_config_error_naming_the_keyword(data):
