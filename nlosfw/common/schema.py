@@ -11,8 +11,9 @@ mapping against the same twin:
 1. :func:`fill` writes a mapping into a schema node one value at a time, so that OmegaConf
    checks each name and type and a mistake names its exact option
    (``model.items[0].count``). On top of OmegaConf's rules, a bool must be written as a
-   bool (OmegaConf would read ``"yes"`` or ``1`` as true) and a whole float is accepted
-   as an integer. A node Hydra composed is already checked and needs no filling;
+   bool (OmegaConf would read ``"yes"`` or ``1`` as true), a whole float is accepted
+   as an integer, and text is kept as written (a ``${...}`` in it is never resolved). A
+   node Hydra composed is already checked and needs no filling;
 2. :func:`build` turns a checked node into the frozen dataclass: it refuses options added
    with ``+key=value`` and NaN numbers, makes tuples (checking fixed lengths), and runs
    each dataclass's ``__post_init__`` range checks with the option's dotted name
@@ -56,6 +57,7 @@ from omegaconf.errors import (
 )
 
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.text import omegaconf_literal
 
 _NONE_TYPE = type(None)
 
@@ -189,7 +191,11 @@ def _put(parent: Any, key: Any, value: Any, where: str) -> None:
         for i, item in enumerate(items):
             _put(child, i, item, f"{where}[{i}]")
     else:
-        _set(parent, key, value, where, value)
+        # a mapping's text is data: stored escaped, so that reading it back never resolves
+        # an interpolation in it (``${oc.env:NAME}`` in a file name or a scene's name)
+        stored = omegaconf_literal(value) if isinstance(value, str) and "${" in value \
+            else value
+        _set(parent, key, stored, where, value)
         kind = OmegaConf.get_type(parent, key)   # or a list index
         if kind is bool and not isinstance(value, bool):
             raise ConfigError(where, f"must be true or false, got {_describe(value)}")

@@ -42,7 +42,7 @@ from typing import IO, TypedDict
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.common.files import TEMPORARY_NAME, open_locked, storage_error, write_text
+from nlosfw.common.files import TEMPORARY_NAME, open_locked, output_error, write_text
 from nlosfw.common.hashing import canonical_digest
 
 log = logging.getLogger(__name__)
@@ -290,7 +290,8 @@ class RunHold:
             existed = lock_path.exists()
             lock = open_locked(lock_path, blocking=False, mode="a+")
         except OSError as err:
-            raise (storage_error(lock_path, err) or err) from None
+            option = "hydra.sweep.dir" if resume else "hydra.run.dir"
+            raise (output_error(err, option, lock_path) or err) from None
         if lock is None:
             holder = _lock_holder(lock_path) or "unknown"
             raise ConfigError("", f"{run_dir}: another nlosfw run (process {holder}) is "

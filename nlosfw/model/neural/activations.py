@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosfw.common.config import require
-from nlosfw.model.neural.config import FieldShape, NeuralFieldConfig
+from nlosfw.model.neural.config import FieldShape, NeuralFieldConfig, mlp_shapes
 from nlosfw.model.neural.mlp import uniform_layer
 
 
@@ -41,6 +41,12 @@ class WireFieldConfig(NeuralFieldConfig):
         super().__post_init__()
         require(self.omega0 > 0, "omega0", f"must be > 0, got {self.omega0}")
         require(self.scale0 >= 0, "scale0", f"must be >= 0, got {self.scale0}")
+
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """A real first layer, then complex layers stored as (re, im) pairs."""
+        shapes = mlp_shapes(wire_widths(self, shape))
+        return {name: (size if name.startswith("layers.0.") else (2, *size))
+                for name, size in shapes.items()}
 
 
 @dataclass(frozen=True)

@@ -131,6 +131,24 @@ class NeuralFieldConfig(FieldModelConfig):
         require(self.smoothness_points >= 1, "smoothness_points",
                 f"must be >= 1, got {self.smoothness_points}")
 
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """The arrays of one network of these options for data of ``shape`` (trainable and
+        fixed, by name, with the shapes its initial state has), from the options alone:
+        nothing is allocated and no backend imported, so the memory a network needs is
+        known before a run. Default: an MLP ``in_dim -> hidden -> out_dim``
+        (:func:`mlp_shapes`); a network of another layout overrides it."""
+        return mlp_shapes([shape.in_dim, *self.hidden, shape.out_dim])
+
+
+def mlp_shapes(dims: list[int], prefix: str = "") -> dict[str, tuple[int, ...]]:
+    """The arrays of linear layers ``dims[0] -> ... -> dims[-1]``: ``<prefix>layers.<i>.weight``
+    (fan_in, fan_out) and ``<prefix>layers.<i>.bias`` (fan_out,)."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    for i, (fan_in, fan_out) in enumerate(zip(dims[:-1], dims[1:], strict=True)):
+        shapes[f"{prefix}layers.{i}.weight"] = (int(fan_in), int(fan_out))
+        shapes[f"{prefix}layers.{i}.bias"] = (int(fan_out),)
+    return shapes
+
 
 class FieldShapeDict(TypedDict):
     """A :class:`FieldShape` as plain values."""

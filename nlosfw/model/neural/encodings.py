@@ -22,7 +22,7 @@ import numpy as np
 
 from nlosfw.common.config import require
 from nlosfw.common.errors import FitError
-from nlosfw.model.neural.config import FieldMode, FieldShape, NeuralFieldConfig
+from nlosfw.model.neural.config import FieldMode, FieldShape, NeuralFieldConfig, mlp_shapes
 from nlosfw.model.neural.mlp import uniform_layer
 
 #: Hashing primes of each grid axis (Mueller et al. 2022; the first axis is not scrambled).
@@ -50,6 +50,11 @@ class FourierFieldConfig(NeuralFieldConfig):
         require(self.sigma > 0, "sigma", f"must be > 0, got {self.sigma}")
         require(self.frequency_sigma is None or self.frequency_sigma > 0, "frequency_sigma",
                 f"must be > 0 (or null: sigma), got {self.frequency_sigma}")
+
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """B (fixed), then the ReLU MLP on the 2 x features features."""
+        return {"features.B": (shape.in_dim, self.features),
+                **mlp_shapes([2 * self.features, *self.hidden, shape.out_dim], "mlp.")}
 
 
 @dataclass(frozen=True)
@@ -87,6 +92,14 @@ class HashGridFieldConfig(NeuralFieldConfig):
                 "finest_resolution", f"must be 0 (the training grid) or >= base_resolution "
                 f"({self.base_resolution}), got {self.finest_resolution}")
         require(self.init_scale >= 0, "init_scale", f"must be >= 0, got {self.init_scale}")
+
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """The tables of every level (:func:`hash_grid_layout`), then the ReLU MLP."""
+        layout = hash_grid_layout(self, shape)
+        tables = {f"encoding.tables.{level}": (rows, layout.features)
+                  for level, rows in enumerate(layout.table_sizes)}
+        return {**tables, **mlp_shapes([layout.encoded_dim, *self.hidden, shape.out_dim],
+                                       "mlp.")}
 
 
 # --------------------------------------------------------------------------- layouts

@@ -33,6 +33,7 @@ from nlosfw.model.neural.config import (
     FieldMode,
     FieldShape,
     NeuralFieldConfig,
+    mlp_shapes,
     set_choice,
 )
 
@@ -90,6 +91,11 @@ class PEFieldConfig(NeuralFieldConfig):
         require(0 <= self.octaves <= 16, "octaves", f"must be in [0, 16], got {self.octaves}")
         require(0 <= self.frequency_octaves <= 16, "frequency_octaves",
                 f"must be in [0, 16], got {self.frequency_octaves}")
+
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """The MLP on the encoded inputs (:func:`resolve_architecture`'s widths)."""
+        arch = resolve_architecture("pe", self, shape.grid_shape, shape.n_frequencies)
+        return mlp_shapes([arch.in_dim, *arch.hidden, arch.out_dim])
 
 
 @dataclass(frozen=True)
