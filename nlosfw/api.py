@@ -55,7 +55,8 @@ def simulate_scene(scene: Scene | str | Mapping[str, object], simulator: str = "
     asks for is added.
     """
     scene = _scene(scene)
-    return _create(PluginKind.SIMULATOR, simulator, "simulator", options).simulate(scene)
+    name = _plugin(PluginKind.SIMULATOR, simulator, "simulator")
+    return _host().registry.create(PluginKind.SIMULATOR, name, options).simulate(scene)
 
 
 def load_capture(path: str | Path, format: str | None = None,
@@ -143,8 +144,8 @@ def transform_capture(capture: Capture, transform: str = "fft", **options: objec
     """The phasor field of ``capture`` (values ``[frequency, y, x]``) by transform plugin
     ``transform`` (``fft``, ``wavelet``) with its ``options`` (``n_frequencies=51``)."""
     _of_type(capture, Capture, "capture", "a Capture")
-    return _create(PluginKind.PHASOR_TRANSFORM, transform, "transform", options
-                   ).transform(capture)
+    name = _plugin(PluginKind.PHASOR_TRANSFORM, transform, "transform")
+    return _host().registry.create(PluginKind.PHASOR_TRANSFORM, name, options).transform(capture)
 
 
 def fit_model(field: PhasorField, model: str = "interp", **options: object) -> FieldModel:
@@ -155,7 +156,8 @@ def fit_model(field: PhasorField, model: str = "interp", **options: object) -> F
     report (steps, seconds, losses), create the plugin and call its ``fit`` yourself.
     """
     _of_type(field, PhasorField, "field", "a PhasorField")
-    fitted = _create(PluginKind.FIELD_MODEL, model, "model", options)
+    fitted = _host().registry.create(
+        PluginKind.FIELD_MODEL, _plugin(PluginKind.FIELD_MODEL, model, "model"), options)
     fitted.fit(field)
     return fitted
 
@@ -187,7 +189,8 @@ def reconstruct(field: PhasorField, depths: Sequence[float] | np.ndarray,
         _of_type(grid, PhasorField, "grid", "a PhasorField (or None: the field's own)")
     planes = _depths(depths)
     voxels = wall_voxels(field if grid is None else grid, planes)
-    return _create(PluginKind.IMAGER, imager, "imager", options).reconstruct(field, voxels)
+    name = _plugin(PluginKind.IMAGER, imager, "imager")
+    return _host().registry.create(PluginKind.IMAGER, name, options).reconstruct(field, voxels)
 
 
 def _depths(depths: object) -> np.ndarray:
@@ -251,16 +254,14 @@ def _scene(scene: Scene | str | Mapping[str, object]) -> Scene:
                       f"{type(scene).__name__}")
 
 
-def _create(kind: PluginKind, name: object, option: str, options: Mapping[str, object]
-            ) -> Any:
-    """Plugin ``name`` of ``kind`` with ``options``; a ConfigError naming ``option`` (the
-    function's keyword) for a name that is not a string or not a plugin of that kind."""
-    registry = _host().registry
-    known = registry.names(kind)
+def _plugin(kind: PluginKind, name: object, option: str) -> str:
+    """The plugin name ``name`` of ``kind``; a ConfigError naming ``option`` (the function's
+    keyword) for a name that is not a string or not a plugin of that kind."""
+    known = _host().registry.names(kind)
     if _name(name, option) not in known:
         raise ConfigError(option, f"unknown {kind.value} plugin {name!r}; valid: "
                                   f"{', '.join(known)}")
-    return registry.create(kind, str(name), options)
+    return str(name)
 
 
 def _host() -> PluginHost:

@@ -191,7 +191,7 @@ class Expected:
                             f"expected {self.what}; refused before reading it")
 
 
-#: Any shape (sized against the memory available only).
+#: A shape of any size (sized against the memory available only).
 ANY_SHAPE = Expected("any shape", lambda shape: True)
 
 
@@ -210,7 +210,7 @@ def points(*counts: int, what: str) -> Expected:
 
 
 def ranks(*allowed: int, what: str) -> Expected:
-    """Any shape of one of the ``allowed`` numbers of axes."""
+    """A shape of any size with one of the ``allowed`` numbers of axes."""
     return Expected(what, lambda shape: len(shape) in allowed)
 
 

@@ -214,7 +214,7 @@ def test_every_networks_shapes_are_its_initial_states(mode):
 def test_counting_imports_no_backend():
     code = ("import sys; from nlosfw.plugins import load_plugins; "
             "from nlosfw.pipeline.model_budget import plugin_requires; "
-            "from nlosfw.model.neural_config import FieldShape, FieldMode; "
+            "from nlosfw.model.neural import FieldShape, FieldMode; "
             "r = plugin_requires(load_plugins()); s = FieldShape(FieldMode.multi, (8, 8), 5); "
             "print(r.parameters('siren_torch', {'hidden': [10]}, s), "
             "r.parameters('neural_volume_jax', {'network': 'hashgrid'}, s) > 0, "
