@@ -15,6 +15,7 @@ from nlosfw.common.config import (
     require_threads,
 )
 from nlosfw.common.cores import available_cores
+from nlosfw.common.deprecation import moved_names
 from nlosfw.common.errors import (
     USER_ERROR_EXIT_STATUS,
     ConfigError,
@@ -40,6 +41,7 @@ __all__ = [
     "Configurable",
     "DataError",
     "FitError",
+    "moved_names",
     "NlosfwError",
     "one_line",
     "PluginError",

@@ -65,6 +65,34 @@ def config_from_mapping(cls: type[T], mapping: T | Mapping[str, object] | None,
     return build(cls, node, where)
 
 
+def with_current_names(cls: type, mapping: Mapping[str, object]) -> dict[str, object]:
+    """``mapping`` (options of config dataclass ``cls``) with the options renamed since
+    (:func:`~nlosfw.common.schema.renamed_option`) moved to their new names, groups made as
+    needed: how a file written before a rename (a saved model's config) still loads. Other
+    options are kept; a group given as a mapping is taken as it is."""
+    from nlosfw.common.schema import renamed_option
+
+    out: dict[str, object] = {}
+    for key, value in mapping.items():
+        new = renamed_option(cls, str(key))
+        if new is None or (isinstance(value, Mapping) and new.startswith(f"{key}.")):
+            path = [str(key)]
+        else:
+            path = new.split(".")
+        node = out
+        for part in path[:-1]:
+            child = node.get(part)
+            if not isinstance(child, dict):
+                child = node[part] = {} if not isinstance(child, Mapping) else dict(child)
+            node = child
+        last = node.get(path[-1])
+        if isinstance(last, dict) and isinstance(value, Mapping):
+            last.update(value)
+        else:
+            node[path[-1]] = dict(value) if isinstance(value, Mapping) else value
+    return out
+
+
 def config_to_dict(config: DataclassInstance) -> dict[str, Any]:
     """A plain, YAML-safe dict of a config dataclass (enums become their values)."""
     if not dataclasses.is_dataclass(config) or isinstance(config, type):

@@ -2,25 +2,25 @@
 
 Instead of a generic function of (x, y, f), the field is explained by a hidden scene: a
 non-negative albedo a on voxel planes parallel to the wall, the same at every frequency,
-propagated to the wall by the physics of :mod:`nlosfw.model.scene_operator` (laser spot
+propagated to the wall by the physics of :mod:`nlosfw.model.physics.operator` (laser spot
 -> voxel -> wall, or the doubled path of confocal scans). Fitting solves
 
     min_{a >= 0}  1/2 sum_f ||A_f a - P_f||^2 + l1 sum_v n_v a_v + tv TV(n a)
 
 over the sparse wall samples P_f (``fit_frequencies`` of the field's frequencies, evenly
-spread), n_v = ||A e_v|| being the column norms: FISTA (monotone, :mod:`nlosfw.model.fista`)
-runs on x = n a, so every column has unit norm (much faster convergence) and a weak,
-distant voxel pays the same L1 price as a bright near one for the same contribution to
-the data. The step is 1/L from a power iteration. The weights are relative:
-l1 = ``l1_weight`` * max Re(A_n^H P), the smallest weight at which the solution is zero
-(A_n the normalised operator); TV is a smoothed total variation of x within each plane
-(off by default).
+spread), n_v = ||A e_v|| being the column norms: FISTA (monotone,
+:mod:`nlosfw.model.physics.solver`) runs on x = n a, so every column has unit norm (much
+faster convergence) and a weak, distant voxel pays the same L1 price as a bright near one
+for the same contribution to the data. The step is 1/L from a power iteration. The weights
+are relative: l1 = ``l1_weight`` * max Re(A_n^H P), the smallest weight at which the
+solution is zero (A_n the normalised operator); TV is a smoothed total variation of x
+within each plane (off by default).
 The fitted albedo then predicts the field anywhere on the wall and at any frequency: on
 a regular grid whose spacing and the voxels' are whole multiples of one another by FFT
 convolution, elsewhere by a direct sum over the non-zero voxels.
 
-Voxels: planes ``depth_step`` apart (default a fifth of the shortest wavelength; the
-feasibility study found about 1.3 cm necessary, 3.9 cm stalls) over ``depth_range``, or
+Voxels: planes ``depth.step`` apart (default a fifth of the shortest wavelength; the
+feasibility study found about 1.3 cm necessary, 3.9 cm stalls) over ``depth.range``, or
 chosen from the data (below), on a lateral lattice of spacing ``lateral_step`` (default
 half the shortest wavelength, a quarter for confocal scans, rounded down so that the
 training spacing is a whole multiple of it) covering the training grid and half a
@@ -28,20 +28,21 @@ training spacing beyond. Enough frequencies are fitted that paths over twice the
 span do not alias in time.
 
 A random scan (scattered samples) is fitted on the grid its points came from
-(:func:`~nlosfw.model.rsd_sampling.wall_samples`), the operator masked to the kept points.
+(:func:`~nlosfw.model.physics.wall.wall_samples`), the operator masked to the kept points.
 
 Automatic depth planes: a quick coarse fit finds where the scene is
-(:mod:`nlosfw.model.rsd_depths`).
+(:mod:`nlosfw.model.physics.lattice`).
 
 Terms of real systems, each fitted jointly and reported in the fit report: ``background:
 constant``, a complex offset per frequency, constant over the wall (minimised out exactly:
-:mod:`nlosfw.model.rsd_background`); ``temporal_response: gaussian`` and ``time_offset``,
-a gain per frequency (jitter, a time-origin offset in ps; :mod:`nlosfw.model.rsd_response`);
-``fit_lobe``, a glossy lobe's exponent (:mod:`nlosfw.model.rsd_lobe`; or a fixed ``lobe``).
+:mod:`nlosfw.model.physics.background`); ``response.temporal: gaussian`` and
+``response.time_offset``, a gain per frequency (jitter, a time-origin offset in ps;
+:mod:`nlosfw.model.physics.response`); ``lobe.fit``, a glossy lobe's exponent
+(:mod:`nlosfw.model.physics.lobe`; or a fixed ``lobe.exponent``).
 ``likelihood: poisson`` weighs each wall point by the inverse Poisson variance of its
-samples (:mod:`nlosfw.model.rsd_likelihood`); ``likelihood: poisson_counts`` refines the
+samples (:mod:`nlosfw.model.physics.likelihood`); ``likelihood: poisson_counts`` refines the
 albedo by the exact Poisson likelihood of the photon counts in every time bin, with a
-background per bin (:mod:`nlosfw.model.rsd_counts`).
+background per bin (:mod:`nlosfw.model.physics.counts`).
 
 The field's device legs (when its time axis has them) are taken out before the fit and
 put back in predictions. The model is the simulators' own physics (an inverse crime on
@@ -64,7 +65,6 @@ from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.fft import Precision
 from nlosfw.image.plane_convolution import GridLayout, from_canonical, grid_layout
 from nlosfw.image.rsd_kernel import check_geometry
-from nlosfw.model.fista import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
 from nlosfw.model.interface import (
     FieldModel,
     FitReport,
@@ -72,32 +72,33 @@ from nlosfw.model.interface import (
     check_query,
     check_training_field,
 )
-from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.rsd_background import (
+from nlosfw.model.model_files import read_model_file, stored_config, write_model_file
+from nlosfw.model.physics.background import (
     BackgroundProjection,
     WallBackground,
     background_projection,
     fit_offsets,
 )
-from nlosfw.model.rsd_config import RSDPriorConfig
-from nlosfw.model.rsd_counts import CountsScene, refine_by_counts
-from nlosfw.model.rsd_depths import plan_lattice
-from nlosfw.model.rsd_likelihood import sample_weights, weight_summary
-from nlosfw.model.rsd_lobe import fit_lobe
-from nlosfw.model.rsd_response import (
+from nlosfw.model.physics.config import RSDPriorConfig
+from nlosfw.model.physics.counts import CountsScene, refine_by_counts
+from nlosfw.model.physics.lattice import plan_lattice
+from nlosfw.model.physics.likelihood import sample_weights, weight_summary
+from nlosfw.model.physics.lobe import fit_lobe
+from nlosfw.model.physics.operator import (
+    OperatorOptions,
+    SceneOperator,
+    VoxelLattice,
+    direct_fields,
+)
+from nlosfw.model.physics.response import (
     SystemResponse,
     TemporalResponse,
     estimate_response,
     search_response,
     with_gains,
 )
-from nlosfw.model.rsd_sampling import WallSamples, training_values
-from nlosfw.model.scene_operator import (
-    OperatorOptions,
-    SceneOperator,
-    VoxelLattice,
-    direct_fields,
-)
+from nlosfw.model.physics.solver import FistaProblem, FistaResult, lipschitz, solve, tv_lipschitz
+from nlosfw.model.physics.wall import WallSamples, training_values
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.temporal_dft import unit_phasor
 
@@ -153,8 +154,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         def operator(k: float, f: np.ndarray = freqs) -> SceneOperator:
             return SceneOperator(lattice, wall, field.geometry, f, self._options(lobe=k), mask)
 
-        lobe = (self.search_lobe(field, values, samples, lattice, chosen) if cfg.fit_lobe
-                else cfg.lobe)
+        lobe = (self.search_lobe(field, values, samples, lattice, chosen) if cfg.lobe.fit
+                else cfg.lobe.exponent)
         log.info("rsd_prior: %d planes in %.3f-%.3f m, %d x %d voxels, %d frequencies",
                  depths.size, depths.min(), depths.max(), *lattice.shape, freqs.size)
         history: list[dict[str, float]] = []
@@ -181,7 +182,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                                background, response, lobe)
         fitted = {**({} if background is None else background.summary(scale)),
                   **({} if response is None else response.summary()),
-                  **({"lobe_exponent": lobe} if cfg.fit_lobe else {}),
+                  **({"lobe_exponent": lobe} if cfg.lobe.fit else {}),
                   **({} if self._weights is None else weight_summary(self._weights, mask)),
                   **({} if counts is None else counts.summary)}
         return FitReport(steps=result.iterations, seconds=time.perf_counter() - start,
@@ -195,14 +196,14 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         the albedo fixed to start, then a search on the residual of albedos fitted again
         (``iterations`` / 4 from the best so far; :func:`search_response`)."""
         cfg = self.config
-        gaussian = cfg.temporal_response == TemporalResponse.gaussian
-        if not (gaussian or cfg.time_offset):
+        gaussian = cfg.response.temporal == TemporalResponse.gaussian
+        if not (gaussian or cfg.response.time_offset):
             albedo, result = self._solve(op, data, cfg.iterations, report)
             return albedo, None, result
         project = self._projector(op.frequencies)
         albedo, _ = self._solve(op, data, cfg.iterations)
         start = estimate_response(project(op.forward(albedo)), project(data), op.frequencies,
-                                  gaussian, cfg.time_offset)
+                                  gaussian, cfg.response.time_offset)
         best_value, best_albedo = math.inf, albedo     # the lowest residual so far
 
         def residual(response: SystemResponse) -> float:
@@ -217,7 +218,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             return value
 
         response = search_response(residual, start, float(np.abs(op.frequencies).max()),
-                                   cfg.response_rounds)
+                                   cfg.response.rounds)
         log.info("rsd_prior: system response %s", response.summary())
         albedo, result = self._solve(op, data, cfg.iterations, report,
                                      response.gains(op.frequencies, True), best_albedo)
@@ -270,15 +271,15 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
     def plan_lattice(self, values: np.ndarray, samples: WallSamples, field: PhasorField
                      ) -> tuple[VoxelLattice, np.ndarray]:
         """The voxel lattice a fit of ``field`` uses and the indices of the frequencies it
-        fits (:func:`~nlosfw.model.rsd_depths.plan_lattice`); ``values``: the field without
+        fits (:func:`~nlosfw.model.physics.lattice.plan_lattice`); ``values``: the field without
         device legs on the wall grid of ``samples``, divided by its RMS."""
         return plan_lattice(self.config, values, samples, field, self._options(),
                             lambda op, data, n: self._solve(op, data, n)[0])
 
     def search_lobe(self, field: PhasorField, values: np.ndarray, samples: WallSamples,
                     lattice: VoxelLattice, chosen: np.ndarray) -> float:
-        """The lobe exponent k fitted on the kept samples (``fit_lobe``'s held-out search,
-        :func:`~nlosfw.model.rsd_lobe.fit_lobe`) on ``lattice`` at the frequencies
+        """The lobe exponent k fitted on the kept samples (``lobe.fit``'s held-out search,
+        :func:`~nlosfw.model.physics.lobe.fit_lobe`) on ``lattice`` at the frequencies
         ``chosen``; arguments as for :meth:`plan_lattice`."""
         freqs = field.frequencies[chosen]
 
@@ -294,7 +295,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
         return OperatorOptions(amplitude=cfg.amplitude, dtype=dtype, workers=cfg.workers,
                                cache_mb=cfg.cache_mb if cache else 0.0,
-                               lobe=cfg.lobe if lobe is None else lobe)
+                               lobe=cfg.lobe.exponent if lobe is None else lobe)
 
     # ------------------------------------------------------------------ predict
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
@@ -353,7 +354,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         divided by ``scale`` (``neural_volume`` predicts through it)."""
         model = cls(config)
         model._fitted = _Fitted(lattice, np.asarray(albedo, dtype=np.float32), geometry, scale,
-                                lobe=config.lobe)
+                                lobe=config.lobe.exponent)
         return model
 
     @property
@@ -395,11 +396,9 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
 
     @classmethod
     def load(cls, path: str | Path) -> RSDPriorFieldModel:
-        from nlosfw.common.config import config_from_mapping
-
         header, arrays = read_model_file(path, MODEL_NAME)
         try:
-            model = cls(config_from_mapping(RSDPriorConfig, header["config"], "model"))
+            model = cls(stored_config(RSDPriorConfig, header))
             depths = np.asarray(arrays["depths"], dtype=float)
             lattice = VoxelLattice(depths, _pair(header["origin"]), _pair(header["step"]),
                                    (int(header["shape"][0]), int(header["shape"][1])))
@@ -411,7 +410,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
                 np.asarray(arrays["background"], np.complex128))
             response = (SystemResponse.from_dict(header["response"]) if "response" in header
                         else None)
-            lobe = float(header.get("lobe", model.config.lobe))
+            lobe = float(header.get("lobe", model.config.lobe.exponent))
         except (KeyError, TypeError, ValueError, IndexError, ConfigError, DataError) as err:
             raise DataError(f"model file {path}: invalid {MODEL_NAME} file "
                             f"({type(err).__name__})") from None

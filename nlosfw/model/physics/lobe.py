@@ -1,4 +1,4 @@
-"""The glossy lobe of ``rsd_prior``'s voxels (``fit_lobe``): its exponent fitted jointly
+"""The glossy lobe of ``rsd_prior``'s voxels (``lobe.fit``): its exponent fitted jointly
 with the albedo.
 
 A voxel's surface may reflect more towards its normal than a Lambertian one: the
@@ -10,8 +10,8 @@ samples. It is chosen by predictive error, not by the training residual: a tenth
 kept wall points (drawn with ``seed``) is held out, the albedo is fitted on the rest (a
 quarter of the iterations) for each k tried, and k is the one whose field is closest to
 the held-out points, ||A_val a - P_val|| / ||P_val|| (less each frequency's mean over them
-with ``background: constant``); a bounded scalar search over [0, ``lobe_max``] to
-``lobe_tolerance``, the Lambertian k = 0 tried too (the search never evaluates its
+with ``background: constant``); a bounded scalar search over [0, ``lobe.max``] to
+``lobe.tolerance``, the Lambertian k = 0 tried too (the search never evaluates its
 bounds). The full fit then uses every kept point.
 
 Why not the training residual: on the shared measured captures (16x grid, thinning seed
@@ -29,10 +29,10 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from nlosfw.common.errors import FitError
-from nlosfw.model.rsd_background import Background
-from nlosfw.model.rsd_config import RSDPriorConfig
-from nlosfw.model.scene_operator import SceneOperator
-from nlosfw.model.volume_training import validation_split
+from nlosfw.model.physics.background import Background
+from nlosfw.model.physics.config import RSDPriorConfig
+from nlosfw.model.physics.operator import SceneOperator
+from nlosfw.model.physics.wall import validation_split
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +52,7 @@ def fit_lobe(config: RSDPriorConfig, operator: Callable[[float, np.ndarray], Sce
     shape = data.shape[1:]
     train, validation = validation_split(shape, _VALIDATION_FRACTION, config.seed, kept)
     if validation is None:
-        raise FitError("rsd_prior: fit_lobe holds out a tenth of the kept wall points and "
+        raise FitError("rsd_prior: lobe.fit holds out a tenth of the kept wall points and "
                        f"needs at least 10 of them, got {int(train.sum())}")
     fit_on, held = train > 0, validation > 0
     target = data * held
@@ -71,8 +71,8 @@ def fit_lobe(config: RSDPriorConfig, operator: Callable[[float, np.ndarray], Sce
 
 
 def search_lobe(residual: Callable[[float], float], config: RSDPriorConfig) -> float:
-    """The exponent k in [0, ``lobe_max``] with the least ``residual(k)`` (an error) to
-    ``lobe_tolerance`` (see the module docstring); each k is evaluated once."""
+    """The exponent k in [0, ``lobe.max``] with the least ``residual(k)`` (an error) to
+    ``lobe.tolerance`` (see the module docstring); each k is evaluated once."""
     tried: dict[float, float] = {}
 
     def once(k: float) -> float:
@@ -83,8 +83,8 @@ def search_lobe(residual: Callable[[float], float], config: RSDPriorConfig) -> f
         return tried[k]
 
     once(0.0)
-    minimize_scalar(once, bounds=(0.0, config.lobe_max), method="bounded",
-                    options={"xatol": config.lobe_tolerance, "maxiter": _MAX_EVALUATIONS})
+    minimize_scalar(once, bounds=(0.0, config.lobe.max), method="bounded",
+                    options={"xatol": config.lobe.tolerance, "maxiter": _MAX_EVALUATIONS})
     best = min(tried, key=lambda k: tried[k])
     log.info("rsd_prior: lobe exponent %.3f (%d values tried)", best, len(tried))
     return best

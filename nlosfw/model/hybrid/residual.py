@@ -2,9 +2,9 @@
 
 The fit runs in two stages on the kept wall samples P (every training frequency):
 
-1. the physics: :class:`~nlosfw.model.rsd_prior.RSDPriorFieldModel` (a non-negative hidden
-   albedo fitted by FISTA, propagated to the wall by RSD) with this config's ``rsd_prior``
-   options; its field at the kept samples is Q;
+1. the physics: :class:`~nlosfw.model.physics.prior.RSDPriorFieldModel` (a non-negative
+   hidden albedo fitted by FISTA, propagated to the wall by RSD) with this config's group
+   ``prior`` (``rsd_prior``'s options); its field at the kept samples is Q;
 2. the residual: a registered network (``network``, any of the ``register_networks``
    API, on the backend of the subclass) r(x, y, f) minimising
 
@@ -22,7 +22,7 @@ The fit runs in two stages on the kept wall samples P (every training frequency)
    predicting unseen wall points is its job.
 
 The backend is the subclass's (``nlosfw-torch``: ``rsd_residual_torch``, ``nlosfw-jax``:
-``rsd_residual_jax``): it names the engine and finds the network class in the registry.
+``rsd_residual_jax``): it names the backend and finds the network class in the registry.
 Both stages are stored in one model file (each stage's own file, embedded as bytes).
 """
 
@@ -42,15 +42,24 @@ from nlosfw.common.config import require, require_threads
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.model.interface import (
     FieldModel,
+    FieldModelConfig,
     FitReport,
     TrainingStep,
     check_query,
     check_training_field,
 )
-from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.neural_config import NeuralFieldConfig, wrapped_network_config
-from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.trainer import NeuralFieldModel
+from nlosfw.model.model_files import read_model_file, stored_config, write_model_file
+from nlosfw.model.neural.config import NeuralFieldConfig, wrapped_network_config
+from nlosfw.model.neural.trainer import NeuralFieldModel
+from nlosfw.model.physics.config import (
+    FLAT_NAMES,
+    PriorOptions,
+    RSDPriorConfig,
+    moved_into,
+    options_in_group,
+    prior_config,
+)
+from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.transform.field import PhasorField
 
 #: The stored stage files' names inside the model file.
@@ -58,10 +67,13 @@ _STAGES = ("prior_file", "network_file")
 
 
 @dataclass(frozen=True)
-class RSDResidualConfig(RSDPriorConfig):
-    """Options of the physics field with a neural residual: ``rsd_prior``'s options (the
-    physics stage, ``device`` aside) and the residual network's (``seed`` and ``device``
-    are the network's too: ``auto`` trains it on a GPU when the backend sees one)."""
+class RSDResidualConfig(FieldModelConfig):
+    """Options of the physics field with a neural residual: the residual network's and,
+    in the group ``prior``, ``rsd_prior``'s (the physics stage; ``seed`` is both stages',
+    ``device`` the network's: ``auto`` trains it on a GPU when the backend sees one)."""
+
+    #: ``rsd_prior``'s options were this config's own, flat, before they became ``prior``.
+    renamed_options: ClassVar[Mapping[str, str]] = moved_into("prior", FLAT_NAMES)
 
     network: str = "siren"
     """The residual network: a name registered through ``register_networks`` for this
@@ -89,6 +101,19 @@ class RSDResidualConfig(RSDPriorConfig):
     weights of the best evaluation are kept)."""
     network_threads: int = 1
     """CPU threads of the residual network's training (0: the backend's default)."""
+    prior: PriorOptions = dataclasses.field(default_factory=PriorOptions)
+    """The physics stage: ``rsd_prior``'s options (``model.prior.iterations``,
+    ``model.prior.depth.range``, ...)."""
+
+    @property
+    def uses_noise_variance(self) -> bool:
+        """With the prior's ``likelihood: poisson`` the fit needs the field's variance."""
+        return self.prior.uses_noise_variance
+
+    @property
+    def uses_photon_counts(self) -> bool:
+        """With the prior's ``likelihood: poisson_counts`` the fit needs the photon counts."""
+        return self.prior.uses_photon_counts
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -111,9 +136,9 @@ class RSDResidualConfig(RSDPriorConfig):
         require_threads(self.network_threads, "network_threads", 0, "the backend's default")
 
     def prior_config(self) -> RSDPriorConfig:
-        """The physics stage's options (this config's rsd_prior fields)."""
-        names = {f.name for f in dataclasses.fields(RSDPriorConfig)}
-        return RSDPriorConfig(**{n: getattr(self, n) for n in names})
+        """The physics stage's config: the group ``prior`` with this config's ``seed`` and
+        ``device``."""
+        return prior_config(self.prior, self.seed, self.device)
 
     def network_options(self) -> dict[str, object]:
         """The residual network's options (its config class fills in the rest)."""
@@ -147,7 +172,7 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
     config_class = RSDResidualConfig
     family = "rsd_residual"
     backend: ClassVar[str] = ""
-    """The engine of the residual network (``torch``, ``jax``)."""
+    """The backend of the residual network (``torch``, ``jax``)."""
 
     def __init__(self, config: RSDResidualConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
@@ -188,7 +213,8 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
         check_training_field(field, who)
         network = self._network_model()         # a bad network name fails before the fit
         prior = RSDPriorFieldModel(self.config.prior_config())
-        prior_report = prior.fit(field)
+        with options_in_group("prior"):
+            prior_report = prior.fit(field)
         residual = _residual(prior, field)
         val_residual = None if validation is None else _residual(prior, validation)
         if not np.any(residual.values != 0):
@@ -251,11 +277,9 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
 
     @classmethod
     def load(cls, path: str | Path) -> RSDResidualFieldModel:
-        from nlosfw.common.config import config_from_mapping
-
         header, arrays = read_model_file(path, cls.model_name())
         try:
-            model = cls(config_from_mapping(cls.config_class, header["config"], "model"))
+            model = cls(stored_config(cls.config_class, header))
             stored = [np.asarray(arrays[name], dtype=np.uint8).tobytes() for name in _STAGES]
         except (KeyError, TypeError, ValueError, ConfigError) as err:
             raise DataError(f"model file {path}: invalid {cls.model_name()} file "

@@ -5,10 +5,10 @@ Units: the field's frequencies f are in cycles per metre of path (the capture's 
 is path length c t), so both parameters are fitted in metres of path and reported in
 picoseconds (divided by c).
 
-* ``temporal_response: gaussian``: Gaussian timing jitter of standard deviation sigma
+* ``response.temporal: gaussian``: Gaussian timing jitter of standard deviation sigma
   blurs every time profile; its transfer function is the real gain
   m_f = exp(-(2 pi f sigma)^2 / 2).
-* ``time_offset: true``: the capture's time origin is off by tau: a histogram shifted tau
+* ``response.time_offset: true``: the capture's time origin is off by tau: a histogram shifted tau
   *later* than the model's (its recorded times too large by tau, e.g. k bins later:
   tau = k delta_t) has the phase ramp exp(-2 pi i f tau), the temporal DFT's convention
   P_f = sum_t H(t) exp(-2 pi i f t) delta_t. A positive tau: the signal arrives late.
@@ -31,14 +31,14 @@ planes, and what is left barely moves the least-squares values (measured on a po
 scatterer 30 mm late and blurred by 20 mm: tau 0.03 mm and sigma 0 after three rounds).
 So the least-squares values only start :func:`search_response`, which minimises the fit's
 own objective over sigma and tau, the albedo fitted again (warm started, a quarter of the
-iterations) for every value tried: ``response_rounds`` rounds of a parabola per term, the
+iterations) for every value tried: ``response.rounds`` rounds of a parabola per term, the
 steps halving.
 
 Measured. A simulated point scatterer (analytic simulator, 100 ps jitter, shifted 10 bins
 of 10 ps later), planes over 0.4-0.6 m, default rounds: sigma 82.6 ps, tau 92.1 ps (the
 albedo still absorbs part of both), held-out error -33.7 dB against -25.1 dB without the
 terms; with the single plane at the point's depth, 96 ps and 97.9 ps. The shared diffuse S
-at 16x with count splitting (thinning seed 0, one run with ``response_rounds: 1``): sigma
+at 16x with count splitting (thinning seed 0, one run with ``response.rounds: 1``): sigma
 2.0 ps, tau -2.1 ps, held-out excess -4.50 dB against -4.41 dB without the terms (the same
 split: interp's -1.91 dB in both); the fit took 278 s on two loaded cores.
 """

@@ -1,4 +1,4 @@
-"""The thesis's three networks (ch. 4), backend-neutral: options, presets, architecture,
+"""The coordinate MLPs of the thesis (ch. 4), backend-neutral: options, architecture,
 initial weights and a numpy reference forward pass.
 
 Each network maps normalised (x, y[, f]) to (Re P, Im P); ``hidden`` = widths of
@@ -11,10 +11,11 @@ the hidden layers:
   linear output.
 
 The torch and JAX plugins register them as networks of the shared trainer
-(:mod:`nlosfw.model.trainer`); their modules resolve the same :class:`Architecture`
-and start from the same numpy weights (:func:`reference_state`), so both backends
-train the same network from the same starting point. :func:`network_inputs` and
-:func:`forward_numpy` are the independent reference the backends are checked against.
+(:mod:`nlosfw.model.neural.trainer`; their registration and the thesis's presets:
+:mod:`nlosfw.model.neural.catalogue`); their modules resolve the same
+:class:`Architecture` and start from the same numpy weights (:func:`reference_state`), so
+both backends train the same network from the same starting point. :func:`network_inputs`
+and :func:`forward_numpy` are the independent reference the backends are checked against.
 """
 
 from __future__ import annotations
@@ -26,13 +27,13 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from nlosfw.common.config import Choice, config_from_mapping, require
+from nlosfw.common.config import Choice, require
 from nlosfw.common.errors import DataError, FitError
-from nlosfw.model.neural_config import (
+from nlosfw.model.neural.config import (
     FieldMode,
     FieldShape,
     NeuralFieldConfig,
-    Preset,
+    mlp_shapes,
     set_choice,
 )
 
@@ -91,6 +92,11 @@ class PEFieldConfig(NeuralFieldConfig):
         require(0 <= self.frequency_octaves <= 16, "frequency_octaves",
                 f"must be in [0, 16], got {self.frequency_octaves}")
 
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """The MLP on the encoded inputs (:func:`resolve_architecture`'s widths)."""
+        arch = resolve_architecture("pe", self, shape.grid_shape, shape.n_frequencies)
+        return mlp_shapes([arch.in_dim, *arch.hidden, arch.out_dim])
+
 
 @dataclass(frozen=True)
 class SirenFieldConfig(NeuralFieldConfig):
@@ -117,46 +123,6 @@ FAMILY_CONFIGS: dict[str, type[NeuralFieldConfig]] = {
     "pe": PEFieldConfig,
     "siren": SirenFieldConfig,
 }
-
-
-# --------------------------------------------------------------------------- presets
-_THESIS_TRAINING = {"lr": 1e-3, "lr_schedule": "constant", "batch_size": 0, "steps": 100_000,
-                    "validation_fraction": 0.0}
-
-#: The thesis's four networks (ch. 4, Table 4.1) with its training recipe (lr 1e-3, full
-#: batch, 100,000 steps: about 9 h on 2 CPU cores; override ``steps`` for a quicker fit).
-PRESETS: dict[str, Preset] = {
-    "thesis_tanh_single": Preset(
-        "tanh", {"mode": "single", "hidden": (20, 20, 20), **_THESIS_TRAINING}, 942,
-        "MLP + tanh, one frequency: 2 -> 20 -> 20 -> 20 -> 2"),
-    "thesis_pe_single": Preset(
-        "pe", {"mode": "single", "hidden": (16, 16, 16), "octaves": 5, "include_input": False,
-               "activation": "relu", **_THESIS_TRAINING}, 914,
-        "MLP + positional encoding (L = 5, no raw input), one frequency: 20 -> 16 x3 -> 2"),
-    "thesis_pe_multi": Preset(
-        "pe", {"mode": "multi", "hidden": (32, 32, 32, 32), "octaves": 5,
-               "include_input": False, "frequency_input": "raw", "activation": "relu",
-               **_THESIS_TRAINING}, 3938,
-        "MLP + positional encoding of (x, y) and raw f: 21 -> 32 x4 -> 2"),
-    "thesis_siren": Preset(
-        "siren", {"mode": "multi", "hidden": (32, 32, 32, 32), "omega0_first": 30.0,
-                  "omega0_hidden": 30.0, **_THESIS_TRAINING}, 3362,
-        "SIREN, multi frequency: 3 -> 32 x4 (sine) -> 2 (linear)"),
-}
-
-
-def presets_of(family: str) -> dict[str, Preset]:
-    """The presets of one network family (``tanh``, ``pe`` or ``siren``)."""
-    return {name: p for name, p in PRESETS.items() if p.family == family}
-
-
-def preset_config(name: str, **overrides: Any) -> NeuralFieldConfig:
-    """The config of preset ``name`` with some options overridden (e.g. ``steps=2000``)."""
-    if name not in PRESETS:
-        raise DataError(f"preset: unknown preset {name!r}; valid: {', '.join(sorted(PRESETS))}")
-    preset = PRESETS[name]
-    return config_from_mapping(FAMILY_CONFIGS[preset.family], {**preset.options, **overrides},
-                               "model")
 
 
 # --------------------------------------------------------------------------- architecture
@@ -382,26 +348,10 @@ def thesis_architecture(config: NeuralFieldConfig, shape: FieldShape) -> Archite
     return resolve_architecture(family, config, shape.grid_shape, shape.n_frequencies)
 
 
-@dataclass(frozen=True)
-class ThesisNetwork:
-    """How the torch and JAX plugins register one thesis network."""
-
-    config: type[NeuralFieldConfig]
-    description: str
-    test_lr: float
-    """Learning rate of the conformance kit's short fits."""
-
-
-#: The three thesis networks, by registered name (each backend appends ``_torch``/``_jax``).
-THESIS_NETWORKS: dict[str, ThesisNetwork] = {
-    "tanh": ThesisNetwork(TanhFieldConfig, "MLP with tanh activations (thesis F_w,M)", 5e-3),
-    "pe": ThesisNetwork(PEFieldConfig,
-                        "MLP on NeRF's positional encoding (thesis F_w,P and F_P)", 5e-3),
-    "siren": ThesisNetwork(SirenFieldConfig,
-                           "SIREN: sine activations, Sitzmann init (thesis F_S)", 2e-3),
-}
-
-#: Small, fast settings for the conformance kit (tiny fields: full batch, small networks,
-#: since more parameters than half the data values over-fit, thesis sec. 4.2).
-THESIS_TEST_CONFIG: dict[str, Any] = {"steps": 300, "batch_size": 0, "eval_every": 50,
-                                      "validation_fraction": 0.0, "hidden": [32, 32]}
+def uniform_layer(rng: np.random.Generator, lead: tuple[int, ...], fan_in: int, fan_out: int,
+                  bound: float, bias_bound: float) -> tuple[np.ndarray, np.ndarray]:
+    """The initial weights (``lead`` + (fan_in, fan_out)) and biases (``lead`` + (fan_out,))
+    of one linear layer, U(-bound, bound) and U(-bias_bound, bias_bound), float32."""
+    w = rng.uniform(-bound, bound, (*lead, fan_in, fan_out))
+    b = rng.uniform(-bias_bound, bias_bound, (*lead, fan_out))
+    return w.astype(np.float32), b.astype(np.float32)

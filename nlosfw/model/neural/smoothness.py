@@ -9,8 +9,8 @@ Between training frequencies a network is free to wiggle; the penalty
 (the second difference at the mean training-frequency spacing h, on the normalised
 field, at random wall points p of the training hull) pulls it towards a field with
 small curvature in f. It is the same for every network: the trainer draws the points
-and frequencies here and the engine adds the penalty to the data loss
-(:class:`~nlosfw.model.engine.SmoothnessBatch`).
+and frequencies here and the backend adds the penalty to the data loss
+(:class:`~nlosfw.model.neural.backend.SmoothnessBatch`).
 
 Multi mode: each of ``points`` random points gets a random centre frequency f in the
 training band (held-out frequencies included) and the network is evaluated at
@@ -26,7 +26,7 @@ import logging
 
 import numpy as np
 
-from nlosfw.model.engine import SmoothnessBatch
+from nlosfw.model.neural.backend import SmoothnessBatch
 
 log = logging.getLogger(__name__)
 

@@ -4,9 +4,9 @@
 every network: normalisation, inputs, batches, the validation split, the
 learning-rate schedule, early stopping, divergence detection, seeding, files and
 prediction. A network plugin supplies only ``factory(config, shape)`` (a torch
-module or a JAX module) and the backend's :class:`~nlosfw.model.engine.Engine`
+module or a JAX module) and the backend's :class:`~nlosfw.model.neural.backend.Backend`
 runs its steps; the ``register_networks`` hook (:mod:`nlosfw.plugins.networks`) turns a
-registered network into a subclass of this class named ``<network>_<engine>``.
+registered network into a subclass of this class named ``<network>_<backend>``.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -21,8 +22,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from nlosfw.common.config import config_from_mapping
+from nlosfw.common.deprecation import REMOVED_IN
 from nlosfw.common.errors import DataError, FitError
-from nlosfw.model.engine import PREDICT_CHUNK, Engine, NetworkBuild
 from nlosfw.model.interface import (
     FieldModel,
     FitReport,
@@ -31,92 +32,54 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.neural_config import (
+from nlosfw.model.neural.backend import PREDICT_CHUNK, Backend, NetworkBuild
+from nlosfw.model.neural.config import (
     FieldMode,
     FieldShape,
-    LRSchedule,
     NeuralFieldConfig,
     Preset,
 )
-from nlosfw.model.normalisation import FieldNormalisation
-from nlosfw.model.smoothness import FrequencySmoothness
+from nlosfw.model.neural.normalisation import FieldNormalisation
+from nlosfw.model.neural.smoothness import FrequencySmoothness
+from nlosfw.model.neural.steps import BatchStream, field_inputs, learning_rate
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
 
-def learning_rate(config: NeuralFieldConfig, step: int) -> float:
-    """Learning rate of (0-based) ``step``: linear warm-up, then the configured decay."""
-    lr, total = config.lr, config.steps
-    if step < config.warmup_steps:
-        return lr * (0.01 + 0.99 * step / config.warmup_steps)
-    span = max(1, total - config.warmup_steps - 1)
-    t = min(1.0, (step - config.warmup_steps) / span)
-    if config.lr_schedule == LRSchedule.cosine:
-        return lr * (config.lr_final + (1 - config.lr_final) * 0.5 * (1 + math.cos(math.pi * t)))
-    if config.lr_schedule == LRSchedule.exponential:
-        return lr * config.lr_final ** t
-    return lr
-
-
-
-def field_inputs(xy: np.ndarray, f: np.ndarray | None = None) -> np.ndarray:
-    """Network inputs (float32) from normalised coordinates (P, 2) and frequencies (F,).
-
-    Single mode (``f`` None): (P, 2) = x, y. Multi mode: (F * P, 3) = x, y, f,
-    frequency-major (row ``k * P + p`` is point p at frequency k).
-    """
-    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    if f is None:
-        return xy.astype(np.float32)
-    f = np.asarray(f, dtype=np.float64).reshape(-1, 1)
-    n_f, n_p = f.shape[0], xy.shape[0]
-    return np.concatenate([np.tile(xy, (n_f, 1)), np.repeat(f, n_p, axis=0)],
-                          axis=1).astype(np.float32)
-
-
-class _IndexStream:
-    """Batches of sample indices: consecutive slices of fresh random permutations."""
-
-    def __init__(self, n: int, batch: int, rng: np.random.Generator) -> None:
-        self.n, self.batch, self.rng = n, batch, rng
-        self.perm = rng.permutation(n)
-        self.pos = 0
-
-    def next(self) -> np.ndarray:
-        parts, need = [], self.batch
-        while need > 0:
-            if self.pos >= self.n:
-                self.perm, self.pos = self.rng.permutation(self.n), 0
-            take = self.perm[self.pos:self.pos + need]
-            parts.append(take)
-            self.pos += take.size
-            need -= take.size
-        return np.concatenate(parts).astype(np.int64)
-
-
 class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
     """A neural field F(x, y, f) -> P (multi mode) or one F_f(x, y) per frequency (single).
 
-    A subclass names its network and engine (:func:`nlosfw.plugins.network_model` makes
+    A subclass names its network and backend (:func:`nlosfw.plugins.network_model` makes
     one from a registered network): ``family`` (the network's name), ``backend``
-    (``torch``, ``jax``), ``engine_class``, ``network_factory`` and ``config_class``.
+    (``torch``, ``jax``), ``backend_class``, ``network_factory`` and ``config_class``.
     """
 
     config_class: ClassVar[type] = NeuralFieldConfig
     family: ClassVar[str] = ""
     """The network's registered name (``siren``, ``example_fourier``, ...)."""
     backend: ClassVar[str] = ""
-    """The engine that runs it (``torch``, ``jax``)."""
-    engine_class: ClassVar[type[Engine]]
+    """The backend that runs it (``torch``, ``jax``)."""
+    backend_class: ClassVar[type[Backend]]
     network_factory: ClassVar[Callable[..., Any]]
     network_presets: ClassVar[Mapping[str, Preset]] = {}
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        """A subclass that sets ``engine_class``, ``backend_class``'s old name, gets it as
+        ``backend_class`` (with a DeprecationWarning)."""
+        super().__init_subclass__(**kwargs)
+        old = cls.__dict__.get("engine_class")
+        if old is not None and "backend_class" not in cls.__dict__:
+            warnings.warn(f"{cls.__name__}.engine_class is deprecated and will be removed in "
+                          f"nlosfw {REMOVED_IN}: set backend_class", DeprecationWarning,
+                          stacklevel=2)
+            cls.backend_class = old
 
     def __init__(self, config: NeuralFieldConfig | Mapping[str, object] | None = None) -> None:
         super().__init__(config)
         self._shape: FieldShape | None = None
         self._norm: FieldNormalisation | None = None
-        self._engine: Engine | None = None
+        self._net: Backend | None = None
         self._train_frequencies: np.ndarray | None = None
         self.report: FitReport | None = None
         self.lr_option = "model.lr"
@@ -132,23 +95,24 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
     @classmethod
     def check_config(cls, config: NeuralFieldConfig) -> None:
         """Before a run: the engine can use ``config.device`` on this machine."""
-        cls.engine_class.check_device(config.device)
+        cls.backend_class.check_device(config.device)
 
     @classmethod
     def presets(cls) -> dict[str, Preset]:
         """Published configurations of this network (e.g. the thesis's), by name."""
         return dict(cls.network_presets)
 
-    def _make_engine(self, shape: FieldShape, n_networks: int,
-                     state: Mapping[str, np.ndarray] | None = None, who: str = "") -> Engine:
+    def _make_net(self, shape: FieldShape, n_networks: int,
+                  state: Mapping[str, np.ndarray] | None = None, who: str = "") -> Backend:
+        """The backend's network (``n_networks`` of them in single mode), from ``state``."""
         factory = type(self).network_factory        # a plain function, not a method
         build = NetworkBuild(factory, self.config, shape, n_networks, who or self.model_name())
-        return self.engine_class(build, state)
+        return self.backend_class(build, state)
 
     # ------------------------------------------------------------------ sizes
     @property
     def is_fitted(self) -> bool:
-        return self._engine is not None
+        return self._net is not None
 
     @property
     def n_networks(self) -> int:
@@ -163,14 +127,14 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
     @property
     def parameters_per_network(self) -> int:
         """Trainable parameters of one network (before fit: when the config alone fixes it)."""
-        if self._engine is not None:
-            return self._engine.parameters_per_network
+        if self._net is not None:
+            return self._net.parameters_per_network
         try:
-            engine = self._make_engine(FieldShape(self.config.mode), 0)
+            net = self._make_net(FieldShape(self.config.mode), 0)
         except FitError as err:
             raise FitError(f"{self.model_name()}: the network's size follows the training "
                            f"data; it is known after fit or load ({err})") from None
-        return engine.parameters_per_network
+        return net.parameters_per_network
 
     @property
     def n_parameters(self) -> int:
@@ -223,27 +187,27 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
         tx = x[train_idx]
         ty = y[:, train_idx] if single else y[train_idx]
         n_networks = field.n_frequencies if single else 0
-        engine = self._make_engine(shape, n_networks)
-        n_params, n_values = engine.parameters_per_network * max(1, n_networks), \
+        net = self._make_net(shape, n_networks)
+        n_params, n_values = net.parameters_per_network * max(1, n_networks), \
             2 * field.values.size
         if n_params > 0.5 * n_values:
             log.warning("%s: %d parameters for %d training values (%.0f%%): more than half "
                         "tends to over-fit and upsample badly (thesis sec. 4.2); consider "
                         "smaller hidden layers", who, n_params, n_values,
                         100 * n_params / n_values)
-        engine.set_data(tx, ty, val_x, val_y)
-        self._shape, self._norm, self._engine = shape, norm, engine
+        net.set_data(tx, ty, val_x, val_y)
+        self._shape, self._norm, self._net = shape, norm, net
         self._train_frequencies = field.frequencies.copy() if single else None
         smooth = FrequencySmoothness.of(
             cfg.frequency_smoothness, cfg.smoothness_points, x[:, :2],
             norm.freqs(field.frequencies), single,
             np.random.default_rng([cfg.seed, 0x736D6F6F7468]))  # "smooth" stream
         try:
-            self.report = self._train(engine, tx.shape[0], val_x is not None, rng, on_step,
+            self.report = self._train(net, tx.shape[0], val_x is not None, rng, on_step,
                                       smooth)
         except BaseException:
             # a failed (diverged, interrupted) fit leaves no half-trained model behind
-            self._shape = self._norm = self._engine = self._train_frequencies = None
+            self._shape = self._norm = self._net = self._train_frequencies = None
             raise
         return self.report
 
@@ -257,12 +221,12 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
             return field_inputs(xy), y
         return field_inputs(xy, norm.freqs(field.frequencies)), y.reshape(-1, 2)
 
-    def _train(self, engine: Engine, n_train: int, has_val: bool, rng: np.random.Generator,
+    def _train(self, net: Backend, n_train: int, has_val: bool, rng: np.random.Generator,
                on_step: Callable[[TrainingStep], None] | None,
                smooth: FrequencySmoothness | None = None) -> FitReport:
         cfg: NeuralFieldConfig = self.config
         batch = cfg.batch_size if 0 < cfg.batch_size < n_train else 0
-        stream = _IndexStream(n_train, batch, rng) if batch else None
+        stream = BatchStream(n_train, batch, rng) if batch else None
         start = time.perf_counter()
         history: list[dict[str, float]] = []
         handles: list[Any] = []
@@ -271,26 +235,26 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
         bad_evals, stopped_early, loss, val = 0, False, math.nan, None
         step, paused = 0, 0.0           # paused: time spent in on_step, not training
         while step < cfg.steps:
-            handle = engine.step(stream.next() if stream else None, learning_rate(cfg, step),
+            handle = net.step(stream.next() if stream else None, learning_rate(cfg, step),
                                  smooth.batch() if smooth else None)
             handles.append(handle)
             step += 1
             if step == 1:
-                first_loss = engine.mean_loss([handle])
+                first_loss = net.mean_loss([handle])
                 self._check_divergence(first_loss, math.inf, step)
             elapsed = time.perf_counter() - start - paused
             out_of_time = cfg.max_seconds > 0 and elapsed >= cfg.max_seconds
             if step % cfg.eval_every and step < cfg.steps and not out_of_time:
                 continue
-            loss = engine.mean_loss(handles)
+            loss = net.mean_loss(handles)
             handles = []
             self._check_divergence(loss, first_loss, step)
             val = None
             if has_val:
-                val = engine.val_loss()
+                val = net.val_loss()
                 self._check_divergence(val, math.inf, step)
                 if val < best_val:
-                    best_val, best_snapshot, bad_evals = val, engine.snapshot(), 0
+                    best_val, best_snapshot, bad_evals = val, net.snapshot(), 0
                 else:
                     bad_evals += 1
             seconds = time.perf_counter() - start - paused
@@ -307,7 +271,7 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
                 stopped_early = True
                 break
         if best_snapshot is not None and val is not None and best_val < val:
-            engine.restore(best_snapshot)
+            net.restore(best_snapshot)
         seconds = time.perf_counter() - start - paused
         log.info("%s: %d steps in %.1f s, loss %.3g, best validation %s", self.model_name(),
                  step, seconds, loss, f"{best_val:.3g}" if has_val else "n/a")
@@ -332,23 +296,23 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
         requested frequency is then put back (see ``demodulate``).
         """
         xy, f = check_query(wall_xy, frequencies, self.model_name())
-        engine, norm, _ = self._fitted()
+        net, norm, _ = self._fitted()
         shape = xy.shape[:-1]
         pts = norm.coords(xy.reshape(-1, 2))
         n_p = pts.shape[0]
         if self.config.mode == FieldMode.single:
-            out = self._predict_single(engine, norm, pts, f)
+            out = self._predict_single(net, norm, pts, f)
         else:
             out = np.empty((f.size, n_p), dtype=np.complex64)
             fn = norm.freqs(f)
             per_chunk = max(1, PREDICT_CHUNK * 4 // max(n_p, 1))
             for k in range(0, f.size, per_chunk):
                 sl = slice(k, k + per_chunk)
-                y = engine.forward(field_inputs(pts, fn[sl]))
+                y = net.forward(field_inputs(pts, fn[sl]))
                 out[sl] = norm.values(y.reshape(-1, n_p, 2), f[sl])
         return out.reshape((f.size, *shape))
 
-    def _predict_single(self, engine: Engine, norm: FieldNormalisation, pts: np.ndarray,
+    def _predict_single(self, net: Backend, norm: FieldNormalisation, pts: np.ndarray,
                         f: np.ndarray) -> np.ndarray:
         trained = self._train_frequencies
         if trained is None:
@@ -363,7 +327,7 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
         w = np.where(ft[hi] > ft[lo], w, 0.0)
         i0, i1 = order[lo], order[hi]
         needed = np.unique(np.concatenate([i0, i1]))
-        values = norm.values(engine.forward(field_inputs(pts), needed), trained[needed])
+        values = norm.values(net.forward(field_inputs(pts), needed), trained[needed])
         where = {int(k): j for j, k in enumerate(needed)}
         v0 = values[[where[int(k)] for k in i0]]
         v1 = values[[where[int(k)] for k in i1]]
@@ -372,22 +336,22 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
         c1 = np.exp(2j * np.pi * (trained[i1] - f) * norm.delay)[:, None]
         return ((1 - w)[:, None] * v0 * c0 + w[:, None] * v1 * c1).astype(np.complex64)
 
-    def _fitted(self) -> tuple[Engine, FieldNormalisation, FieldShape]:
-        if self._engine is None or self._norm is None or self._shape is None:
+    def _fitted(self) -> tuple[Backend, FieldNormalisation, FieldShape]:
+        if self._net is None or self._norm is None or self._shape is None:
             raise FitError(f"{self.model_name()}: call fit() or load() before predict() or "
                            "save()")
-        return self._engine, self._norm, self._shape
+        return self._net, self._norm, self._shape
 
     # ------------------------------------------------------------------ files
     def save(self, path: str | Path) -> None:
         """Write the network's state, config, data shape and normalisation to one ``.npz``."""
-        engine, norm, shape = self._fitted()
+        net, norm, shape = self._fitted()
         extra: dict[str, Any] = {"field_shape": shape.to_dict(),
                                  "normalisation": norm.to_dict(),
                                  "backend": self.backend, "family": self.family}
         if self._train_frequencies is not None:
             extra["train_frequencies"] = [float(v) for v in self._train_frequencies]
-        write_model_file(path, self.model_name(), self.config, engine.state(), extra)
+        write_model_file(path, self.model_name(), self.config, net.state(), extra)
 
     @classmethod
     def load(cls, path: str | Path, *, allow_other_backend: bool = False) -> NeuralFieldModel:
@@ -419,10 +383,10 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
             raise DataError(f"model file {path}: single-mode model without its frequencies")
         model = cls(config)
         try:
-            engine = model._make_engine(shape, n_networks, arrays, f"model file {path}")
+            net = model._make_net(shape, n_networks, arrays, f"model file {path}")
         except FitError as err:
             raise DataError(str(err)) from None
-        model._shape, model._norm, model._engine = shape, norm, engine
+        model._shape, model._norm, model._net = shape, norm, net
         model._train_frequencies = np.asarray(trained, dtype=float) if n_networks else None
         return model
 

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosfw.common.config import Choice
-from nlosfw.model.rsd_sampling import WallSamples
+from nlosfw.model.physics.wall import WallSamples
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.temporal_dft import unit_phasor
 

@@ -103,7 +103,7 @@ class NeuralFieldConfig(FieldModelConfig):
     difference of the normalised field between neighbouring frequencies (at the mean
     training spacing), at random wall points, added to the loss. The field is smooth
     in frequency; this keeps a network from wiggling between training frequencies
-    (:mod:`nlosfw.model.smoothness`). Needs 3 or more training frequencies."""
+    (:mod:`nlosfw.model.neural.smoothness`). Needs 3 or more training frequencies."""
     smoothness_points: int = 64
     """Random wall points of that penalty per step (multi mode: each at its own random
     frequency of the band; single mode: every network at the same points)."""
@@ -154,6 +154,24 @@ def wrapped_network_config(config_class: type[C], options: Mapping[str, object],
         name = names.get(head) or ".".join(p for p in (others, head) if p)
         raise ConfigError(".".join(p for p in ("model", name) if p) + dot + rest,
                           err.problem) from None
+
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """The arrays of one network of these options for data of ``shape`` (trainable and
+        fixed, by name, with the shapes its initial state has), from the options alone:
+        nothing is allocated and no backend imported, so the memory a network needs is
+        known before a run. Default: an MLP ``in_dim -> hidden -> out_dim``
+        (:func:`mlp_shapes`); a network of another layout overrides it."""
+        return mlp_shapes([shape.in_dim, *self.hidden, shape.out_dim])
+
+
+def mlp_shapes(dims: list[int], prefix: str = "") -> dict[str, tuple[int, ...]]:
+    """The arrays of linear layers ``dims[0] -> ... -> dims[-1]``: ``<prefix>layers.<i>.weight``
+    (fan_in, fan_out) and ``<prefix>layers.<i>.bias`` (fan_out,)."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    for i, (fan_in, fan_out) in enumerate(zip(dims[:-1], dims[1:], strict=True)):
+        shapes[f"{prefix}layers.{i}.weight"] = (int(fan_in), int(fan_out))
+        shapes[f"{prefix}layers.{i}.bias"] = (int(fan_out),)
+    return shapes
 
 
 class FieldShapeDict(TypedDict):

@@ -1,8 +1,8 @@
 """The backend half of a neural field: a network (or a batch of them) and Adam on one device.
 
-The shared trainer (:mod:`nlosfw.model.trainer`) builds a network through a
-:class:`NetworkBuild` and hands it to the :class:`Engine` of its backend (one for
-"a torch module", one for "a JAX module"; they live in the torch and JAX plugins).
+The shared trainer (:mod:`nlosfw.model.neural.trainer`) builds a network through a
+:class:`NetworkBuild` and hands it to its backend plugin's :class:`Backend` subclass (one
+for "a torch module", one for "a JAX module"; they live in the torch and JAX plugins).
 What is backend-independent is implemented here once: choosing the initial state,
 checking a stored state against the network, chunked validation and prediction,
 and checking what the network returns.
@@ -30,7 +30,7 @@ from typing import Any, Generic, Protocol, TypeVar
 import numpy as np
 
 from nlosfw.common.errors import DataError, FitError
-from nlosfw.model.neural_config import FieldShape, NeuralFieldConfig
+from nlosfw.model.neural.config import FieldShape, NeuralFieldConfig
 
 #: Rows per forward pass when predicting or validating (bounds memory).
 PREDICT_CHUNK = 1 << 16
@@ -38,9 +38,9 @@ PREDICT_CHUNK = 1 << 16
 
 @dataclass(frozen=True)
 class SmoothnessBatch:
-    """One step's regularisation across frequency (:mod:`nlosfw.model.smoothness`).
+    """One step's regularisation across frequency (:mod:`nlosfw.model.neural.smoothness`).
 
-    The engine evaluates the network at ``x`` and adds ``weight * mean((D @ out)^2)`` to the
+    The backend evaluates the network at ``x`` and adds ``weight * mean((D @ out)^2)`` to the
     loss, ``out`` being the outputs as (A, M, 2): in multi mode ``x`` is (A * M, in_dim)
     frequency-major (A frequencies at the same M points) and the outputs are reshaped;
     in single mode ``x`` is (M, in_dim) and the K = A networks give (K, M, 2).
@@ -54,7 +54,7 @@ class SmoothnessBatch:
 
 @dataclass(frozen=True)
 class NetworkBuild:
-    """What an engine builds: ``factory(config, shape)`` (JAX: ``factory(config, shape, key)``).
+    """What a backend builds: ``factory(config, shape)`` (JAX: ``factory(config, shape, key)``).
 
     A network may define ``initial_state(n_networks, seed) -> {name: numpy array}`` to
     start from weights that do not depend on the backend (with a leading axis
@@ -75,7 +75,7 @@ class NetworkBuild:
 NetT = TypeVar("NetT")
 #: A backend's loss handle (a device scalar read back only when needed).
 LossT = TypeVar("LossT")
-#: A backend's copy of the trainable state (see :meth:`Engine.snapshot`).
+#: A backend's copy of the trainable state (see :meth:`Backend.snapshot`).
 SnapT = TypeVar("SnapT")
 
 
@@ -89,7 +89,7 @@ class DeviceArray(Protocol):
 ArrT = TypeVar("ArrT", bound=DeviceArray)
 
 
-class Engine(ABC, Generic[NetT, ArrT, LossT, SnapT]):
+class Backend(ABC, Generic[NetT, ArrT, LossT, SnapT]):
     """A network's state and Adam's on one device, with training steps and forward passes.
 
     A backend implements the methods marked abstract; each takes and returns numpy

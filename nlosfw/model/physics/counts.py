@@ -16,7 +16,7 @@ included (``tests/test_rsd_counts.py`` checks it against the FFT scene operator)
 the time-domain forward model of the whole spectrum that the phasor fit does not have.
 
 Fit. Maximise L = sum n log lambda - lambda over the kept points and every bin from the
-first that holds a count (a gate's zeros are not measurements), on bins ``counts_bin``
+first that holds a count (a gate's zeros are not measurements), on bins ``counts.bin``
 wide: sums of whole bins of the capture, so still Poisson counts. EM (Richardson-Lucy for
 the albedo, the same for the background) keeps both >= 0 and never lowers L:
 
@@ -30,7 +30,7 @@ When to stop. Run to convergence, EM fits the counts' noise (Richardson-Lucy's k
 semi-convergence): on the shared diffuse S at 16x (thinning seed 0) the held-out excess
 was -7.4 dB after 10 iterations and -3.5 dB after 50 (least squares alone: -4.6 dB; the
 rule below stops after 7: -7.6 dB). So by default
-(``counts_stop``) the counts are split once more, binomially, into two independent halves:
+(``counts.stop``) the counts are split once more, binomially, into two independent halves:
 EM runs on one, and stops at the iteration where the other's likelihood peaks
 (:func:`stopping_iteration`); the fit on all the counts then runs that many iterations.
 """
@@ -49,14 +49,14 @@ from scipy.special import ndtr
 from nlosfw.capture.geometry import CaptureGeometry, CaptureKind
 from nlosfw.common.config import Choice
 from nlosfw.common.errors import ConfigError, FitError
-from nlosfw.model.rsd_background import WallBackground
-from nlosfw.model.rsd_response import SystemResponse
-from nlosfw.model.scene_operator import OperatorOptions, VoxelLattice, leg_amplitude
+from nlosfw.model.physics.background import WallBackground
+from nlosfw.model.physics.operator import OperatorOptions, VoxelLattice, leg_amplitude
+from nlosfw.model.physics.response import SystemResponse
 from nlosfw.transform.counts import BinnedCounts, bin_counts
 from nlosfw.transform.field import PhasorField
 
 if TYPE_CHECKING:
-    from nlosfw.model.rsd_config import RSDPriorConfig
+    from nlosfw.model.physics.config import RSDPriorConfig
 
 #: The pulse is cut this many standard deviations either side of its centre.
 _TAIL = 4.0
@@ -192,17 +192,17 @@ def stopping_iteration(problem: BinnedCounts, operator: sparse.csr_matrix, start
 def refine_by_counts(field: PhasorField, scene: CountsScene, albedo: np.ndarray,
                      config: RSDPriorConfig) -> CountsFit:
     """The least-squares ``albedo`` (Z, Y, X) refined by EM on the counts of the training
-    ``field``'s points (``config``'s ``counts_*`` options: ``counts_iterations`` of EM, or
-    with ``counts_stop`` as many as :func:`stopping_iteration` finds, up to that); the
+    ``field``'s points (``config``'s ``counts`` options: ``counts.iterations`` of EM, or
+    with ``counts.stop`` as many as :func:`stopping_iteration` finds, up to that); the
     background's phasor at the field's frequencies."""
-    iterations, stop, seed = config.counts_iterations, config.counts_stop, config.seed
+    iterations, stop, seed = config.counts.iterations, config.counts.stop, config.seed
     counts = field.counts
     if counts is None:
         raise ConfigError("model.likelihood", "rsd_prior: poisson_counts fits the photon "
                           "counts, which this field does not carry: it needs a capture of "
                           "photon counts run through the pipeline with split.spectral=none "
                           "(or a PhasorField with counts); use least_squares or poisson")
-    bin_width = config.counts_bin or 0.25 / float(field.frequencies.max())
+    bin_width = config.counts.bin or 0.25 / float(field.frequencies.max())
     problem = bin_counts(counts, field.wall_xyz, bin_width)
     flat = np.asarray(albedo, dtype=np.float64).ravel()
     support = np.flatnonzero(flat > 0)

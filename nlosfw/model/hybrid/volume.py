@@ -2,8 +2,9 @@
 
 Like ``rsd_prior`` the field is explained by a hidden scene on voxel planes parallel to
 the wall (the same lattice, depth planes, frequencies, device legs and normalisation, set up
-as :class:`~nlosfw.model.rsd_prior.RSDPriorFieldModel` does, its quick coarse fit finding
-the depth planes when ``depth_range`` is not given), but the albedo is not
+as :class:`~nlosfw.model.physics.prior.RSDPriorFieldModel` does with the options of the
+group ``prior``, its quick coarse fit finding the depth planes when ``prior.depth.range``
+is not given), but the albedo is not
 a free array: it is a registered network (``network``, any of the ``register_networks``
 API, on the subclass's backend) evaluated at the voxel centres,
 
@@ -21,7 +22,7 @@ wall samples (every training frequency, full batch) by least squares,
 
 with the operator A written once per backend (torch, JAX: differentiable, native FFTs)
 from the numpy kernel spectra and laser legs of
-:class:`~nlosfw.model.scene_operator.SceneOperator` (:func:`plane_stack`). The network's
+:class:`~nlosfw.model.physics.operator.SceneOperator` (:func:`plane_stack`). The network's
 smoothness is the prior: no L1 or TV term. The fitted albedo predicts the field anywhere
 ``rsd_prior`` can (through :meth:`RSDPriorFieldModel.from_albedo`).
 
@@ -47,7 +48,6 @@ resolution chart), stopping after 69-144 steps; without validation, 300 steps ga
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import tempfile
 import time
@@ -58,147 +58,40 @@ from typing import ClassVar
 
 import numpy as np
 
-from nlosfw.common.config import require, require_threads
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.files import format_bytes
 from nlosfw.common.memory import available_memory
 from nlosfw.image.fft import Precision
 from nlosfw.image.rsd_kernel import check_geometry
+from nlosfw.model.hybrid.stack import PlaneStack, plane_stack, stack_bytes
+from nlosfw.model.hybrid.volume_config import VOLUME_NAMES, NeuralVolumeConfig
 from nlosfw.model.interface import (
     FieldModel,
-    FieldModelConfig,
     FitReport,
     TrainingStep,
     check_query,
     check_training_field,
 )
-from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.neural_config import (
+from nlosfw.model.model_files import read_model_file, stored_config, write_model_file
+from nlosfw.model.neural.config import (
     FieldMode,
     FieldShape,
     NeuralFieldConfig,
     wrapped_network_config,
 )
-from nlosfw.model.rsd_depths import fitted_frequencies
-from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import training_values
-from nlosfw.model.scene_operator import Amplitude, OperatorOptions, SceneOperator, VoxelLattice
-from nlosfw.model.trainer import NeuralFieldModel, learning_rate
-from nlosfw.model.volume_training import (
-    PlaneStack,
-    plane_stack,
-    stack_bytes,
-    validation_split,
-)
+from nlosfw.model.neural.steps import learning_rate
+from nlosfw.model.neural.trainer import NeuralFieldModel
+from nlosfw.model.physics.config import RSDPriorConfig, options_in_group
+from nlosfw.model.physics.frequencies import fitted_frequencies
+from nlosfw.model.physics.operator import OperatorOptions, SceneOperator, VoxelLattice
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.physics.wall import training_values, validation_split
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
-#: The network options the neural volume sets from its own: by the network's name, the
-#: name of this model's option.
-_VOLUME_NAMES = {"seed": "seed", "device": "device", "hidden": "network_hidden",
-                 "steps": "steps", "lr": "lr", "threads": "threads",
-                 "validation_fraction": "validation_fraction"}
-_VOLUME_SETS = frozenset(_VOLUME_NAMES)
 #: Inputs of the network are scaled into [-MARGIN, MARGIN] per axis.
 MARGIN = 0.9
-
-
-@dataclass(frozen=True)
-class NeuralVolumeConfig(FieldModelConfig):
-    """Options of the neural hidden volume (``seed`` and ``device`` are the network's:
-    ``auto`` trains it on a GPU when the backend sees one). The lattice options are
-    ``rsd_prior``'s."""
-
-    network: str = "siren"
-    """The albedo's network: a name registered through ``register_networks`` for this
-    model's backend (siren, fourier, hashgrid, ...)."""
-    network_hidden: tuple[int, ...] = (64, 64)
-    """Widths of the network's hidden layers."""
-    network_options: dict[str, bool | int | float | str] = dataclasses.field(default_factory=dict)
-    """Options of the network's own config (siren's ``omega0_first``, a hash grid's
-    levels, ...), checked by it before the run; its widths, seed, device, steps, learning
-    rate and threads are this model's options, refused here."""
-    steps: int = 300
-    """Adam steps (full batch: every kept sample at every training frequency); an upper
-    bound when ``patience`` stops sooner."""
-    validation_fraction: float = 0.1
-    """Fraction of the kept wall points held out of the loss (chosen with ``seed``): the
-    albedo of the step with the lowest error there is kept, so the network stops before it
-    fits the noise of the points it trains on (0: none, the last step is kept). Needs 10 or
-    more kept points."""
-    patience: int = 50
-    """Steps without a lower validation error before training stops (0: run every step;
-    the best step's albedo is kept in every case)."""
-    lr: float = 3e-3
-    """Peak learning rate (cosine decay to ``lr * lr_final``)."""
-    lr_final: float = 0.05
-    """Final learning rate as a fraction of ``lr``."""
-    albedo_start: float = 0.001
-    """Albedo (times mean(n) / s, see the module docstring) where the network's output is
-    0: the start is a faint, nearly uniform volume."""
-    threads: int = 1
-    """CPU threads of torch while training (0: torch's default; JAX ignores it)."""
-    amplitude: Amplitude = Amplitude.lambertian
-    """Amplitude of each leg (``rsd_prior``'s): lambertian, point or inverse_square."""
-    lobe: float = 0.0
-    """Exponent k of a glossy lobe about the voxels' normal (``rsd_prior``'s; 0: none)."""
-    fit_lobe: bool = False
-    """Choose k by ``rsd_prior``'s fit with ``fit_lobe`` (its held-out search over [0,
-    ``lobe_max``]) before training; the network then trains with that k."""
-    lobe_max: float = 20.0
-    """``fit_lobe``: the largest k searched."""
-    fit_frequencies: int = 0
-    """Frequencies used in the fit, evenly spread over the field's (0: all)."""
-    depth_range: tuple[float, ...] = ()
-    """[m] Near and far depth of the voxel planes; empty: found by ``rsd_prior``'s quick
-    coarse fit."""
-    depth_step: float | None = None
-    """[m] Distance between voxel planes; default a fifth of the shortest wavelength."""
-    lateral_step: float | None = None
-    """[m] Largest lateral voxel spacing (``rsd_prior``'s default when null)."""
-    depth_threshold: float = 0.1
-    """Automatic depth range: keep planes whose coarse contribution reaches this fraction."""
-    depth_iterations: int = 40
-    """Automatic depth range: FISTA iterations of the coarse fit."""
-    depth_margin: float = 0.05
-    """Automatic depth range: metres added before and after the kept planes."""
-    precision: Precision = Precision.single
-    """Precision of the operator's constants: complex64 or complex128."""
-    workers: int = -1
-    """Threads of scipy.fft in the setup (-1: all cores)."""
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require(bool(self.network), "network", "must name a registered network, e.g. siren")
-        taken = sorted(set(self.network_options) & _VOLUME_SETS)
-        require(not taken, f"network_options.{taken[0] if taken else ''}",
-                "is set by the neural volume's own options (network_hidden, seed, device, "
-                "steps, lr, threads); set it there")
-        require(len(self.network_hidden) >= 1 and all(h >= 1 for h in self.network_hidden),
-                "network_hidden", f"must be one or more widths >= 1, got "
-                f"{list(self.network_hidden)}")
-        require(self.steps >= 1, "steps", f"must be >= 1, got {self.steps}")
-        require(self.lr > 0 and np.isfinite(self.lr), "lr",
-                f"must be > 0 and finite, got {self.lr}")
-        require(0 < self.lr_final <= 1, "lr_final", f"must be in (0, 1], got {self.lr_final}")
-        require(0 <= self.validation_fraction < 0.5, "validation_fraction",
-                f"must be in [0, 0.5), got {self.validation_fraction}")
-        require(self.patience >= 0, "patience", f"must be >= 0, got {self.patience}")
-        require(0 < self.albedo_start < 1, "albedo_start",
-                f"must be in (0, 1), got {self.albedo_start}")
-        require_threads(self.threads, "threads", 0, "torch's default")
-        self.prior_config()                 # the lattice options, checked by rsd_prior
-
-    def prior_config(self) -> RSDPriorConfig:
-        """``rsd_prior``'s options that find the depth planes and predict."""
-        return RSDPriorConfig(
-            seed=self.seed, amplitude=self.amplitude, lobe=self.lobe, fit_lobe=self.fit_lobe,
-            lobe_max=self.lobe_max, fit_frequencies=self.fit_frequencies,
-            depth_range=self.depth_range, depth_step=self.depth_step,
-            lateral_step=self.lateral_step,
-            depth_threshold=self.depth_threshold, depth_iterations=self.depth_iterations,
-            depth_margin=self.depth_margin, precision=self.precision, workers=self.workers)
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,7 +150,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
     config_class = NeuralVolumeConfig
     family = "neural_volume"
     backend: ClassVar[str] = ""
-    """The engine of the network (``torch``, ``jax``)."""
+    """The backend of the network (``torch``, ``jax``)."""
 
     def __init__(self, config: NeuralVolumeConfig | Mapping[str, object] | None = None
                  ) -> None:
@@ -303,7 +196,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         network = self.network_class(self.config.network)   # a bad name fails first
         problem, lattice, scale, prior = self._problem(field, network,
                                                        self.config.prior_config())
-        fitted = {"lobe_exponent": prior.lobe} if self.config.fit_lobe else {}
+        fitted = {"lobe_exponent": prior.lobe.exponent} if self.config.prior.lobe.fit else {}
         trained = self.train(problem, on_step)
         albedo = np.asarray(trained.albedo, dtype=np.float32)
         if albedo.shape != problem.gain.shape or not np.all(np.isfinite(albedo)):
@@ -322,21 +215,24 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
                  ) -> tuple[VolumeProblem, VoxelLattice, float, RSDPriorConfig]:
         """(What the backend trains on, the lattice, the field's scale, ``prior`` with its
         lobe fixed): ``rsd_prior``'s setup with options ``prior`` (its depth planes, lattice,
-        frequencies, lobe and normalisation). With ``fit_lobe``, ``rsd_prior``'s held-out
+        frequencies, lobe and normalisation). With ``lobe.fit``, ``rsd_prior``'s held-out
         search on this lattice (at its default frequency count) fixes the lobe first."""
         cfg, who = self.config, self.model_name()
         check_geometry(field.geometry)
         samples, values, scale = training_values(field, who)      # rsd_prior's
-        lattice, chosen = RSDPriorFieldModel(prior).plan_lattice(values, samples, field)
-        if prior.fit_lobe:
+        with options_in_group("prior"):
+            lattice, chosen = RSDPriorFieldModel(prior).plan_lattice(values, samples, field)
+        if prior.lobe.fit:
             search = replace(prior, fit_frequencies=RSDPriorConfig().fit_frequencies)
             picked = fitted_frequencies(search.fit_frequencies, field, lattice.depths)
-            prior = replace(prior, fit_lobe=False, lobe=RSDPriorFieldModel(search).search_lobe(
-                field, values, samples, lattice, picked))
-        dtype = np.complex64 if cfg.precision == Precision.single else np.complex128
+            exponent = RSDPriorFieldModel(search).search_lobe(field, values, samples, lattice,
+                                                              picked)
+            prior = replace(prior, lobe=replace(prior.lobe, fit=False, exponent=exponent))
+        dtype = np.complex64 if prior.precision == Precision.single else np.complex128
         op = SceneOperator(lattice, samples.layout, field.geometry, field.frequencies[chosen],
-                           OperatorOptions(amplitude=cfg.amplitude, lobe=prior.lobe, dtype=dtype,
-                                           workers=cfg.workers, cache_mb=0.0), samples.mask)
+                           OperatorOptions(amplitude=prior.amplitude, lobe=prior.lobe.exponent,
+                                           dtype=dtype, workers=prior.workers, cache_mb=0.0),
+                           samples.mask)
         need, room = stack_bytes(op) * self.stack_copies(op.confocal), available_memory()
         log.info("%s: operator of %d planes x %d frequencies on a %d x %d lattice: %s",
                  who, lattice.depths.size, op.frequencies.size, *op.conv.shape,
@@ -345,7 +241,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
             raise FitError(f"{who}: its operator ({lattice.depths.size} depth planes x "
                            f"{op.frequencies.size} frequencies) needs {format_bytes(need)}, "
                            f"but {format_bytes(room)} are available; lower "
-                           "model.fit_frequencies or narrow model.depth_range")
+                           "model.prior.fit_frequencies or narrow model.prior.depth.range")
         data = np.ascontiguousarray(values[chosen]).astype(dtype)
         norms = op.column_norms()
         peak = float((op.adjoint(data).real / norms).max())
@@ -385,7 +281,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
                    "lr": config.lr, "threads": config.threads, "validation_fraction": 0.0,
                    **config.network_options}
         built: NeuralFieldConfig = wrapped_network_config(
-            network.config_class, options, _VOLUME_NAMES, "network_options")
+            network.config_class, options, VOLUME_NAMES, "network_options")
         return built
 
     # ------------------------------------------------------------------ predict
@@ -432,11 +328,9 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
 
     @classmethod
     def load(cls, path: str | Path) -> NeuralVolumeFieldModel:
-        from nlosfw.common.config import config_from_mapping
-
         header, arrays = read_model_file(path, cls.model_name())
         try:
-            model = cls(config_from_mapping(cls.config_class, header["config"], "model"))
+            model = cls(stored_config(cls.config_class, header))
             stored = np.asarray(arrays["scene_file"], dtype=np.uint8).tobytes()
             n_network = int(header["n_parameters"])
         except (KeyError, TypeError, ValueError, ConfigError) as err:

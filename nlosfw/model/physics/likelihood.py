@@ -1,7 +1,7 @@
 """The likelihood ``rsd_prior`` fits by: plain least squares, the Poisson noise of the
 capture's photon counts to second order (``likelihood: poisson``, here), or the exact
 Poisson likelihood of the counts in every time bin (``likelihood: poisson_counts``,
-:mod:`nlosfw.model.rsd_counts`).
+:mod:`nlosfw.model.physics.counts`).
 
 A phasor sample is a DFT of a wall point's histogram, P(x, f) = sum_t K(f, t) n(x, t). With
 Poisson counts n its variance is Var P(x, f) = sum_t |K(f, t)|^2 n(x, t): for every nlosfw
@@ -30,7 +30,7 @@ import numpy as np
 
 from nlosfw.common.config import Choice
 from nlosfw.common.errors import ConfigError
-from nlosfw.model.rsd_sampling import WallSamples
+from nlosfw.model.physics.wall import WallSamples
 from nlosfw.transform.field import PhasorField
 
 #: The smallest variance, as a fraction of the kept points' median.

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlosfw.model.volume_training import PlaneStack, aligned_empty
+from nlosfw.model.hybrid.stack import PlaneStack, aligned_empty
 
 #: Largest difference between mirrored spectra, relative to each spectrum's peak, that
 #: still counts as symmetric (complex64 FFTs differ by about 3e-7).
