@@ -136,6 +136,14 @@ class NeuralFieldConfig(FieldModelConfig):
         require(1 <= self.smoothness_points <= MAX_SMOOTHNESS_POINTS, "smoothness_points",
                 f"must be 1 to {MAX_SMOOTHNESS_POINTS}, got {self.smoothness_points}")
 
+    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
+        """The arrays of one network of these options for data of ``shape`` (trainable and
+        fixed, by name, with the shapes its initial state has), from the options alone:
+        nothing is allocated and no backend imported, so the memory a network needs is
+        known before a run. Default: an MLP ``in_dim -> hidden -> out_dim``
+        (:func:`mlp_shapes`); a network of another layout overrides it."""
+        return mlp_shapes([shape.in_dim, *self.hidden, shape.out_dim])
+
 
 C = TypeVar("C")
 
@@ -154,14 +162,6 @@ def wrapped_network_config(config_class: type[C], options: Mapping[str, object],
         name = names.get(head) or ".".join(p for p in (others, head) if p)
         raise ConfigError(".".join(p for p in ("model", name) if p) + dot + rest,
                           err.problem) from None
-
-    def network_shapes(self, shape: FieldShape) -> dict[str, tuple[int, ...]]:
-        """The arrays of one network of these options for data of ``shape`` (trainable and
-        fixed, by name, with the shapes its initial state has), from the options alone:
-        nothing is allocated and no backend imported, so the memory a network needs is
-        known before a run. Default: an MLP ``in_dim -> hidden -> out_dim``
-        (:func:`mlp_shapes`); a network of another layout overrides it."""
-        return mlp_shapes([shape.in_dim, *self.hidden, shape.out_dim])
 
 
 def mlp_shapes(dims: list[int], prefix: str = "") -> dict[str, tuple[int, ...]]:
