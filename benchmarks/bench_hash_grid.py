@@ -32,7 +32,7 @@ from rich.console import Console
 from rich.table import Table
 from timing import best_of, machine
 
-from nlosfw.model import FieldMode, FieldShape, HashGridFieldConfig, hash_grid_layout
+from nlosfw.model.neural import FieldMode, FieldShape, HashGridFieldConfig, hash_grid_layout
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 

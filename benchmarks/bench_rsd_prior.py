@@ -52,7 +52,7 @@ from timing import machine
 from nlosfw.capture import Capture, read_capture, write_capture
 from nlosfw.image import FFTImager, volume_voxels
 from nlosfw.model import InterpFieldModel, split_field
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
+from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate import builtin_scene
 from nlosfw.transform.fft import FFTTransform

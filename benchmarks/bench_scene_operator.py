@@ -25,7 +25,7 @@ from timing import machine
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.image import grid_layout
-from nlosfw.model import OperatorOptions, SceneOperator, VoxelLattice
+from nlosfw.model.physics import OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.testing import fixtures
 
 RESULTS = Path(__file__).parent / "results" / "bench_scene_operator.json"

@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 from timing import best_of, machine, print_speedups
 
-from nlosfw.model import FieldMode, FieldShape, NetworkBuild, volume_coordinates
+from nlosfw.model.hybrid import volume_coordinates
+from nlosfw.model.neural import FieldMode, FieldShape, NetworkBuild
 from nlosfw.plugins import registered_network
 
 RESULTS = Path(__file__).parent / "results" / "bench_volume_network.json"
@@ -62,11 +63,11 @@ def _row(whole: Callable[[], list[np.ndarray]], pieces: Callable[[], list[np.nda
 def torch_pass(repeats: int, threads: int) -> dict[str, float]:
     """torch: forward + backward, whole against in pieces."""
     import torch
-    from nlosfw_torch.engine import TorchEngine
+    from nlosfw_torch.backend import TorchBackend
     from nlosfw_torch.neural_volume import CPU_CHUNK, volume_albedo
 
     coords, gain, weights, build, _ = _problem()
-    engine = TorchEngine(build)
+    engine = TorchBackend(build)
     state = {**engine.fixed, **engine.params}
     x, g, w = (torch.from_numpy(a) for a in (coords, gain, weights))
 
@@ -93,11 +94,11 @@ def jax_pass(repeats: int) -> dict[str, float]:
     import equinox as eqx
     import jax
     import jax.numpy as jnp
-    from nlosfw_jax.engine import Fixed, JaxEngine
+    from nlosfw_jax.backend import Fixed, JaxBackend
     from nlosfw_jax.neural_volume import CPU_CHUNK, volume_albedo
 
     coords, gain, weights, _, build = _problem()
-    engine = JaxEngine(build)
+    engine = JaxBackend(build)
     x, g, w = (jnp.asarray(a) for a in (coords, gain, weights))
 
     def grads(chunk: int | None) -> Callable[[], list[np.ndarray]]:

@@ -12,7 +12,7 @@ timed in the same run on the same operator:
   differentiated by autograd's own ``bmm`` backward, which multiplies by the spectra's
   conjugate transpose, against the operator's S^H g computed as (g^H S)^H, both per
   point; ``folded`` (the default, the second change): that product per point against one
-  per orbit of the folded spectra (:func:`nlosfw.model.fold_spectra`);
+  per orbit of the folded spectra (:func:`nlosfw.model.hybrid.fold_spectra`);
 - JAX: the product summed over planes (the GPU's path); the operator on the CPU contracts
   the reordered spectra with an ``einsum`` instead. Both jitted, the spectra passed as
   arguments (closed over, XLA folds them into the program and compiles for minutes).
@@ -39,7 +39,8 @@ from timing import machine, print_speedups
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.image import grid_layout
-from nlosfw.model import OperatorOptions, PlaneStack, SceneOperator, VoxelLattice, plane_stack
+from nlosfw.model.hybrid import PlaneStack, plane_stack
+from nlosfw.model.physics import OperatorOptions, SceneOperator, VoxelLattice
 from nlosfw.testing import fixtures
 
 RESULTS = Path(__file__).parent / "results" / "bench_volume_operator.json"

@@ -39,7 +39,7 @@ from typing import Any
 
 from sparsity_study import _fmt, _rows, collect_study, write_readme_section
 
-from nlosfw.common.text import markdown
+from nlosfw.common.text import markdown, override_value
 from nlosfw.report.study import StudyRow, study_figure
 from nlosfw.report.tables import markdown_table
 
@@ -112,7 +112,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 def sweep_command(sweep: Path, capture: Path, overrides: Sequence[str]) -> list[str]:
     """``python -m nlosfw -m experiment=sparsity_real capture.path=FILE ...``."""
     return [sys.executable, "-m", "nlosfw", "-m", "experiment=sparsity_real",
-            f"capture.path={capture.resolve()}", f"hydra.sweep.dir={sweep}", *overrides]
+            f"capture.path={override_value(str(capture.resolve()))}",
+            f"hydra.sweep.dir={override_value(str(sweep))}", *overrides]
 
 
 # ---------------------------------------------------------------------- markdown

@@ -38,6 +38,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from nlosfw.common.text import override_value
 from nlosfw.report.records import RunRecord, find_runs, read_run
 from nlosfw.report.study import Stat, StudyRow, study_figure, study_rows
 from nlosfw.report.tables import markdown_table
@@ -96,9 +97,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 def sweep_command(sweep: Path, capture: Path | None, overrides: Sequence[str]) -> list[str]:
     """``python -m nlosfw -m experiment=sparsity ...`` for the study."""
     command = [sys.executable, "-m", "nlosfw", "-m", "experiment=sparsity",
-               f"hydra.sweep.dir={sweep}"]
+               f"hydra.sweep.dir={override_value(str(sweep))}"]
     if capture is not None:
-        command += [f"capture.path={capture.resolve()}", "~hydra.sweeper.params.scene",
+        command += [f"capture.path={override_value(str(capture.resolve()))}",
+                    "~hydra.sweeper.params.scene",
                     "~hydra.sweeper.params.acquisition"]
     return command + list(overrides)
 

@@ -141,7 +141,7 @@ def test_stage_functions_check_options_like_the_command_line():
     with pytest.raises(nlosfw.ConfigError, match="unknown scene 'nope'"):
         nlosfw.simulate_scene("nope")
     field = nlosfw.transform_capture(capture, n_frequencies=5)
-    with pytest.raises(nlosfw.DataError, match="depths: need one or more finite depths > 0"):
+    with pytest.raises(nlosfw.ConfigError, match="depths: need one or more finite depths > 0"):
         nlosfw.reconstruct(field, [0.5, -1.0])
 
 

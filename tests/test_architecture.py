@@ -1,5 +1,7 @@
-"""The package layout's rules: stages depend only on earlier stages, no import cycles, and
-plugins and examples use only the public names (``__all__``) of the stage packages."""
+"""The package layout's rules: stages depend only on earlier stages, no import cycles, the
+field models' families depend on each other only through the hybrids, and plugins and
+examples use only the public names (``__all__``) of the stage packages and of the backend
+APIs."""
 
 from __future__ import annotations
 
@@ -39,6 +41,18 @@ FORBIDDEN = {
     "nlosfw": ("nlosfw.cli", "nlosfw.report"),
     "nlosfw.pipeline": ("nlosfw.cli", "nlosfw.report", "nlosfw.compose"),
     "nlosfw.compose": ("nlosfw.cli", "nlosfw.report"),
+}
+
+#: Below the stage packages, the packages whose ``__all__`` is public too: the APIs the
+#: backend and network plugins build on.
+BACKEND_APIS = ("nlosfw.model.neural", "nlosfw.model.physics", "nlosfw.model.hybrid")
+
+#: The field models' families: each may import the model package's own modules and the
+#: families named here, nothing of the others (the hybrids build on both).
+MODEL_FAMILIES = {
+    "nlosfw.model.neural": (),
+    "nlosfw.model.physics": (),
+    "nlosfw.model.hybrid": ("nlosfw.model.neural", "nlosfw.model.physics"),
 }
 
 #: Packages that must not import these libraries at all (not even inside functions).
@@ -114,6 +128,22 @@ def test_forbidden_imports():
     assert not wrong, f"imports the architecture forbids (importer, imported): {wrong}"
 
 
+def test_model_families_import_only_the_families_they_build_on():
+    wrong = []
+    for src, deps in _graph().items():
+        own = _package_of(src, {k: () for k in MODEL_FAMILIES})
+        for dst in deps:
+            other = _package_of(dst, {k: () for k in MODEL_FAMILIES})
+            if other is None or other == own:
+                continue
+            if own is None:     # a module of the model package's root, or another stage
+                if src.startswith("nlosfw.model.") and other != "nlosfw.model.neural":
+                    wrong.append((src, dst))
+            elif other not in MODEL_FAMILIES[own]:
+                wrong.append((src, dst))
+    assert not wrong, f"imports between model families (importer, imported): {wrong}"
+
+
 def test_engine_imports_no_ui_library():
     wrong = []
     for path in CORE.rglob("*.py"):
@@ -178,16 +208,17 @@ def test_plugins_and_examples_use_only_public_names(path):
             continue
         module = importlib.import_module(node.module)
         public = set(getattr(module, "__all__", ()))
+        api = node.module.count(".") <= 1 or node.module in BACKEND_APIS
         for alias in node.names:
-            if node.module.count(".") > 1 or alias.name not in public:
+            if not api or alias.name not in public:
                 private.append(f"{node.module}.{alias.name}")
     assert not private, (f"{path.relative_to(ROOT)} imports names outside the stage packages' "
-                         f"__all__: {private}")
+                         f"and the backend APIs' __all__: {private}")
 
 
 def test_every_public_name_exists():
     for package in [m for m in LAYERS if m.count(".") == 1 and m != "nlosfw.cli"
-                    and m != "nlosfw.__main__"] + ["nlosfw"]:
+                    and m != "nlosfw.__main__"] + ["nlosfw", *BACKEND_APIS]:
         module = importlib.import_module(package)
         missing = [n for n in getattr(module, "__all__", ()) if not hasattr(module, n)]
         assert not missing, f"{package}.__all__ names what it does not define: {missing}"
@@ -214,7 +245,8 @@ MAX_ANY = 134
 #: Modules allowed past MAX_MODULE_LINES until the work named beside them lands.
 OVERSIZED_FOR_NOW: set[str] = set()
 MAX_MODULE_LINES = 450
-#: The largest share of nlosfw/'s lines one package may hold.
+#: The largest share of nlosfw/'s lines one leaf package may hold (a package's modules,
+#: not its subpackages': ``nlosfw.model`` and ``nlosfw.model.physics`` are measured apart).
 MAX_PACKAGE_SHARE = 0.20
 
 
@@ -246,15 +278,38 @@ def test_no_module_is_over_the_size_limit():
                             f"responsibility): {unexpected}")
 
 
+def _leaf_package(path: Path) -> str:
+    """The package whose own module ``path`` is (``model.physics``; ``(top level)`` for
+    nlosfw/'s own modules)."""
+    return ".".join(path.relative_to(CORE).parts[:-1]) or "(top level)"
+
+
 def test_no_package_holds_more_than_a_fifth_of_the_lines():
     sizes: dict[str, int] = {}
     for path in _core_sources():
-        parts = path.relative_to(CORE).parts
-        package = parts[0] if len(parts) > 1 else "(top level)"
+        package = _leaf_package(path)
         sizes[package] = sizes.get(package, 0) + _lines(path)
     total = sum(sizes.values())
     shares = {p: round(n / total, 3) for p, n in sizes.items() if n / total > MAX_PACKAGE_SHARE}
     assert not shares, f"packages over {MAX_PACKAGE_SHARE:.0%} of nlosfw/'s lines: {shares}"
+
+
+def test_every_package_is_listed_in_pyproject():
+    """A package (a folder of nlosfw/ or conf/ with an ``__init__.py``) missing from
+    pyproject.toml's ``packages`` would be left out of a non-editable install."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:        # Python 3.10
+        tomllib = pytest.importorskip("tomli")
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))[
+        "tool"]["setuptools"]
+    found = {".".join(("nlosfw", *init.parent.relative_to(CORE).parts))
+             for init in CORE.rglob("__init__.py")}
+    found |= {".".join(("nlosfw.conf", *init.parent.relative_to(ROOT / "conf").parts))
+              for init in (ROOT / "conf").rglob("__init__.py")}
+    listed = set(setuptools["packages"])
+    assert found - listed == set(), f"packages missing from pyproject.toml: {found - listed}"
+    assert listed - found == set(), f"pyproject.toml lists no such package: {listed - found}"
 
 
 def test_hook_specifications_keep_their_signatures():

@@ -82,6 +82,27 @@ def test_a_subclass_docstring_overrides_its_base():
     assert docs["size"].unit == "m"
 
 
+@dataclass(frozen=True)
+class Inner:
+    step: float = 0.1
+    """[m] Plane spacing."""
+
+
+@dataclass(frozen=True)
+class Outer:
+    seed: int = 0
+    """Seed."""
+    depth: Inner = field(default_factory=Inner)
+    """The planes."""
+
+
+def test_a_group_of_options_is_given_as_its_options_on_request():
+    assert [o.name for o in option_docs(Outer)] == ["seed", "depth"]
+    flat = {o.name: o for o in option_docs(Outer, groups=True)}
+    assert list(flat) == ["seed", "depth.step"]
+    assert flat["depth.step"] == OptionDoc("depth.step", "float", 0.1, "m", "Plane spacing.")
+
+
 def test_split_unit_and_type_text_edge_cases():
     assert split_unit("  [1/m]  Explicit\n   frequencies. ") == ("1/m", "Explicit frequencies.")
     assert split_unit("Inputs are scaled into [-margin, margin].") == (
@@ -111,6 +132,9 @@ def _builtin_config_classes() -> dict[str, type]:
 
     nested(RunSettings, "run settings")
     nested(Scene, "scene")
+    for name, cls in list(classes.items()):
+        if ":" in name:                  # a plugin's config and its groups (model.prior.*)
+            nested(cls, name)
     return classes
 
 

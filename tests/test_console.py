@@ -55,7 +55,7 @@ def _record(name: str, level: int, **extra) -> logging.LogRecord:
 def test_the_console_shows_nlosfw_records_and_any_error_only():
     keep = ConsoleFilter().filter
     assert keep(_record("nlosfw.pipeline.engine", logging.INFO))
-    assert keep(_record("nlosfw_torch.engine", logging.WARNING))        # our plugins too
+    assert keep(_record("nlosfw_torch.backend", logging.WARNING))        # our plugins too
     assert not keep(_record("jax._src.xla_bridge", logging.INFO))        # "no TPU"
     assert not keep(_record("jax._src.xla_bridge", logging.WARNING))
     assert not keep(_record("matplotlib.font_manager", logging.INFO))

@@ -11,8 +11,8 @@ import pytest
 from nlosfw import load_capture
 from nlosfw.capture.signal import signal_bins, signal_depth_range
 from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span, field_depth_range
+from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
 from nlosfw.testing import fixtures, layouts
@@ -70,11 +70,11 @@ def test_the_run_range_bounds_rsd_priors_depth_search(caplog):
                   meta)
     train = split_field(full, spatial_step=2).train_field
     assert field_depth_range(train) == (0.5, 0.7)
-    model = RSDPriorFieldModel({"iterations": 5, "depth_iterations": 10, "workers": 1})
-    with caplog.at_level(logging.INFO, logger="nlosfw.model.rsd_depths"):
+    model = RSDPriorFieldModel({"iterations": 5, "depth": {"iterations": 10}, "workers": 1})
+    with caplog.at_level(logging.INFO, logger="nlosfw.model.physics.lattice"):
         model.fit(train)
     depths = model.lattice.depths
-    margin = model.config.depth_margin + 1 / (4 * 4.5)
+    margin = model.config.depth.margin + 1 / (4 * 4.5)
     assert depths.min() >= 0.5 - margin and depths.max() <= 0.7 + margin
     coarse = [r.getMessage() for r in caplog.records if "coarse fit" in r.getMessage()]
     assert len(coarse) == 1 and "[" not in coarse[0] and len(coarse[0]) < 160

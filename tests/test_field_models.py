@@ -9,10 +9,9 @@ import pytest
 
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.neural_config import NeuralFieldConfig
-from nlosfw.model.normalisation import FieldNormalisation, estimate_delay
-from nlosfw.model.thesis_networks import (
-    PRESETS,
+from nlosfw.model.neural.catalogue import PRESETS, preset_config
+from nlosfw.model.neural.config import NeuralFieldConfig
+from nlosfw.model.neural.mlp import (
     SirenFieldConfig,
     count_parameters,
     default_octaves,
@@ -20,10 +19,10 @@ from nlosfw.model.thesis_networks import (
     init_parameters,
     network_inputs,
     positional_encoding,
-    preset_config,
     resolve_architecture,
 )
-from nlosfw.model.trainer import learning_rate
+from nlosfw.model.neural.normalisation import FieldNormalisation, estimate_delay
+from nlosfw.model.neural.trainer import learning_rate
 from nlosfw.testing import fixtures
 
 THESIS_COUNTS = {"thesis_tanh_single": 942, "thesis_pe_single": 914, "thesis_pe_multi": 3938,

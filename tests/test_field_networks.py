@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import ConfigError, FitError
-from nlosfw.model import (
+from nlosfw.model.neural import (
     FieldMode,
     FieldShape,
     FinerFieldConfig,
@@ -25,22 +25,22 @@ from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 
 NETWORKS = ("fourier", "wire", "finer", "hashgrid")
-ENGINES = ("torch", "jax")
+BACKENDS = ("torch", "jax")
 
 
-def _engine_module(engine):
-    pytest.importorskip(engine)
-    if engine == "jax":
+def _backend_module(backend):
+    pytest.importorskip(backend)
+    if backend == "jax":
         pytest.importorskip("equinox")
-    return pytest.importorskip(f"nlosfw_{engine}.networks")
+    return pytest.importorskip(f"nlosfw_{backend}.networks")
 
 
 def _to_numpy(out):
     return np.asarray(out.detach().numpy() if hasattr(out, "detach") else out)
 
 
-def _call(engine, module, x):
-    if engine == "torch":
+def _call(backend, module, x):
+    if backend == "torch":
         import torch
 
         with torch.no_grad():
@@ -105,13 +105,13 @@ COUNTS = [
 ]
 
 
-@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize(("network", "options", "shape", "expected"), COUNTS)
-def test_parameter_counts_match_hand_computed_formulas(engine, network, options, shape, expected):
-    _engine_module(engine)
-    model = load_plugins().registry.get("model", f"{network}_{engine}").load()
+def test_parameter_counts_match_hand_computed_formulas(backend, network, options, shape, expected):
+    _backend_module(backend)
+    model = load_plugins().registry.get("model", f"{network}_{backend}").load()
     config = model.config_class(**{**options, "mode": shape.mode, "device": "cpu"})
-    built = model.engine_class(NetworkBuild(model.network_factory, config, shape))
+    built = model.backend_class(NetworkBuild(model.network_factory, config, shape))
     assert built.parameters_per_network == expected
     assert sum(p.size for p in built.parameters()) == expected
 
@@ -126,14 +126,14 @@ def test_fourier_matrix_has_its_sigmas_and_is_not_a_parameter():
 
 
 # --------------------------------------------------------------------------- parts: closed forms
-@pytest.mark.parametrize("engine", ENGINES)
-def test_fourier_features_match_the_closed_form(engine):
-    networks = _engine_module(engine)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_fourier_features_match_the_closed_form(backend):
+    networks = _backend_module(backend)
     rng = np.random.default_rng(0)
     b = rng.normal(0, 4.0, (3, 7)).astype(np.float32)
     v = rng.uniform(-1, 1, (20, 3)).astype(np.float32)
     features = networks.FourierFeatures(3, 7)
-    if engine == "torch":
+    if backend == "torch":
         import torch
 
         features.B = torch.as_tensor(b)
@@ -143,11 +143,11 @@ def test_fourier_features_match_the_closed_form(engine):
         features = eqx.tree_at(lambda m: m.B.value, features, b)
     angle = 2 * np.pi * v.astype(np.float64) @ b.astype(np.float64)
     expected = np.concatenate([np.cos(angle), np.sin(angle)], axis=1)
-    np.testing.assert_allclose(_call(engine, features, v), expected, atol=2e-5)
+    np.testing.assert_allclose(_call(backend, features, v), expected, atol=2e-5)
 
 
-def _call_pair(engine, module, re, im):
-    if engine == "torch":
+def _call_pair(backend, module, re, im):
+    if backend == "torch":
         import torch
 
         with torch.no_grad():
@@ -156,9 +156,9 @@ def _call_pair(engine, module, re, im):
     return _to_numpy(module(re, im))
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_gabor_wavelet_matches_its_formula_for_real_and_complex_inputs(engine):
-    networks = _engine_module(engine)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_gabor_wavelet_matches_its_formula_for_real_and_complex_inputs(backend):
+    networks = _backend_module(backend)
     gabor = networks.Gabor(7.0, 1.5)
     rng = np.random.default_rng(1)
     re = rng.uniform(-1, 1, (5, 4)).astype(np.float32)
@@ -166,24 +166,24 @@ def test_gabor_wavelet_matches_its_formula_for_real_and_complex_inputs(engine):
     for z_im in (None, im):
         z = re.astype(np.float64) + (0 if z_im is None else 1j * z_im.astype(np.float64))
         psi = np.exp(1j * 7.0 * z - np.abs(1.5 * z) ** 2)
-        out = _call_pair(engine, gabor, re, z_im)                   # [Re psi, Im psi]
+        out = _call_pair(backend, gabor, re, z_im)                   # [Re psi, Im psi]
         np.testing.assert_allclose(out, np.concatenate([psi.real, psi.imag], axis=1),
                                    rtol=2e-5, atol=2e-6)
     # psi(0.3 + 0.2 i), by hand: exp(7i (0.3 + 0.2i) - 2.25 * 0.13) = exp(-1.6925) e^{2.1 i}
-    one = _call_pair(engine, gabor, np.array([[0.3]], np.float32), np.array([[0.2]], np.float32))
+    one = _call_pair(backend, gabor, np.array([[0.3]], np.float32), np.array([[0.2]], np.float32))
     expected = math.exp(-1.6925) * complex(math.cos(2.1), math.sin(2.1))
     assert complex(*one[0]) == pytest.approx(expected, abs=1e-6)
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_complex_linear_is_a_complex_matrix_product(engine):
-    networks = _engine_module(engine)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_complex_linear_is_a_complex_matrix_product(backend):
+    networks = _backend_module(backend)
     rng = np.random.default_rng(2)
     w = rng.normal(size=(2, 4, 3)).astype(np.float32)
     b = rng.normal(size=(2, 3)).astype(np.float32)
     z = rng.normal(size=(6, 4)) + 1j * rng.normal(size=(6, 4))
     layer = networks.ComplexLinear(4, 3)
-    if engine == "torch":
+    if backend == "torch":
         import torch
 
         layer.weight.data, layer.bias.data = torch.as_tensor(w), torch.as_tensor(b)
@@ -192,22 +192,22 @@ def test_complex_linear_is_a_complex_matrix_product(engine):
 
         layer = eqx.tree_at(lambda m: (m.weight, m.bias), layer, (w, b))
     expected = z @ (w[0] + 1j * w[1]) + (b[0] + 1j * b[1])
-    out = _call(engine, layer, np.concatenate([z.real, z.imag], axis=1).astype(np.float32))
+    out = _call(backend, layer, np.concatenate([z.real, z.imag], axis=1).astype(np.float32))
     np.testing.assert_allclose(out[:, :3] + 1j * out[:, 3:], expected, rtol=1e-5, atol=1e-5)
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_finer_activation_and_its_gradient_match_the_formula(engine):
-    networks = _engine_module(engine)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_finer_activation_and_its_gradient_match_the_formula(backend):
+    networks = _backend_module(backend)
     z = np.array([-1.3, -0.4, 0.0, 0.25, 0.9], np.float32)
     zz = z.astype(np.float64)
     expected = np.sin(30.0 * (np.abs(zz) + 1) * zz)
-    np.testing.assert_allclose(_call(engine, networks.Finer(30.0), z), expected, atol=2e-5)
+    np.testing.assert_allclose(_call(backend, networks.Finer(30.0), z), expected, atol=2e-5)
     # the factor |z| + 1 held constant: d/dz = w (|z| + 1) cos(.); through it: w (2|z| + 1) cos(.)
     cos = np.cos(30.0 * (np.abs(zz) + 1) * zz)
     for through, factor in ((False, np.abs(zz) + 1), (True, 2 * np.abs(zz) + 1)):
         act = networks.Finer(30.0, through)
-        if engine == "torch":
+        if backend == "torch":
             import torch
 
             t = torch.tensor(z, requires_grad=True)
@@ -252,10 +252,10 @@ def brute_force_encoding(x, resolutions, tables, dims):
     return np.array(out)
 
 
-def _encoding(engine, layout, tables):
-    networks = _engine_module(engine)
+def _encoding(backend, layout, tables):
+    networks = _backend_module(backend)
     encoding = networks.HashGridEncoding(layout)
-    if engine == "torch":
+    if backend == "torch":
         import torch
 
         for param, table in zip(encoding.tables, tables, strict=True):
@@ -278,9 +278,9 @@ GRID_CASES = [
 ]
 
 
-@pytest.mark.parametrize("engine", ENGINES)
+@pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize(("options", "mode", "hashed"), GRID_CASES)
-def test_hash_grid_matches_a_brute_force_multilinear_lookup(engine, options, mode, hashed):
+def test_hash_grid_matches_a_brute_force_multilinear_lookup(backend, options, mode, hashed):
     layout = hash_grid_layout(HashGridFieldConfig(**options), FieldShape(mode))
     assert layout.hashed == hashed
     rng = np.random.default_rng(3)
@@ -291,21 +291,21 @@ def test_hash_grid_matches_a_brute_force_multilinear_lookup(engine, options, mod
     x[0, :2] = [-1.0, 1.0]                   # the grid's corners and a point outside it
     x[1, :2] = [1.0, -1.0]
     x[2, :2] = [1.3, 0.2]
-    got = _call(engine, _encoding(engine, layout, tables), x)
+    got = _call(backend, _encoding(backend, layout, tables), x)
     expected = brute_force_encoding(x, layout.resolutions, tables, layout.dims)
     assert got.shape == (25, layout.encoded_dim)
     np.testing.assert_allclose(got, expected, atol=2e-5)
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_hash_grid_encoding_is_continuous_across_cell_boundaries(engine):
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_hash_grid_encoding_is_continuous_across_cell_boundaries(backend):
     layout = hash_grid_layout(HashGridFieldConfig(levels=3, base_resolution=4,
                                                   finest_resolution=16, log2_table_size=8),
                               FieldShape(FieldMode.multi))
     rng = np.random.default_rng(4)
     tables = [rng.uniform(-1, 1, (rows, layout.features)).astype(np.float32)
               for rows in layout.table_sizes]
-    encoding = _encoding(engine, layout, tables)
+    encoding = _encoding(backend, layout, tables)
     # boundaries of every level along x (u = k / 16 lies on a cell edge of N = 4, 8, 16),
     # at random y, f
     k = rng.integers(1, 16, 40)
@@ -315,8 +315,8 @@ def test_hash_grid_encoding_is_continuous_across_cell_boundaries(engine):
         left, right = base.copy(), base.copy()
         left[:, 0] -= eps
         right[:, 0] += eps
-        jump = np.abs(_call(engine, encoding, right.astype(np.float32))
-                      - _call(engine, encoding, left.astype(np.float32)))
+        jump = np.abs(_call(backend, encoding, right.astype(np.float32))
+                      - _call(backend, encoding, left.astype(np.float32)))
         jumps.append(float(jump.max()))
     # each feature is multilinear in u = (x + 1) / 2 with table values in [-1, 1]: its slope
     # in x is at most N / 2 * 2 = N <= 16, so over [b - e, b + e] it moves at most 32 e;
@@ -329,15 +329,15 @@ def test_hash_grid_encoding_is_continuous_across_cell_boundaries(engine):
 
 # --------------------------------------------------------------------------- torch vs JAX
 def _engines(network, options, mode, n_networks):
-    _engine_module("torch")
-    _engine_module("jax")
+    _backend_module("torch")
+    _backend_module("jax")
     registry = load_plugins().registry
     built = []
-    for engine in ENGINES:
-        model = registry.get("model", f"{network}_{engine}").load()
+    for backend in BACKENDS:
+        model = registry.get("model", f"{network}_{backend}").load()
         config = model.config_class(**{**options, "mode": mode, "device": "cpu", "seed": 5})
         shape = FieldShape(config.mode, (8, 8), 6)
-        built.append(model.engine_class(NetworkBuild(model.network_factory, config, shape,
+        built.append(model.backend_class(NetworkBuild(model.network_factory, config, shape,
                                                      n_networks)))
     return built
 
@@ -368,8 +368,8 @@ def test_torch_and_jax_start_alike_and_agree_on_the_forward_pass(network, mode):
 
 @pytest.mark.parametrize("network", NETWORKS)
 def test_a_file_written_by_torch_predicts_the_same_in_jax(tmp_path, network):
-    _engine_module("torch")
-    _engine_module("jax")
+    _backend_module("torch")
+    _backend_module("jax")
     registry = load_plugins().registry
     options = {**SMALL[network], "steps": 30, "batch_size": 0, "device": "cpu"}
     model = registry.create("model", f"{network}_torch", options)
@@ -383,20 +383,20 @@ def test_a_file_written_by_torch_predicts_the_same_in_jax(tmp_path, network):
                                rtol=1e-4, atol=1e-5 * np.abs(field.values).max())
 
 
-@pytest.mark.parametrize("engine", ENGINES)
-def test_wire_outputs_complex_values_and_the_trainer_takes_them(engine):
-    networks = _engine_module(engine)
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_wire_outputs_complex_values_and_the_trainer_takes_them(backend):
+    networks = _backend_module(backend)
     config = WireFieldConfig(hidden=(6,))
     shape = FieldShape(FieldMode.multi)
-    if engine == "torch":
+    if backend == "torch":
         net = networks.field_network(config, shape)
     else:
         import jax
 
         net = networks.field_network(config, shape, jax.random.key(0))
-    out = _call(engine, net, np.zeros((4, 3), np.float32))
+    out = _call(backend, net, np.zeros((4, 3), np.float32))
     assert np.iscomplexobj(out) and out.shape == (4,)
-    model = load_plugins().registry.create("model", f"wire_{engine}",
+    model = load_plugins().registry.create("model", f"wire_{backend}",
                                            {"steps": 5, "hidden": [6], "device": "cpu"})
     model.fit(fixtures.smooth_field(n=6, frequencies=np.linspace(2.0, 3.0, 4), seed=1))
     pred = model.predict(fixtures.wall_grid(3)[..., :2], [2.5])

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from nlosfw.model import split_field
+from nlosfw.model.neural.smoothness import FrequencySmoothness, second_difference_matrix
 from nlosfw.model.protocol import error_metrics
-from nlosfw.model.smoothness import FrequencySmoothness, second_difference_matrix
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 
@@ -71,9 +71,9 @@ TOY = {"features": 32, "hidden": [32, 32], "sigma": 0.5, "frequency_sigma": 2.0,
        "steps": 300, "batch_size": 0, "validation_fraction": 0.0, "device": "cpu"}
 
 
-@pytest.mark.parametrize("engine", ["torch", "jax"])
-def test_the_penalty_smooths_a_toy_fit_across_frequency(engine):
-    pytest.importorskip(engine)
+@pytest.mark.parametrize("backend", ["torch", "jax"])
+def test_the_penalty_smooths_a_toy_fit_across_frequency(backend):
+    pytest.importorskip(backend)
     field = fixtures.smooth_field(n=10, frequencies=np.linspace(2.0, 4.0, 13), seed=3)
     split = split_field(field, spatial_step=1, spectral="interleaved", spectral_fraction=0.25)
     held = split.heldout_frequencies                          # 4 of 13, inside the band
@@ -89,7 +89,7 @@ def test_the_penalty_smooths_a_toy_fit_across_frequency(engine):
     truth = roughness(lambda p, f: fixtures.smooth_field(n=10, frequencies=f, seed=3).values)
     results = {}
     for weight in (0.0, 0.1):
-        model = load_plugins().registry.create("model", f"fourier_{engine}",
+        model = load_plugins().registry.create("model", f"fourier_{backend}",
                                                {**TOY, "frequency_smoothness": weight})
         model.fit(split.train_field)
         pred = model.predict(pts, field.frequencies)

@@ -44,6 +44,7 @@ def test_a_public_name_wins_over_the_submodule_it_shares_its_name_with():
 
 
 LAZY_PACKAGES = ["nlosfw", "nlosfw.capture", "nlosfw.simulate", "nlosfw.transform", "nlosfw.model",
+                 "nlosfw.model.neural", "nlosfw.model.physics", "nlosfw.model.hybrid",
                  "nlosfw.image", "nlosfw.pipeline", "nlosfw.report"]
 
 

@@ -144,8 +144,9 @@ def test_missing_field(tmp_path):
         ("delta_t", 0.0, "delta_t: must be a positive number of metres, got 0.0"),
         ("delta_t", -0.01, "delta_t: must be a positive number of metres"),
         ("H", "nan", "H: contains 1 NaN or inf values"),
-        ("sensor_grid_xyz", "shape", "sensor_grid_normals: shape (6, 4, 3) does not match "
-                                     "sensor_grid_xyz (5, 4, 3)"),
+        ("sensor_grid_xyz", "shape", "dataset 'sensor_grid_xyz' declares shape [5, 4, 3]; "
+                                     "expected 24 points of 3 coordinates, as many as H's "
+                                     "sensor axes [6, 4]; refused before reading it"),
     ],
 )
 def test_invalid_fields_name_file_and_field(tmp_path, field, value, message):

@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from nlosfw.common import ConfigError, FitError
-from nlosfw.model import BestStep, NeuralVolumeConfig, aligned_empty, validation_split
+from nlosfw.model import NeuralVolumeConfig
+from nlosfw.model.hybrid import BestStep, aligned_empty
+from nlosfw.model.physics import validation_split
 from nlosfw.plugins import load_plugins
 from nlosfw.plugins.networks import NEURAL_VOLUME_TEST_CONFIG
 from nlosfw.testing.checks_model import fit_fixture
@@ -59,14 +61,14 @@ def test_an_operator_larger_than_the_memory_left_is_refused_in_one_line(monkeypa
     """Before its spectra are built, the fit names the operator's size, the memory left and
     the options that make it smaller."""
     pytest.importorskip("torch")
-    monkeypatch.setattr("nlosfw.model.neural_volume.available_memory", lambda: 1000)
+    monkeypatch.setattr("nlosfw.model.hybrid.volume.available_memory", lambda: 1000)
     model = load_plugins().registry.create("model", "neural_volume_torch",
                                            dict(NEURAL_VOLUME_TEST_CONFIG))
     with pytest.raises(FitError) as err:
         model.fit(fit_fixture(physical=True))
     message = str(err.value)
     assert "\n" not in message and "but 1.0 kB are available" in message, message
-    assert "model.fit_frequencies" in message and "depth planes" in message, message
+    assert "model.prior.fit_frequencies" in message and "depth planes" in message, message
 
 
 @pytest.mark.parametrize("shape, dtype", [((3, 5, 7), np.complex64), ((1,), np.complex128),

@@ -9,12 +9,8 @@ from pathlib import Path
 import pytest
 
 from nlosfw.common import yaml_safe
-from nlosfw.model.thesis_networks import (
-    FAMILY_CONFIGS,
-    PRESETS,
-    count_parameters,
-    resolve_architecture,
-)
+from nlosfw.model.neural.catalogue import PRESETS
+from nlosfw.model.neural.mlp import FAMILY_CONFIGS, count_parameters, resolve_architecture
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 

@@ -9,7 +9,7 @@ import pytest
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.errors import DataError
+from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.model.protocol import (
     SpatialSampling,
     error_metrics,
@@ -58,9 +58,9 @@ def test_split_rejects_bad_options():
     field = _field(8, 10)
     for kwargs in ({"spatial_step": 0}, {"spatial_step": 1.5}, {"spectral": "middle"},
                    {"spectral_fraction": 1.2}):
-        with pytest.raises(DataError) as err:
+        with pytest.raises(ConfigError) as err:
             split_field(field, **kwargs)
-        assert "\n" not in str(err.value)
+        assert "\n" not in str(err.value) and err.value.option == next(iter(kwargs))
 
 
 def test_metrics_of_known_errors():

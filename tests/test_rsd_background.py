@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import ConfigError
+from nlosfw.model.physics.background import BackgroundProjection, WallBackground
+from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_background import BackgroundProjection, WallBackground
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
 from tests.test_rsd_prior import _geometry, _point_field
@@ -18,9 +18,9 @@ from tests.test_rsd_prior import _geometry, _point_field
 WALL = fixtures.rect_wall_grid((16, 16), 1 / 16)
 FREQS = np.linspace(2.0, 4.0, 10)
 TARGET = (WALL[0, 0, 0] + 9 / 16, WALL[0, 0, 1] + 5 / 16, 0.5)   # on the voxel lattice
-OPTIONS = {"amplitude": "point", "lateral_step": 1 / 16, "depth_range": [0.45, 0.55],
-           "depth_step": 0.025, "l1_weight": 1e-3, "iterations": 800, "precision": "double",
-           "workers": 1}
+OPTIONS = {"amplitude": "point", "lateral_step": 1 / 16,
+           "depth": {"range": [0.45, 0.55], "step": 0.025}, "l1_weight": 1e-3, "iterations": 800,
+           "precision": "double", "workers": 1}
 
 
 def _scene(confocal: bool, legs: bool) -> tuple[PhasorField, np.ndarray]:

@@ -1,5 +1,5 @@
 """``rsd_prior``'s exact Poisson likelihood of the photon counts (``likelihood:
-poisson_counts``, :mod:`nlosfw.model.rsd_counts`): a time-domain forward model of the
+poisson_counts``, :mod:`nlosfw.model.physics.counts`): a time-domain forward model of the
 whole spectrum, fitted by EM on the counts of every time bin."""
 
 from __future__ import annotations
@@ -9,18 +9,18 @@ import pytest
 
 from nlosfw.cli import main
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.model.protocol import scattered_field, split_field
-from nlosfw.model.rsd_config import RSDPriorConfig
-from nlosfw.model.rsd_counts import (
+from nlosfw.model.physics.config import RSDPriorConfig
+from nlosfw.model.physics.counts import (
     CountsScene,
     counts_operator,
     fit_counts,
     log_likelihood,
     stopping_iteration,
 )
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
-from nlosfw.model.rsd_response import SystemResponse
-from nlosfw.model.scene_operator import OperatorOptions, VoxelLattice
+from nlosfw.model.physics.operator import OperatorOptions, VoxelLattice
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.physics.response import SystemResponse
+from nlosfw.model.protocol import scattered_field, split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.counts import bin_counts
 from nlosfw.transform.field import PhasorField, PhotonCounts
@@ -180,7 +180,11 @@ def test_a_field_carries_its_counts_through_selection_and_scattering_but_not_hel
 def _run(tmp_path, monkeypatch, *overrides: str, model: str = "rsd_prior"
          ) -> tuple[int, dict]:
     """A run of the tiny scene with photon noise and known dark counts (256 per wall point
-    over the 512 bins: 0.5 a bin) fitted with poisson_counts: (status, fit report)."""
+    over the 512 bins: 0.5 a bin) fitted with poisson_counts: (status, fit report). An
+    override ``prior.<option>`` sets rsd_prior's option (``model.prior.`` of a hybrid)."""
+    prior = "model." if model == "rsd_prior" else "model.prior."
+    overrides = tuple(prior + o.removeprefix("prior.") if o.startswith("prior.") else o
+                      for o in overrides)
     reports: list = []
     fit = RSDPriorFieldModel.fit
 
@@ -193,7 +197,7 @@ def _run(tmp_path, monkeypatch, *overrides: str, model: str = "rsd_prior"
     monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
     status = main(["scene=tiny", "scene.noise.model=poisson", "scene.noise.photons=1e6",
                    "scene.noise.dark_counts=256", f"model={model}",
-                   "model.likelihood=poisson_counts", "model.iterations=60",
+                   f"{prior}likelihood=poisson_counts", f"{prior}iterations=60",
                    "split.spatial_step=2", "transform.n_frequencies=21",
                    "reconstruction.n_depths=4", "figures.enabled=false", *overrides,
                    f"hydra.run.dir={tmp_path / 'run'}"])
@@ -211,7 +215,7 @@ def test_a_run_recovers_the_simulators_dark_counts(tmp_path, monkeypatch, thinni
     if extra:
         pytest.importorskip("torch")
     status, fitted = _run(tmp_path, monkeypatch, "split.spectral=none",
-                          "model.counts_stop=likelihood", *thinning, *extra, model=model)
+                          "prior.counts.stop=likelihood", *thinning, *extra, model=model)
     assert status == 0
     floor = 0.25 if thinning else 0.5
     assert fitted["counts_background"] == pytest.approx(floor, rel=0.1)
@@ -236,7 +240,7 @@ def test_a_field_without_counts_is_refused_in_one_line():
     rng = np.random.default_rng(0)
     field = PhasorField(rng.normal(size=(4, 4, 4)) + 0j, np.linspace(2, 3, 4),
                         fixtures.rect_wall_grid((4, 4), 0.1), _geometry(True))
-    model = RSDPriorFieldModel({"likelihood": "poisson_counts", "depth_range": [0.5, 0.5],
+    model = RSDPriorFieldModel({"likelihood": "poisson_counts", "depth": {"range": [0.5, 0.5]},
                                 "iterations": 5, "workers": 1})
     with pytest.raises(ConfigError, match="model.likelihood") as err:
         model.fit(field)
@@ -248,7 +252,7 @@ def test_device_legs_in_the_times_need_a_field_that_keeps_them(tmp_path, monkeyp
     takes them out of the field is refused in one line, and one that keeps them fits (the
     simulator's dark counts found again)."""
     legs = ["scene.capture.device_legs=true", "split.spectral=none",
-            "model.counts_stop=likelihood"]
+            "model.counts.stop=likelihood"]
     status, fitted = _run(tmp_path, monkeypatch, *legs)
     err = capsys.readouterr().err
     assert status == 2 and not fitted and err.count("\n") == 1

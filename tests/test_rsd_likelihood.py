@@ -12,10 +12,10 @@ from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.capture.thinning import count_scale
 from nlosfw.cli import main
 from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.model.physics.likelihood import sample_weights
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.physics.wall import wall_samples
 from nlosfw.model.protocol import scattered_field, split_field
-from nlosfw.model.rsd_likelihood import sample_weights
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import wall_samples
 from nlosfw.testing import fixtures, heldout_error_db
 from nlosfw.testing.fixtures import tiny_capture
 from nlosfw.transform.common import histogram_2d, to_field_layout

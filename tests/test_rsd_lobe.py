@@ -1,6 +1,6 @@
 """A glossy reflectance lobe: the simulators' physics (cos^k of the half vector's angle),
 ``rsd_prior``'s operator with it, and the exponent fitted jointly from simulated captures
-(``fit_lobe``)."""
+(``lobe.fit``)."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ import pytest
 
 from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.image.plane_convolution import grid_layout
-from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
-from nlosfw.model.scene_operator import (
+from nlosfw.model.physics.operator import (
     OperatorOptions,
     SceneOperator,
     VoxelLattice,
     direct_fields,
 )
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.protocol import split_field
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.physics import three_bounce
 from nlosfw.simulate.scene import GeometryItem, scene_from_config
@@ -26,7 +26,7 @@ from nlosfw.transform.field import PhasorField
 from tests.test_rsd_prior import _geometry
 
 #: One voxel plane at the patch's depth, voxels a quarter of the kept points' spacing apart.
-OPTIONS = {"depth_range": [0.5, 0.5], "lateral_step": 1 / 32, "l1_weight": 1e-3,
+OPTIONS = {"depth": {"range": [0.5, 0.5]}, "lateral_step": 1 / 32, "l1_weight": 1e-3,
            "iterations": 300, "workers": 1}
 
 
@@ -102,7 +102,7 @@ def _patch_fit(lobe: float, confocal: bool, options: dict) -> tuple[dict, float]
 def test_fit_lobe_recovers_the_exponent_of_a_confocal_capture(lobe, tolerance):
     """Measured: 0 -> 0.0, 4 -> 3.70, 8 -> 8.12; the held-out error with the fitted lobe
     is about -26 dB for every lobe (the Lambertian model's: -15.0 dB at 4, -10.7 at 8)."""
-    fitted, error = _patch_fit(lobe, True, {"fit_lobe": True})
+    fitted, error = _patch_fit(lobe, True, {"lobe": {"fit": True}})
     assert fitted["lobe_exponent"] == pytest.approx(lobe, abs=tolerance)
     assert error < -24.0
     if lobe:
@@ -114,7 +114,7 @@ def test_a_single_spot_lobe_is_fitted_as_an_effective_exponent():
     """For a single laser spot the operator's lobe is the product of its legs' half-powers,
     not the half vector's: a k = 8 lobe with the spot in front of the patch is fitted as
     about 3.5, the held-out error still falling by 10 dB (-15.5 to -25.3 dB)."""
-    fitted, error = _patch_fit(8.0, False, {"fit_lobe": True})
+    fitted, error = _patch_fit(8.0, False, {"lobe": {"fit": True}})
     _, lambertian = _patch_fit(8.0, False, {})
     assert 2.0 < fitted["lobe_exponent"] < 6.0
     assert error < lambertian - 8.0
@@ -127,7 +127,7 @@ def test_a_fitted_lobe_is_saved_and_predicts_the_same(tmp_path):
     config["geometry"][0]["lobe"] = 6.0
     capture = AnalyticSimulator({}).simulate(scene_from_config(config))
     field = FFTTransform({"n_frequencies": 6, "f_min": 2.0, "f_max": 4.0}).transform(capture)
-    model = RSDPriorFieldModel({**OPTIONS, "iterations": 60, "fit_lobe": True})
+    model = RSDPriorFieldModel({**OPTIONS, "iterations": 60, "lobe": {"fit": True}})
     model.fit(field)
     model.save(tmp_path / "m.npz")
     loaded = RSDPriorFieldModel.load(tmp_path / "m.npz")
@@ -137,12 +137,12 @@ def test_a_fitted_lobe_is_saved_and_predicts_the_same(tmp_path):
 
 
 @pytest.mark.parametrize("options, option", [
-    ({"lobe": -1.0}, "lobe"),
-    ({"lobe": 4.0, "amplitude": "point"}, "lobe"),
-    ({"fit_lobe": True, "amplitude": "inverse_square"}, "lobe"),
-    ({"fit_lobe": True, "lobe": 4.0}, "lobe"),
-    ({"fit_lobe": True, "lobe_max": 0.0}, "lobe_max"),
-    ({"lobe_tolerance": 0.0}, "lobe_tolerance"),
+    ({"lobe": {"exponent": -1.0}}, "lobe.exponent"),
+    ({"lobe": {"exponent": 4.0}, "amplitude": "point"}, "lobe"),
+    ({"lobe": {"fit": True}, "amplitude": "inverse_square"}, "lobe"),
+    ({"lobe": {"fit": True, "exponent": 4.0}}, "lobe.exponent"),
+    ({"lobe": {"fit": True, "max": 0.0}}, "lobe.max"),
+    ({"lobe": {"tolerance": 0.0}}, "lobe.tolerance"),
 ])
 def test_lobe_options_are_checked(options, option):
     with pytest.raises(ConfigError) as err:
@@ -174,6 +174,6 @@ def test_fit_lobe_needs_points_to_hold_out():
                                target=(0.03, -0.02, 0.5), patch=0.08)
     capture = AnalyticSimulator({}).simulate(scene_from_config(config))
     field = FFTTransform({"n_frequencies": 4, "f_min": 2.0, "f_max": 4.0}).transform(capture)
-    model = RSDPriorFieldModel({**OPTIONS, "iterations": 10, "fit_lobe": True})
+    model = RSDPriorFieldModel({**OPTIONS, "iterations": 10, "lobe": {"fit": True}})
     with pytest.raises(FitError, match="at least 10 of them, got 9"):
         model.fit(field)

@@ -11,16 +11,17 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.image.plane_convolution import grid_layout
-from nlosfw.model.fista import FistaProblem, lipschitz, smoothed_tv, solve
-from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_prior import RSDPriorConfig, RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import fit_frequency_indices, voxel_lattice
-from nlosfw.model.scene_operator import (
+from nlosfw.model.physics.frequencies import fit_frequency_indices
+from nlosfw.model.physics.lattice import voxel_lattice
+from nlosfw.model.physics.operator import (
     OperatorOptions,
     SceneOperator,
     VoxelLattice,
     direct_fields,
 )
+from nlosfw.model.physics.prior import RSDPriorConfig, RSDPriorFieldModel
+from nlosfw.model.physics.solver import FistaProblem, lipschitz, smoothed_tv, solve
+from nlosfw.model.protocol import split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
 
@@ -264,7 +265,7 @@ def test_point_scatterer_is_reproduced_at_unsampled_wall_points(confocal):
     full = _field(_point_field(target, wall, freqs, confocal), wall, freqs, confocal)
     split = split_field(full, spatial_step=2)
     model = RSDPriorFieldModel({"amplitude": "point", "lateral_step": 1 / 16,
-                                "depth_range": [0.45, 0.55], "depth_step": 0.025,
+                                "depth": {"range": [0.45, 0.55], "step": 0.025},
                                 "l1_weight": 1e-3, "iterations": 1500, "precision": "double"})
     model.fit(split.train_field)
     assert np.isin(0.5, np.round(model.lattice.depths, 9))
@@ -315,7 +316,7 @@ def test_device_legs_are_removed_for_the_fit_and_put_back():
     values = _point_field(target, wall, freqs, False) * np.exp(
         -2j * np.pi * freqs[:, None, None] * legs[None])
     field = PhasorField(values=values, frequencies=freqs, wall_xyz=wall, geometry=geometry)
-    model = RSDPriorFieldModel({"amplitude": "point", "depth_range": [0.5, 0.5],
+    model = RSDPriorFieldModel({"amplitude": "point", "depth": {"range": [0.5, 0.5]},
                                 "l1_weight": 1e-3, "iterations": 300, "precision": "double"})
     model.fit(field)
     pred = model.predict(wall[..., :2], freqs)
@@ -326,7 +327,7 @@ def test_save_load_round_trip(tmp_path):
     wall = fixtures.rect_wall_grid((8, 8), 1 / 8)
     freqs = np.linspace(2.0, 4.0, 6)
     field = _field(_point_field((0.1, 0.0, 0.5), wall, freqs, True), wall, freqs, True)
-    model = RSDPriorFieldModel({"depth_range": [0.45, 0.55], "iterations": 20})
+    model = RSDPriorFieldModel({"depth": {"range": [0.45, 0.55]}, "iterations": 20})
     model.fit(field)
     path = tmp_path / "m.npz"
     model.save(path)
@@ -346,8 +347,8 @@ def test_helpers_and_bad_input():
     assert lat.shape == (3 * 3 + 1 + 2, 3 * 4 + 1 + 2)             # half a spacing beyond
     with pytest.raises(ConfigError, match="l1_weight"):
         RSDPriorConfig(l1_weight=1.0)
-    with pytest.raises(ConfigError, match="depth_range"):
-        RSDPriorConfig(depth_range=(0.5,))
+    with pytest.raises(ConfigError, match="depth.range"):
+        RSDPriorFieldModel({"depth": {"range": [0.5]}})
     with pytest.raises(FitError, match="fit"):
         RSDPriorFieldModel().predict(np.zeros((2, 2)), np.array([2.0]))
     row = fixtures.rect_wall_grid((1, 6), 0.1)
@@ -356,5 +357,5 @@ def test_helpers_and_bad_input():
         RSDPriorFieldModel().fit(field)
     one = _field(np.ones((1, 4, 4), complex), fixtures.rect_wall_grid((4, 4), 0.1),
                  np.array([2.0]), False)
-    with pytest.raises(ConfigError, match="depth_range"):
+    with pytest.raises(ConfigError, match="depth.range"):
         RSDPriorFieldModel().fit(one)

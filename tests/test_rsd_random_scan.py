@@ -9,12 +9,11 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import DataError
+from nlosfw.model.physics.background import BackgroundProjection
+from nlosfw.model.physics.operator import SceneOperator, VoxelLattice
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.physics.wall import validation_split, wall_samples
 from nlosfw.model.protocol import SpatialSampling, scattered_field, split_field
-from nlosfw.model.rsd_background import BackgroundProjection
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
-from nlosfw.model.rsd_sampling import wall_samples
-from nlosfw.model.scene_operator import SceneOperator, VoxelLattice
-from nlosfw.model.volume_training import validation_split
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
 from tests.test_rsd_prior import _geometry, _point_field
@@ -120,9 +119,9 @@ def test_random_scan_predicts_a_point_scatterer_at_the_points_it_never_saw(confo
     full = _field(_point_field(target, wall, freqs, confocal), wall, freqs, confocal)
     split = split_field(full, SpatialSampling(pattern="random", step=2, seed=5))
     assert split.train_field.grid_shape == (1, 64)
-    options = {"amplitude": "point", "lateral_step": 1 / 16, "depth_range": [0.45, 0.55],
-               "depth_step": 0.025, "l1_weight": 1e-3, "iterations": 700,
-               "precision": "double"}
+    options = {"amplitude": "point", "lateral_step": 1 / 16,
+               "depth": {"range": [0.45, 0.55], "step": 0.025}, "l1_weight": 1e-3,
+               "iterations": 700, "precision": "double"}
     model = RSDPriorFieldModel(options)
     model.fit(split.train_field)
     pred = model.predict(wall[..., :2], freqs)

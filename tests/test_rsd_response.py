@@ -1,8 +1,8 @@
-"""``rsd_prior``'s system response (``temporal_response: gaussian``, ``time_offset: true``):
-known Gaussian jitter and time-origin offsets recovered from a point scatterer's
+"""``rsd_prior``'s system response (``response.temporal: gaussian``, ``response.time_offset:
+true``): known Gaussian jitter and time-origin offsets recovered from a point scatterer's
 closed-form field and from simulated captures (the simulator's ``jitter_ps``, the histogram
-shifted by whole bins); the least-squares estimate against its definition; both terms off
-leave the model as it was."""
+shifted by whole bins); the least-squares estimate against its definition; both terms off leave
+the model as it was."""
 
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import pytest
 
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.common.errors import ConfigError
+from nlosfw.model.physics.prior import RSDPriorFieldModel
+from nlosfw.model.physics.response import SystemResponse, estimate_response
 from nlosfw.model.protocol import split_field
-from nlosfw.model.rsd_prior import RSDPriorFieldModel
-from nlosfw.model.rsd_response import SystemResponse, estimate_response
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
 from nlosfw.testing import fixtures, heldout_error_db
@@ -24,9 +24,9 @@ from tests.test_rsd_prior import _geometry, _point_field
 WALL = fixtures.rect_wall_grid((16, 16), 1 / 16)
 FREQS = np.linspace(2.0, 4.0, 10)
 TARGET = (WALL[0, 0, 0] + 9 / 16, WALL[0, 0, 1] + 5 / 16, 0.5)   # on the voxel lattice
-OPTIONS = {"amplitude": "point", "lateral_step": 1 / 16, "depth_range": [0.5, 0.5],
+OPTIONS = {"amplitude": "point", "lateral_step": 1 / 16, "depth": {"range": [0.5, 0.5]},
            "l1_weight": 1e-3, "iterations": 400, "precision": "double", "workers": 1}
-BOTH = {"temporal_response": "gaussian", "time_offset": True}
+BOTH = {"response": {"temporal": "gaussian", "time_offset": True}}
 
 
 def _gains(f: np.ndarray, sigma: float, tau: float) -> np.ndarray:
@@ -93,19 +93,19 @@ def test_both_terms_off_is_the_model_without_them():
     prediction, bit for bit, and nothing fitted besides the albedo."""
     field = split_field(_point(0.0, 0.0), spatial_step=2).train_field
     preds = []
-    for extra in ({}, {"temporal_response": "none", "time_offset": False, "response_rounds": 2}):
+    for extra in ({}, {"response": {"temporal": "none", "time_offset": False, "rounds": 2}}):
         model = RSDPriorFieldModel({**OPTIONS, "iterations": 100, **extra})
         assert model.fit(field).fitted == {} and model.response is None
         preds.append(model.predict(WALL[..., :2], FREQS))
     np.testing.assert_array_equal(preds[0], preds[1])
 
 
-@pytest.mark.parametrize(("option", "value"), [("temporal_response", "lorentz"),
+@pytest.mark.parametrize(("option", "value"), [("temporal", "lorentz"),
                                                ("time_offset", "maybe"),
-                                               ("response_rounds", 0)])
+                                               ("rounds", 0)])
 def test_bad_response_options_are_refused(option, value):
-    with pytest.raises(ConfigError, match=option):
-        RSDPriorFieldModel({option: value})
+    with pytest.raises(ConfigError, match=f"response.{option}"):
+        RSDPriorFieldModel({"response": {option: value}})
 
 
 def test_simulated_jitter_and_shift_are_recovered():
@@ -139,12 +139,12 @@ def test_simulated_jitter_and_shift_are_recovered():
 
 def test_offset_alone_with_a_confocal_scan_and_device_legs():
     """A confocal scan whose time axis has the device legs, 2 cm late (66.7 ps), no jitter:
-    ``time_offset`` alone finds tau to 5% (measured 66.715 ps) and reports no sigma."""
+    ``response.time_offset`` alone finds tau to 5% (measured 66.715 ps) and reports no sigma."""
     geometry = _geometry(True, True)
     values = _point_field(TARGET, WALL, FREQS, True) * np.exp(
         -2j * np.pi * FREQS[:, None, None] * (geometry.device_path(WALL)[None] + 0.02))
     field = PhasorField(values=values, frequencies=FREQS, wall_xyz=WALL, geometry=geometry)
-    model = RSDPriorFieldModel({**OPTIONS, "time_offset": True})
+    model = RSDPriorFieldModel({**OPTIONS, "response": {"time_offset": True}})
     fitted = model.fit(split_field(field, spatial_step=2).train_field).fitted
     print(fitted)
     assert fitted.keys() == {"time_offset_ps"}

@@ -8,12 +8,11 @@ import pytest
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.image import grid_layout
-from nlosfw.model import (
+from nlosfw.model.hybrid import fold_spectra, plane_stack
+from nlosfw.model.physics import (
     OperatorOptions,
     SceneOperator,
     VoxelLattice,
-    fold_spectra,
-    plane_stack,
     training_grid,
     voxel_lattice,
 )

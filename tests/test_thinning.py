@@ -238,7 +238,7 @@ def thinned_sweep(tmp_path_factory) -> Path:
 def test_a_run_with_thinning_scores_against_half_b(thinned_sweep):
     run = thinned_sweep / "0"
     m = json.loads((run / "metrics.json").read_text())
-    assert m["schema_version"] == 7
+    assert m["schema_version"] == 8
     thinning = m["capture"]["thinning"]
     assert thinning["seed"] == 1 and thinning["count_scale"] > 0
     total = (thinning["counts_a"] + thinning["counts_b"]) / thinning["count_scale"]

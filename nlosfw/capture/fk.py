@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.dataset_shapes import SQUARE_SCAN
 from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.matfile import (
@@ -49,6 +50,7 @@ from nlosfw.capture.matfile import (
 from nlosfw.capture.preprocess import Preprocessing, TimeCrop
 from nlosfw.capture.scan import ConfocalScan, ScanLayout, confocal_capture
 from nlosfw.common.errors import DataError
+from nlosfw.common.hdf5_guard import ranks
 
 log = logging.getLogger(__name__)
 
@@ -83,7 +85,7 @@ class FkFormat(CaptureFormat[CaptureFormatConfig]):
             extra = " (a sequence of scans: save one frame as meas)" if len(shape) == 4 else ""
             raise DataError(f"{path}: variable 'meas' has shape {list(shape)}; expected one "
                             f"square scan [N, N, T]{extra}")
-        meas = read_mat_array(path, "meas", dtype=np.float32)
+        meas = read_mat_array(path, "meas", dtype=np.float32, expected=SQUARE_SCAN)
         if not np.all(np.isfinite(meas)):
             raise DataError(f"{path}: variable 'meas' contains NaN or inf")
         scan = ConfocalScan(histograms=meas, layout=LAYOUT, half_width=HALF_WIDTH,
@@ -110,14 +112,19 @@ class FkFormat(CaptureFormat[CaptureFormatConfig]):
                              else TimeCrop())
 
 
+def tofgrid_shape(path: Path) -> tuple[int, ...] | None:
+    """The MATLAB shape ``tofgrid`` declares in a ``tof.mat`` (None: the file has no such
+    variable, or is no MATLAB file); from its header, nothing read."""
+    found = (variables_or_none(path) or {}).get(TOF_VARIABLE)
+    return None if found is None else found.shape
+
+
 def read_tofgrid(path: Path) -> np.ndarray:
     """The per-pixel delays (ps) of a ``tof.mat`` (v5 or v7.3), in MATLAB's ``[i, j]`` order."""
     require_variables(path, (TOF_VARIABLE,), "tofgrid, the per-pixel delays in picoseconds "
                                              "[N, N] of the scan")
-    delays = read_mat_array(path, TOF_VARIABLE, dtype=np.float64)
-    if delays.ndim != 2:
-        raise DataError(f"{path}: variable '{TOF_VARIABLE}' has shape {list(delays.shape)}; "
-                        "expected [N, N] (one delay in picoseconds per scan point)")
+    delays = read_mat_array(path, TOF_VARIABLE, dtype=np.float64, expected=ranks(
+        2, what="[N, N] (one delay in picoseconds per scan point)"))
     if not np.all(np.isfinite(delays)):
         raise DataError(f"{path}: variable '{TOF_VARIABLE}' contains NaN or inf")
     low, high = float(delays.min()), float(delays.max())

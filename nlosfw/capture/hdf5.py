@@ -10,7 +10,9 @@ which is how the ``nlosfw`` capture format tells them from other y-tal files.
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import os
 from collections.abc import Iterable
 from enum import IntEnum
 from pathlib import Path
@@ -21,11 +23,18 @@ import numpy as np
 import numpy.typing as npt
 
 from nlosfw.capture.data import YTAL_FIELDS, Capture
+from nlosfw.capture.dataset_shapes import FIXED, ytal_shapes, znlos_shapes
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.common import yaml_safe
-from nlosfw.common.errors import DataError, one_line
+from nlosfw.common.errors import ConfigError, DataError, one_line
 from nlosfw.common.hdf5 import new_file, write_header
-from nlosfw.common.hdf5_guard import is_numeric, open_checked, read_dataset
+from nlosfw.common.hdf5_guard import (
+    Expected,
+    check_header,
+    is_numeric,
+    open_checked,
+    read_dataset,
+)
 from nlosfw.common.inputs import describe_input
 from nlosfw.common.text import json_safe
 
@@ -64,8 +73,16 @@ def write_capture(path: str | Path, capture: Capture, compression: int = 0,
     never replaced unless ``overwrite``. ``nlosfw_attributes`` marks the file as
     nlosfw's own (root attributes only: the datasets are y-tal's either way).
     """
-    if not 0 <= compression <= 9:
-        raise DataError(f"compression: must be a gzip level 0-9, got {compression}")
+    path = _path(path)
+    if not isinstance(capture, Capture):
+        raise ConfigError("capture", f"write_capture needs a Capture, got "
+                                     f"{type(capture).__name__}")
+    if isinstance(compression, bool) or not isinstance(compression, (int, np.integer)) or \
+            not 0 <= compression <= 9:
+        raise ConfigError("compression", f"must be a gzip level 0-9, got {compression!r}")
+    for option, value in (("overwrite", overwrite), ("nlosfw_attributes", nlosfw_attributes)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise ConfigError(option, f"must be true or false, got {value!r}")
     with new_file(path, overwrite=overwrite) as f:
         if nlosfw_attributes:
             write_header(f, NLOSFW_CAPTURE_TYPE)
@@ -80,7 +97,7 @@ def read_capture(path: str | Path) -> Capture:
     Every problem (not HDF5, truncated, missing or malformed field, NaN in H,
     mismatched grids) raises :class:`DataError` naming the file and the field.
     """
-    path = Path(path)
+    path = _path(path)
     raw = read_fields(path)
     if "data" in raw and "H" not in raw:
         from nlosfw.capture.znlos_layout import znlos_to_ytal
@@ -89,11 +106,22 @@ def read_capture(path: str | Path) -> Capture:
     return capture_from_fields(raw, path)
 
 
+def _path(path: object) -> Path:
+    """A file path given as ``str`` or ``os.PathLike``; a ConfigError naming ``path`` else."""
+    if isinstance(path, os.PathLike) or (isinstance(path, str) and path):
+        return Path(path)
+    raise ConfigError("path", f"expected a path (str or pathlib.Path), got {path!r} "
+                              f"({type(path).__name__})")
+
+
 def read_fields(path: Path, names: Iterable[str] | None = None) -> dict[str, Any]:
     """The top-level datasets ``names`` of an HDF5 file (default: y-tal's and the Zaragoza
-    layout's fields; None for empty ones and groups). Nothing else is read: the file is
-    checked for links and storage outside it first, and each dataset sized before it is
-    read (:mod:`nlosfw.common.hdf5_guard`); other datasets are named in a warning."""
+    layout's fields; with ``H`` present, y-tal's only), None for empty ones, groups, and
+    grids without the transient that sizes them. Nothing else is read: the file is checked
+    for links and storage outside it first, then every dataset's declared shape against
+    the one its layout defines (:mod:`nlosfw.capture.dataset_shapes`) and its size, all
+    before any is read but ``H_format`` (:mod:`nlosfw.common.hdf5_guard`); other datasets
+    are named in a warning."""
     describe_input(path, "capture file")
     wanted = set(KNOWN_FIELDS if names is None else names)
     try:
@@ -102,11 +130,41 @@ def read_fields(path: Path, names: Iterable[str] | None = None) -> dict[str, Any
             if ignored:
                 log.warning("%s: ignoring datasets the capture formats do not define: %s",
                             path, ", ".join(ignored[:20]))
-            return {key: _read_field(f, key, path) for key in f if key in wanted}
+            keys = [key for key in f if key in wanted]
+            if "H" in keys:          # a y-tal capture: the Zaragoza layout's fields are unused
+                keys = [key for key in keys if key not in ZNLOS_FIELDS]
+            rules = _expected_shapes(f, keys, path)
+            shaped = {key: f[key] for key in keys if _has_data(f[key])}
+            for key in sorted(shaped, key=lambda k: k not in ("H", "data")):  # the transient first
+                if key in rules:
+                    check_header(shaped[key], path, key, rules[key])
+            return {key: (_read_field(f, key, path, rules[key]) if key in rules and key in shaped
+                          else None) for key in keys}
     except DataError:
         raise
     except (OSError, RuntimeError, ValueError, KeyError) as err:
         raise DataError(f"{path}: not a readable HDF5 capture ({one_line(err)})") from None
+
+
+def _has_data(node: object) -> bool:
+    """Whether ``node`` is a dataset with a shape (not a group, not h5py.Empty)."""
+    return isinstance(node, h5py.Dataset) and node.shape is not None
+
+
+def _expected_shapes(f: h5py.File, keys: list[str], path: Path) -> dict[str, Expected]:
+    """The shape each of ``keys`` may declare (:mod:`nlosfw.capture.dataset_shapes`), from the
+    headers of ``H`` and ``data`` and the value of ``H_format`` (read first: one number)."""
+    rules = dict(FIXED)
+    if "H" in keys and _has_data(f["H"]):
+        h_format = None
+        if "H_format" in keys and _has_data(f["H_format"]):
+            value = _read_field(f, "H_format", path, rules["H_format"])
+            with contextlib.suppress(ValueError, TypeError, IndexError):
+                h_format = HFormat(int(np.asarray(value).reshape(-1)[0]))
+        rules.update(ytal_shapes(tuple(f["H"].shape), h_format))
+    if "data" in keys and _has_data(f["data"]):
+        rules.update(znlos_shapes(tuple(f["data"].shape)))
+    return rules
 
 
 def capture_from_fields(raw: dict[str, Any], path: Path) -> Capture:
@@ -169,15 +227,13 @@ def _write_field(f: h5py.File, key: str, value: Any, compression: int) -> None:
         f.create_dataset(key, data=np.asarray(value))
 
 
-def _read_field(f: h5py.File, key: str, path: Path) -> Any:
+def _read_field(f: h5py.File, key: str, path: Path, expected: Expected) -> Any:
     node = f[key]
-    if isinstance(node, h5py.Group):  # Zaragoza files keep nothing we need in groups
-        return None
-    if node.shape is None:  # h5py.Empty: y-tal's None
-        return None
+    if not _has_data(node):  # a group (Zaragoza files keep nothing we need in groups), or
+        return None          # h5py.Empty: y-tal's None
     if key != "scene_info" and key not in _ENUMS and not is_numeric(node):
         raise DataError(f"{path}: field '{key}' must be numeric, got {node.dtype} data")
-    return read_dataset(node, path, key)
+    return read_dataset(node, path, key, expected=expected)
 
 
 def _scalar(value: npt.ArrayLike, key: str, path: Path) -> float:

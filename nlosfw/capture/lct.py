@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.dataset_shapes import SQUARE_SCAN
 from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.hints import lct_hints, with_hints
@@ -55,6 +56,7 @@ from nlosfw.capture.matfile import (
 from nlosfw.capture.preprocess import Gate, Preprocessing
 from nlosfw.capture.scan import ConfocalScan, ScanLayout, confocal_capture
 from nlosfw.common.errors import DataError
+from nlosfw.common.hdf5_guard import values
 
 #: Bin width of the published captures (s).
 BIN_SECONDS = 4e-12
@@ -81,15 +83,16 @@ class LctFormat(CaptureFormat[CaptureFormatConfig]):
         if len(found["rect_data"].shape) != 3:
             raise DataError(f"{path}: variable 'rect_data' has shape "
                             f"{list(found['rect_data'].shape)}; expected [N, N, T]")
-        width = scalar(read_mat_array(path, "width"), path, "width",
-                       "one number of metres (half the side of the scanned square)")
+        width = scalar(read_mat_array(path, "width", expected=values(1, what="one number")),
+                       path, "width", "one number of metres (half the side of the scanned "
+                       "square)")
         if width <= 0:
             raise DataError(f"{path}: variable 'width' is {width}; expected a positive number of "
                             "metres (half the side of the scanned square)")
         if not MIN_WIDTH <= width <= MAX_WIDTH:
             raise DataError(f"{path}: variable 'width' is {width:g}; expected half the side of "
                             f"the scanned square, {MIN_WIDTH:g} to {MAX_WIDTH:g} metres")
-        rect_data = read_mat_array(path, "rect_data")
+        rect_data = read_mat_array(path, "rect_data", expected=SQUARE_SCAN)
         if rect_data.ndim != 3 or rect_data.shape[0] != rect_data.shape[1]:
             raise DataError(f"{path}: variable 'rect_data' has shape {list(rect_data.shape)}; "
                             "expected a square scan [N, N, T]")

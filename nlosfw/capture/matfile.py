@@ -9,7 +9,7 @@ HDF5 groups in v7.3 files; :func:`read_mat_struct` reads one.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +20,8 @@ import numpy.typing as npt
 from nlosfw.common.errors import DataError, one_line
 from nlosfw.common.files import format_bytes
 from nlosfw.common.hdf5_guard import (
+    ANY_SHAPE,
+    Expected,
     check_file,
     dataset_limit,
     is_numeric,
@@ -199,14 +201,16 @@ def require_variables(path: Path, names: Sequence[str], expected: str) -> dict[s
     return found
 
 
-def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None) -> np.ndarray:
+def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None,
+                   expected: Expected = ANY_SHAPE) -> np.ndarray:
     """Variable ``name`` of a v5 or v7.3 file in MATLAB's axis order (``dtype``: convert
     while reading, so a large v7.3 array is never held in two types at once).
 
     Only numeric arrays are read: text, cell arrays, structs and sparse matrices are refused
     naming the variable and its class, and a complex array is refused where ``dtype`` is
-    real (its imaginary part would be lost). The file is checked for data outside it and the
-    variable sized before it is read (:mod:`nlosfw.common.hdf5_guard`)."""
+    real (its imaginary part would be lost). The file is checked for data outside it, and
+    the variable's declared shape (MATLAB's order) against ``expected`` and its size,
+    before it is read (:mod:`nlosfw.common.hdf5_guard`)."""
     if is_hdf5(path):
         import h5py
 
@@ -215,11 +219,13 @@ def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None) ->
                 node = f.get(name)
                 if not isinstance(node, h5py.Dataset):
                     raise DataError(f"{path}: variable '{name}' is missing or not an array")
-                cls = _hdf5_variable(name, node).matlab_class
-                if cls in _NOT_NUMERIC or not is_numeric(node):
-                    raise DataError(_not_numeric(path, name, cls or str(node.dtype)))
+                header = _hdf5_variable(name, node)
+                if header.matlab_class in _NOT_NUMERIC or not is_numeric(node):
+                    raise DataError(_not_numeric(path, name, header.matlab_class
+                                                 or str(node.dtype)))
                 _check_complex(path, name, node.dtype, dtype)
-                value = read_dataset(node, path, name, dtype)
+                expected.check(header.shape, path, name, "variable")
+                value = read_dataset(node, path, name, dtype, expected=ANY_SHAPE)
         except (OSError, RuntimeError) as err:
             raise DataError(f"{path}: variable '{name}' cannot be read (file truncated or "
                             f"corrupt: {one_line(err)})") from None
@@ -231,6 +237,7 @@ def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None) ->
         raise DataError(f"{path}: no variable '{name}'")
     if found.matlab_class in _NOT_NUMERIC:
         raise DataError(_not_numeric(path, name, found.matlab_class))
+    expected.check(found.shape, path, name, "variable")
     nbytes = int(np.prod(found.shape, dtype=float)) * 16
     limit = dataset_limit()
     if nbytes > limit:
@@ -266,29 +273,59 @@ def _check_complex(path: Path, name: str, found: npt.DTypeLike,
         raise DataError(f"{path}: variable '{name}' must be real, got complex numbers")
 
 
-def read_mat_struct(path: Path, name: str, fields: Sequence[str] | None = None
-                    ) -> dict[str, np.ndarray]:
-    """The numeric ``fields`` of struct ``name`` of a v7.3 file that it has (default: all;
-    each in MATLAB's axis order); no other field is read."""
+def mat_struct_shapes(path: Path, name: str) -> dict[str, tuple[int, ...]]:
+    """The MATLAB shapes of the array fields of struct ``name`` of a v7.3 file, from their
+    headers (no data read); DataError when it has no such struct."""
     import h5py
 
     if not is_hdf5(path):
         raise DataError(f"{path}: struct '{name}' must be in a MATLAB 7.3 (HDF5) file")
     try:
         with open_checked(path) as f:
-            group = f.get(name)
-            if not isinstance(group, h5py.Group):
-                raise DataError(f"{path}: no struct '{name}' (the file holds: "
-                                f"{', '.join(sorted(f)) or 'nothing'})")
-            found = {}
+            group = _struct(f, name, path)
+            return {key: _hdf5_variable(key, node).shape for key, node in group.items()
+                    if isinstance(node, h5py.Dataset)}
+    except (OSError, RuntimeError) as err:
+        raise DataError(f"{path}: struct '{name}' cannot be read (file truncated or corrupt: "
+                        f"{one_line(err)})") from None
+
+
+def _struct(f: h5py.File, name: str, path: Path) -> h5py.Group:
+    import h5py
+
+    group = f.get(name)
+    if not isinstance(group, h5py.Group):
+        raise DataError(f"{path}: no struct '{name}' (the file holds: "
+                        f"{', '.join(sorted(f)) or 'nothing'})")
+    return group
+
+
+def read_mat_struct(path: Path, name: str, fields: Sequence[str] | None = None,
+                    expected: Mapping[str, Expected] | None = None) -> dict[str, np.ndarray]:
+    """The numeric ``fields`` of struct ``name`` of a v7.3 file that it has (default: all;
+    each in MATLAB's axis order); no other field is read. Every field's declared shape is
+    checked against ``expected[field]`` (any shape where none is given) before any is read."""
+    import h5py
+
+    if not is_hdf5(path):
+        raise DataError(f"{path}: struct '{name}' must be in a MATLAB 7.3 (HDF5) file")
+    rules = dict(expected or {})
+    try:
+        with open_checked(path) as f:
+            group = _struct(f, name, path)
+            nodes = {}
             for key in (list(group) if fields is None else fields):
                 node = group.get(key)
                 if not isinstance(node, h5py.Dataset):
                     continue
                 if not is_numeric(node):
                     raise DataError(_not_numeric(path, f"{name}.{key}", str(node.dtype)))
-                found[key] = np.asarray(read_dataset(node, path, f"{name}.{key}")).T
-            return found
+                rules.get(key, ANY_SHAPE).check(_hdf5_variable(key, node).shape, path,
+                                                f"{name}.{key}", "variable")
+                nodes[key] = node
+            return {key: np.asarray(read_dataset(node, path, f"{name}.{key}",
+                                                 expected=ANY_SHAPE)).T
+                    for key, node in nodes.items()}
     except (OSError, RuntimeError) as err:
         raise DataError(f"{path}: struct '{name}' cannot be read (file truncated or corrupt: "
                         f"{one_line(err)})") from None

@@ -4,6 +4,7 @@ the gate, crop and bin width it holds."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -41,6 +42,8 @@ class Gate:
         require(self.bins is None or self.metres is None, "bins",
                 "give the gate in bins or in metres, not both")
         require(self.bins is None or self.bins >= 0, "bins", f"must be >= 0, got {self.bins}")
+        require(self.metres is None or not math.isnan(self.metres), "metres",
+                "must be a number of metres, got nan")
 
     @property
     def is_set(self) -> bool:
@@ -68,6 +71,8 @@ class TimeCrop:
                     f"{list(self.bins)}")
         if self.metres is not None:
             start_m, stop_m = self.metres
+            require(not (math.isnan(start_m) or math.isnan(stop_m)), "metres",
+                    f"must be numbers of metres, got {list(self.metres)}")
             require(start_m < stop_m, "metres", f"must satisfy start < stop, got "
                     f"{list(self.metres)}")
 

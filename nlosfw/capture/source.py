@@ -164,38 +164,39 @@ def prepare(capture: Capture, options: Preprocessing, from_format: frozenset[str
     return Prepared(result, steps, material)
 
 
-def check_files(options: Preprocessing, formats: FormatCatalogue) -> None:
-    """The files the options name exist and are readable (a simulated run's preflight:
-    their shapes are checked against the capture once it is simulated)."""
-    if options.tofgrid:
-        from nlosfw.capture.fk import read_tofgrid
-
-        read_tofgrid(_existing(options.tofgrid, "tofgrid"))
-    if options.background:
-        read_capture_file(_existing(options.background, "background"), None, formats)
-
-
 def _existing(value: str, option: str) -> Path:
     return regular_file(value, f"capture.{option}")
 
 
 def _delays(tof: Path, capture: Capture, origin: Path | None) -> np.ndarray:
     """The per-pixel delays (ps) of ``tof`` on the capture's scan grid (X, Y)."""
-    from nlosfw.capture.fk import TOF_VARIABLE, read_tofgrid
+    from nlosfw.capture.fk import TOF_VARIABLE, read_tofgrid, tofgrid_shape
 
+    declared = tofgrid_shape(tof)
+    if declared is not None and len(declared) == 2:     # its header, before reading it
+        _check_tofgrid_shape(tof, declared, capture, origin)
     try:
         raw = read_tofgrid(tof)
     except DataError as err:
         raise ConfigError("capture.tofgrid", str(err)) from None
+    _check_tofgrid_shape(tof, raw.shape, capture, origin)
     delays = on_scan_grid(capture, raw)
     bin_ps = capture.delta_t / (SPEED_OF_LIGHT * 1e-12)
     if float(np.max(raw, initial=0.0)) >= capture.n_bins * bin_ps:
         raise ConfigError("capture.tofgrid", f"{tof}: variable '{TOF_VARIABLE}' holds delays up "
                                              f"to {float(np.max(raw)):g} ps, beyond the "
                                              f"capture's {capture.n_bins} bins of {bin_ps:g} ps")
-    if delays.shape != capture.grid_shape:
+    return delays
+
+
+def _check_tofgrid_shape(tof: Path, shape: tuple[int, ...], capture: Capture,
+                         origin: Path | None) -> None:
+    """Delays of ``shape`` (MATLAB's ``[i, j]``) must cover the capture's scan grid."""
+    from nlosfw.capture.fk import TOF_VARIABLE
+
+    on_grid = on_scan_grid(capture, np.broadcast_to(np.float64(0), shape)).shape  # no data
+    if on_grid != capture.grid_shape:
         of = f" of {origin}" if origin is not None else ""
         raise ConfigError("capture.tofgrid", f"{tof}: variable '{TOF_VARIABLE}' has shape "
-                                             f"{list(raw.shape)}; expected "
+                                             f"{list(shape)}; expected "
                                              f"{list(capture.grid_shape)}, the scan grid{of}")
-    return delays

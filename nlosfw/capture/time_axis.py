@@ -3,6 +3,8 @@ background; pure functions, each returning a new capture."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from nlosfw.capture.data import Capture
@@ -17,7 +19,7 @@ def gate_bins(capture: Capture, gate: Gate, option: str = "capture.gate") -> int
         n, name, value = int(gate.bins), "bins", f"{gate.bins} bins"
     else:
         assert gate.metres is not None
-        n = max(0, int(np.ceil((gate.metres - capture.t_start) / capture.delta_t - 1e-9)))
+        n = max(0, _bin_at(capture, gate.metres, np.ceil, -1e-9))
         name, value = "metres", f"{gate.metres} m"
     if n >= capture.n_bins:
         end = capture.t_start + capture.n_bins * capture.delta_t
@@ -26,6 +28,15 @@ def gate_bins(capture: Capture, gate: Gate, option: str = "capture.gate") -> int
                           f"path {capture.t_start:.4g} to {end:.4g} m); valid: fewer than "
                           f"{capture.n_bins} bins (0: no gate)")
     return n
+
+
+def _bin_at(capture: Capture, metres: float, rounding: Callable[[float], float],
+            nudge: float) -> int:
+    """The bin boundary at optical path ``metres`` (rounded by ``rounding`` after ``nudge``),
+    clipped to one bin beyond either end of the histogram: a path of 1e308 m is past the end,
+    not an integer too large to hold (and the check that compares it must not fail)."""
+    position = (metres - capture.t_start) / capture.delta_t + nudge
+    return int(rounding(np.clip(position, -1.0, capture.n_bins + 1.0)))
 
 
 def zero_before(capture: Capture, n: int) -> Capture:
@@ -44,8 +55,8 @@ def crop_bins(capture: Capture, crop: TimeCrop, option: str = "capture.time_crop
     else:
         assert crop.metres is not None
         lo, hi = crop.metres
-        start = max(0, int(np.floor((lo - capture.t_start) / capture.delta_t + 1e-9)))
-        stop = min(capture.n_bins, int(np.ceil((hi - capture.t_start) / capture.delta_t - 1e-9)))
+        start = max(0, _bin_at(capture, lo, np.floor, 1e-9))
+        stop = min(capture.n_bins, _bin_at(capture, hi, np.ceil, -1e-9))
         name = "metres"
     if not 0 <= start < stop <= capture.n_bins:
         end = capture.t_start + capture.n_bins * capture.delta_t
@@ -90,6 +101,18 @@ def remove_delays(capture: Capture, delays_ps: np.ndarray, option: str = "captur
 
 def subtract_background(capture: Capture, background: Capture) -> Capture:
     """``capture`` minus ``background`` bin by bin (same shape, bins and scan points)."""
+    check_background(capture, background)
+    H = capture.H.astype(np.result_type(capture.H, background.H), copy=True)
+    H -= background.H
+    if not np.any(H):
+        raise ConfigError("capture.background", "subtracting it leaves nothing: it equals the "
+                                                "capture (give the background measurement)")
+    return capture.replace(H=H)
+
+
+def check_background(capture: Capture, background: Capture) -> None:
+    """A ConfigError for ``capture.background`` unless ``background`` has ``capture``'s
+    shape, time axis and scan points (what :func:`subtract_background` needs)."""
     if background.H.shape != capture.H.shape:
         raise ConfigError("capture.background", f"shape {list(background.H.shape)} does not "
                                                 f"match the capture's {list(capture.H.shape)}")
@@ -101,10 +124,4 @@ def subtract_background(capture: Capture, background: Capture) -> Capture:
                                                 f"{capture.t_start:.6g} m)")
     if not np.allclose(background.sensor_grid_xyz, capture.sensor_grid_xyz, atol=1e-6):
         raise ConfigError("capture.background", "its scan points differ from the capture's")
-    H = capture.H.astype(np.result_type(capture.H, background.H), copy=True)
-    H -= background.H
-    if not np.any(H):
-        raise ConfigError("capture.background", "subtracting it leaves nothing: it equals the "
-                                                "capture (give the background measurement)")
-    return capture.replace(H=H)
 

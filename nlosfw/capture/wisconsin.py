@@ -29,23 +29,39 @@ import numpy as np
 import numpy.typing as npt
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.dataset_shapes import VOLUME_HINT
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
 from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.matfile import (
     hdf5_keys,
     hdf5_shape,
     is_hdf5,
+    mat_struct_shapes,
+    mat_variables,
     read_mat_array,
     read_mat_struct,
     scalar,
 )
+from nlosfw.common import hdf5_guard
 from nlosfw.common.errors import DataError
-from nlosfw.common.hdf5_guard import open_checked
+from nlosfw.common.hdf5_guard import Expected, open_checked, ranks, values
 
 #: The struct's fields that must be present.
 FIELDS = ("t", "data", "laserOrigin", "laserPos", "cameraPos", "deltat", "t0")
 _EXPECTED = ("a struct 'dataset' with t, data [nl, 1, nt], laserOrigin, laserPos, laserNorm, "
              "cameraPos, cameraNormal, deltat, t0, as in the Wisconsin phasor-field captures")
+
+
+def struct_shapes(n_l: int) -> dict[str, Expected]:
+    """The MATLAB shapes the fields of the struct ``dataset`` may declare, for ``n_l`` laser
+    positions (the first axis of ``data``)."""
+    one, point = values(1, what="one number"), values(3, what="3 numbers (one point)")
+    return {"t": one, "deltat": one, "t0": one, "data": ranks(3, what="[nl, 1, nt]"),
+            "laserOrigin": point, "cameraPos": point, "cameraNormal": point,
+            "laserPos": hdf5_guard.points(n_l, what=f"{n_l} points n x 3 (or 3 x n), one "
+                                                    "per row of data"),
+            "laserNorm": hdf5_guard.points(1, n_l, what=f"one or {n_l} normals n x 3 (or "
+                                                        "3 x n)")}
 
 
 def points(value: npt.ArrayLike, path: Path, name: str, count: int | None = None) -> np.ndarray:
@@ -86,14 +102,17 @@ class WisconsinFormat(CaptureFormat[CaptureFormatConfig]):
             with open_checked(path):   # says why when data lies outside the file, or damage
                 pass
             raise DataError(f"{path}: no struct 'dataset' (expected {_EXPECTED})")
-        ds = read_mat_struct(path, "dataset", (*FIELDS, "laserNorm", "cameraNormal"))
-        missing = [k for k in FIELDS if k not in ds]
+        declared = mat_struct_shapes(path, "dataset")
+        missing = [k for k in FIELDS if k not in declared]
         if missing:
             raise DataError(f"{path}: no field 'dataset.{missing[0]}' (expected {_EXPECTED})")
-        data = np.asarray(ds["data"])
-        if data.ndim != 3 or data.shape[1] != 1:
-            raise DataError(f"{path}: field 'dataset.data' has MATLAB shape {list(data.shape)}; "
+        data_shape = declared["data"]
+        if len(data_shape) != 3 or data_shape[1] != 1:
+            raise DataError(f"{path}: field 'dataset.data' has MATLAB shape {list(data_shape)}; "
                             "expected [nl, 1, nt] (one camera point)")
+        ds = read_mat_struct(path, "dataset", (*FIELDS, "laserNorm", "cameraNormal"),
+                             struct_shapes(data_shape[0]))
+        data = np.asarray(ds["data"])
         n_l, _, n_t = data.shape
         n_t_declared = int(scalar(ds["t"], path, "dataset.t", "the number of time bins"))
         if n_t_declared != n_t:
@@ -108,12 +127,13 @@ class WisconsinFormat(CaptureFormat[CaptureFormatConfig]):
         camera_normal = (points(ds["cameraNormal"], path, "cameraNormal", 1)
                          if "cameraNormal" in ds else None)
         volume = {}
+        present = mat_variables(path)
         for src, dst in (("minimalpos", "minimal_pos"), ("maximalpos", "maximal_pos"),
                          ("sampling_grid_spacing", "sampling_grid_spacing")):
-            try:
-                value = np.asarray(read_mat_array(path, src), dtype=float).reshape(-1)
-            except DataError:
+            if src not in present:
                 continue
+            value = np.asarray(read_mat_array(path, src, expected=VOLUME_HINT),
+                               dtype=float).reshape(-1)
             volume[dst] = float(value[0]) if value.size == 1 else value.tolist()
         try:
             return Capture(

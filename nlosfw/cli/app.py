@@ -25,11 +25,12 @@ from typing import TYPE_CHECKING
 
 from hydra.experimental.callback import Callback
 
-from nlosfw.cli import workers
-from nlosfw.cli.errors import report_user_error, unexpected_error
+from nlosfw.cli import outcomes, workers
+from nlosfw.cli.errors import report_job_failure, report_user_error, unexpected_error
+from nlosfw.cli.flags import refuse_flags
 from nlosfw.cli.reporter import ConsoleReporter
 from nlosfw.common.errors import ConfigError, NlosfwError, one_line
-from nlosfw.common.files import storage_error
+from nlosfw.common.files import output_error
 from nlosfw.common.logs import FILE_ONLY
 from nlosfw.common.resources import config_dir
 from nlosfw.compose import (
@@ -46,9 +47,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: Hydra flags nlosfw refuses: ``--experimental-rerun`` unpickles a file (code would run).
-REFUSED_FLAGS = ("--experimental-rerun",)
-
 
 def main(argv: Sequence[str]) -> int:
     """Run the Hydra app with ``argv`` (without the program name); return the exit status."""
@@ -56,13 +54,9 @@ def main(argv: Sequence[str]) -> int:
     from hydra.errors import HydraException
     from omegaconf.errors import OmegaConfBaseException
 
+    refuse_flags(argv)  # before Hydra's parser sees them, in any spelling it accepts
     argv = normalise_overrides(argv)
     check_override_shapes(argv)
-    for arg in argv:
-        if arg.split("=", 1)[0] in REFUSED_FLAGS:
-            raise ConfigError("", f"{arg.split('=', 1)[0]} is not supported: it unpickles a "
-                                  "file, which can run any code; run the configuration "
-                                  "again from its overrides instead")
     from nlosfw.plugins import load_plugins
 
     host = load_plugins()
@@ -71,8 +65,9 @@ def main(argv: Sequence[str]) -> int:
     decorated = hydra.main(config_path=str(config_dir()), config_name="config",
                            version_base="1.3")(_task)
     try:
-        with _hydra_argv(argv), _hydra_full_error(), workers.forwarding():
+        with _hydra_argv(argv), _hydra_full_error(), workers.forwarding() as sweep:
             decorated()
+            outcomes.check(sweep)     # a sweep whose jobs failed: one line naming them
     except (HydraException, OmegaConfBaseException) as err:
         raise composition_error(err, host) from None
     except ValueError as err:  # Hydra refusing its own command line (before any job)
@@ -83,8 +78,9 @@ def main(argv: Sequence[str]) -> int:
         if _raised_in_a_job(err):
             raise
         where = Path(str(err.filename or "hydra.run.dir"))
-        raise (storage_error(where, err) or ConfigError(
-            "hydra.run.dir", f"{where}: {err.strerror or one_line(err)}")) from None
+        option = "hydra.sweep.dir" if _multirun(argv) else "hydra.run.dir"
+        raise (output_error(err, option, where) or ConfigError(
+            option, f"{where}: {err.strerror or one_line(err)}")) from None
     except RecursionError:  # Hydra's parser on a deeply nested value
         raise ConfigError("", "command line: an override is nested too deeply") from None
     return 0
@@ -115,6 +111,12 @@ def check_override_shapes(argv: Sequence[str]) -> None:
                               f"at most {MAX_OVERRIDE_DEPTH} are allowed")
 
 
+def _multirun(argv: Sequence[str]) -> bool:
+    """Whether ``argv`` runs a sweep (``-m``, ``--multirun``, ``hydra.mode=MULTIRUN``)."""
+    return any(a in ("-m", "--multirun") or a.replace(" ", "") == "hydra.mode=MULTIRUN"
+               for a in argv)
+
+
 def _raised_in_a_job(err: BaseException) -> bool:
     """Whether ``err`` came from a job (:func:`_task`), not from Hydra itself."""
     return any(frame.f_code is _task.__code__
@@ -126,8 +128,8 @@ class PreflightCallback(Callback):
     every configuration a command will run before Hydra writes anything.
 
     A mistake is reported in one line and ends the command with ``SystemExit`` (exit
-    status 2): Hydra turns a callback's exceptions into warnings and goes on, but lets
-    ``SystemExit`` through.
+    status 2), and so does a check that fails for any other reason: Hydra turns a
+    callback's exceptions into warnings and goes on, but lets ``SystemExit`` through.
     """
 
     def on_run_start(self, config: DictConfig, **kwargs: object) -> None:
@@ -138,28 +140,40 @@ class PreflightCallback(Callback):
 
 
 def _check(config: DictConfig, multirun: bool) -> None:
+    """Every check of :func:`~nlosfw.compose.preflight`; any failure ends the command with
+    one line and ``SystemExit`` (Hydra would turn an exception into a warning and start the
+    run): a mistake with its exit status, a check that could not decide (an exception that
+    is not an NlosfwError: a bug, in nlosfw or a plugin) with 2, nothing written."""
     from omegaconf import OmegaConf
 
     from nlosfw.plugins import load_plugins
 
-    given = config.hydra.overrides
-    hydra = [str(o) for o in OmegaConf.to_container(given.hydra, resolve=False) or []]
-    task = [str(o) for o in OmegaConf.to_container(given.task, resolve=False) or []]
-    # the user's hydra.* overrides (hydra.run.dir, ...) and the task's, as on the command
-    # line; hydra.mode is Hydra's own record of -m
-    overrides = [o for o in hydra if not o.startswith("hydra.mode=")] + task
-    config_name = str(config.hydra.job.config_name or "config")
     try:
+        given = config.hydra.overrides
+        hydra = [str(o) for o in OmegaConf.to_container(given.hydra, resolve=False) or []]
+        task = [str(o) for o in OmegaConf.to_container(given.task, resolve=False) or []]
+        # the user's hydra.* overrides (hydra.run.dir, ...) and the task's, as on the command
+        # line; hydra.mode is Hydra's own record of -m
+        overrides = [o for o in hydra if not o.startswith("hydra.mode=")] + task
+        config_name = str(config.hydra.job.config_name or "config")
         preflight(overrides, load_plugins(), config_name, multirun)
     except NlosfwError as err:
         report_user_error(err)
         raise SystemExit(err.exit_status) from None
+    except Exception as err:  # Hydra would warn and start the run: stop here instead
+        failure = NlosfwError(f"the checks before the run failed: {type(err).__name__}: "
+                              f"{one_line(err, whole=True)} (a bug in nlosfw or a plugin; "
+                              "nothing was written; the traceback with --debug)")
+        failure.__traceback__ = err.__traceback__
+        report_user_error(failure)
+        raise SystemExit(failure.exit_status) from None
 
 
 def _task(cfg: DictConfig) -> float | None:
     """One Hydra job: the whole pipeline in its run directory, drawn on the console (in a
     worker of a parallel sweep, ended with its status when the sweep is interrupted:
-    :mod:`nlosfw.cli.workers`)."""
+    :mod:`nlosfw.cli.workers`). A failed run ends the command (``SystemExit``); a failed
+    job of a sweep ends alone and the sweep goes on (:mod:`nlosfw.cli.outcomes`)."""
     with workers.job():
         return _job(cfg)
 
@@ -173,6 +187,10 @@ def _job(cfg: DictConfig) -> float | None:
 
     logging.captureWarnings(True)  # library warnings go to run.log, not the console
     hydra = HydraConfig.get()
+    job = None
+    if hydra.mode == RunMode.MULTIRUN:
+        job = outcomes.Outcome(num=int(hydra.job.num),
+                               overrides=tuple(str(o) for o in hydra.overrides.task))
     pipeline: Pipeline | None = None
     try:
         plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
@@ -182,20 +200,42 @@ def _job(cfg: DictConfig) -> float | None:
         plan = make_plan({str(k): v for k, v in plain.items()}, host)
         host.manager.register(ConsoleReporter(host, plan.settings))
         pipeline = Pipeline(plan, Path(hydra.runtime.output_dir), host,
-                            resume=hydra.mode == RunMode.MULTIRUN)
-        return pipeline.run()
+                            resume=job is not None)
+        objective = pipeline.run()
     except NlosfwError as err:
-        report_user_error(err)
-        raise SystemExit(err.exit_status) from None
+        _failed(err, err.exit_status, job)
+        return None
     except MemoryError as err:  # the estimate let it through: still one line
-        report_user_error(NlosfwError(f"out of memory ({one_line(err)}); make the run "
-                                      "smaller (the sizes, or fewer sweep jobs at once)"))
-        raise SystemExit(1) from None
+        _failed(NlosfwError(f"out of memory ({one_line(err)}); make the run smaller (the "
+                            "sizes, or fewer sweep jobs at once)"), 1, job)
+        return None
     except Exception as err:  # any other failure: one line, the traceback in run.log
         log.error("the run failed:", exc_info=err, extra=FILE_ONLY)
         stage = None if pipeline is None else pipeline.stage_reached
-        report_user_error(unexpected_error(err, stage))
-        raise SystemExit(1) from None
+        _failed(unexpected_error(err, stage), 1, job)
+        return None
+    folder = outcomes.sweep_folder()
+    if job is not None and folder is not None:
+        outcomes.record(folder, job)
+    return objective
+
+
+def _failed(err: BaseException, status: int, job: outcomes.Outcome | None) -> None:
+    """End a failed run: its one line, then ``SystemExit(status)``; in a sweep (``job``)
+    the job's line and its outcome recorded for the sweep, which goes on (an ordinary
+    exception when it cannot be recorded: Hydra's launcher then records the failure)."""
+    if job is None:
+        report_user_error(err)
+        raise SystemExit(status)
+    report_job_failure(err, job.num)
+    message = one_line(err, whole=True)
+    folder = outcomes.sweep_folder()
+    failed = outcomes.Outcome(num=job.num, overrides=job.overrides, message=message,
+                              exit_status=status)
+    if folder is None or not outcomes.record(folder, failed):
+        failure = NlosfwError(f"job {job.num} of the sweep failed: {message}")
+        failure.exit_status = status
+        raise failure
 
 
 @contextmanager

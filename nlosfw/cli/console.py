@@ -3,8 +3,8 @@
 The console shows nlosfw's own messages (loggers ``nlosfw*``, INFO and above) and any
 library's errors; everything else a library logs (JAX's backend probing, Hydra,
 matplotlib's font manager...) goes only to the run's ``run.log``, as do records logged
-with ``extra=FILE_ONLY``. Log records and progress bars share rich's console, so they do
-not garble each other.
+with ``extra=FILE_ONLY``, whatever their level. Log records and progress bars share rich's
+console, so they do not garble each other.
 """
 
 from __future__ import annotations
@@ -31,13 +31,14 @@ from nlosfw.common.text import controls_visible
 
 
 class ConsoleFilter(logging.Filter):
-    """Passes nlosfw's own records (``nlosfw*`` loggers, plugins' included) unless marked
-    :data:`FILE_ONLY`, and any record of level ERROR or above."""
+    """Passes nlosfw's own records (``nlosfw*`` loggers, plugins' included) and any
+    library's record of level ERROR or above, except records marked :data:`FILE_ONLY`
+    (an unexpected failure's traceback: the console has its one line)."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        if record.levelno >= logging.ERROR:
-            return True
-        return record.name.startswith(OWN_LOGGERS) and getattr(record, "console", True)
+        if not getattr(record, "console", True):
+            return False
+        return record.levelno >= logging.ERROR or record.name.startswith(OWN_LOGGERS)
 
 
 class _PlainHandler(RichHandler):

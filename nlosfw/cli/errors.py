@@ -22,6 +22,15 @@ def report_user_error(err: BaseException) -> None:
     console.print(f"[bold red]error:[/] {escape(one_line(err, whole=True))}")
 
 
+def report_job_failure(err: BaseException, num: int) -> None:
+    """Print ``job <num> failed: <message>`` as one line on stderr (the traceback too in
+    debug mode): a sweep's job that failed, the sweep going on."""
+    console = Console(stderr=True, soft_wrap=True, highlight=False)
+    if os.environ.get("NLOSFW_DEBUG") == "1":
+        console.print(escape("".join(traceback.format_exception(err))), end="")
+    console.print(f"[bold red]job {num} failed:[/] {escape(one_line(err, whole=True))}")
+
+
 def unexpected_error(err: BaseException, stage: str | None = None) -> NlosfwError:
     """An unexpected exception (a bug, a library's failure) as a one-line error with exit
     status 1, naming its type, the stage it ended (if known) and where the traceback is."""

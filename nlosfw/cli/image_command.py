@@ -13,12 +13,17 @@ field model. Any other override applies as in a normal run (``imager=lct``,
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
 from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.common.text import override_value
 
 USAGE = "python -m nlosfw image FILE [OVERRIDE ...]"
+
+#: The start of an override: a key (``+``/``~`` first), then ``=``.
+_OVERRIDE = re.compile(r"[+~]*[\w.@/-]+=")
 
 #: What an image run keeps of the large files: the volume, not the capture's copy.
 KEEP = "output.keep=[reconstructions]"
@@ -29,7 +34,10 @@ def image_overrides(argv: Sequence[str]) -> list[str]:
     when FILE is missing, not a readable file, or the overrides choose another model or
     capture."""
     args = list(argv)
-    if not args or "=" in args[0] or args[0].startswith("-"):
+    # FILE is any path (a folder /data/run=3/ included); a first argument that names no
+    # file but reads as an override or a flag is a forgotten FILE
+    if not args or args[0].startswith("-") or (
+            _OVERRIDE.match(args[0]) and not os.path.lexists(Path(args[0]).expanduser())):
         raise ConfigError("", f"image needs a capture file first: {USAGE}")
     path = Path(args[0]).expanduser()
     if not path.exists():
@@ -43,12 +51,14 @@ def image_overrides(argv: Sequence[str]) -> list[str]:
         key = arg.lstrip("+~").split("=", 1)[0]
         if key in ("model", "capture.path"):
             raise ConfigError(key, f"image sets it (capture.path=FILE model=none); to fit a "
-                              f"field model run python -m nlosfw capture.path={path} "
-                              f"model=NAME instead")
+                              f"field model run python -m nlosfw capture.path="
+                              f"{override_value(str(path))} model=NAME instead")
     flags, overrides = _hydra_flags(rest)
     keep = [] if any(a.lstrip("+~").startswith("output.keep=") for a in overrides) else [KEEP]
-    return [*flags, f"capture.path={_quoted(str(path.resolve()))}", "model=none", *keep,
-            *overrides]
+    # the name is data: quoted so that neither Hydra's grammar nor an OmegaConf
+    # interpolation (${oc.env:NAME}) reads anything in it
+    return [*flags, f"capture.path={override_value(str(path.absolute()))}", "model=none",
+            *keep, *overrides]
 
 
 #: Hydra's flags that take a value (the next argument unless written ``--flag=value``).
@@ -72,12 +82,6 @@ def _hydra_flags(args: Sequence[str]) -> tuple[list[str], list[str]]:
         else:
             overrides.append(arg)
     return flags, overrides
-
-
-def _quoted(value: str) -> str:
-    """``value`` as a quoted Hydra override value (brackets, commas, spaces kept as is; a
-    quote and an interpolation's ``${`` escaped)."""
-    return "'" + value.replace("'", "\\'").replace("${", "\\${") + "'"
 
 
 def image_command(argv: Sequence[str]) -> int:

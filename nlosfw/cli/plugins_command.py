@@ -120,7 +120,7 @@ def plugin_details(spec: PluginSpec) -> list[RenderableType]:
     ]
     options: tuple[OptionDoc, ...] = ()
     if status.state == "ok":
-        options = option_docs(spec.config_class())
+        options = option_docs(spec.config_class(), groups=True)
         out.append(_options_table(spec, options))
     else:
         out.append("  (options unavailable until the plugin imports)")

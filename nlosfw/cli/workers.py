@@ -84,15 +84,17 @@ MARKER = "interrupted"
 
 
 @contextlib.contextmanager
-def forwarding() -> Iterator[None]:
+def forwarding() -> Iterator[Path]:
     """In the parent, around Hydra: the workers of a parallel sweep started in the block
-    are told where to register, and a signal is forwarded to them (see the module)."""
+    are told where to register, and a signal is forwarded to them (see the module).
+    Yields the sweep's folder (made when first needed), where the jobs also record how
+    they ended (:mod:`nlosfw.cli.outcomes`)."""
     folder = Path(tempfile.gettempdir()) / f"nlosfw-sweep-{os.getpid()}-{secrets.token_hex(6)}"
     saved = os.environ.get(ENV)
     os.environ[ENV] = f"{os.getpid()}:{folder}"
     try:
         with interrupts.before_raising(partial(stop_workers, folder)):
-            yield
+            yield folder
     finally:
         if saved is None:
             os.environ.pop(ENV, None)

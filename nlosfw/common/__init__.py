@@ -11,8 +11,11 @@ from nlosfw.common.config import (
     config_to_dict,
     require,
     require_finite,
+    require_seed,
+    require_threads,
 )
 from nlosfw.common.cores import available_cores
+from nlosfw.common.deprecation import moved_names
 from nlosfw.common.errors import (
     USER_ERROR_EXIT_STATUS,
     ConfigError,
@@ -38,12 +41,15 @@ __all__ = [
     "Configurable",
     "DataError",
     "FitError",
+    "moved_names",
     "NlosfwError",
     "one_line",
     "PluginError",
     "ProgressCallback",
     "require",
     "require_finite",
+    "require_seed",
+    "require_threads",
     "USER_ERROR_EXIT_STATUS",
     "write_text",
 ]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+import operator
 from collections.abc import Collection, Mapping
 from typing import TYPE_CHECKING, Any, ClassVar, Generic, SupportsFloat, TypeVar
 
@@ -64,6 +65,34 @@ def config_from_mapping(cls: type[T], mapping: T | Mapping[str, object] | None,
     return build(cls, node, where)
 
 
+def with_current_names(cls: type, mapping: Mapping[str, object]) -> dict[str, object]:
+    """``mapping`` (options of config dataclass ``cls``) with the options renamed since
+    (:func:`~nlosfw.common.schema.renamed_option`) moved to their new names, groups made as
+    needed: how a file written before a rename (a saved model's config) still loads. Other
+    options are kept; a group given as a mapping is taken as it is."""
+    from nlosfw.common.schema import renamed_option
+
+    out: dict[str, object] = {}
+    for key, value in mapping.items():
+        new = renamed_option(cls, str(key))
+        if new is None or (isinstance(value, Mapping) and new.startswith(f"{key}.")):
+            path = [str(key)]
+        else:
+            path = new.split(".")
+        node = out
+        for part in path[:-1]:
+            child = node.get(part)
+            if not isinstance(child, dict):
+                child = node[part] = {} if not isinstance(child, Mapping) else dict(child)
+            node = child
+        last = node.get(path[-1])
+        if isinstance(last, dict) and isinstance(value, Mapping):
+            last.update(value)
+        else:
+            node[path[-1]] = dict(value) if isinstance(value, Mapping) else value
+    return out
+
+
 def config_to_dict(config: DataclassInstance) -> dict[str, Any]:
     """A plain, YAML-safe dict of a config dataclass (enums become their values)."""
     if not dataclasses.is_dataclass(config) or isinstance(config, type):
@@ -86,6 +115,45 @@ def require(condition: bool, option: str, problem: str) -> None:
     """
     if not condition:
         raise ConfigError(option, problem)
+
+
+#: The largest seed an option may hold: seeds feed numpy's generators (any integer >= 0),
+#: torch (below 2^64) and JAX's keys (int64); every seed is an integer 0 to 2^63 - 1.
+MAX_SEED = 2**63 - 1
+
+
+def is_seed(value: object) -> bool:
+    """Whether ``value`` is a seed: an integer (Python's or numpy's) from 0 to
+    :data:`MAX_SEED`."""
+    if isinstance(value, bool):
+        return False
+    try:
+        number = operator.index(value)  # type: ignore[arg-type]
+    except TypeError:
+        return False
+    return 0 <= number <= MAX_SEED
+
+
+def require_seed(value: object, option: str) -> None:
+    """Raise :class:`ConfigError` for ``option`` unless ``value`` is a seed (a negative one
+    ended numpy's generators, a larger one JAX's keys, after the run had started)."""
+    if not is_seed(value):
+        raise ConfigError(option, f"must be an integer from 0 to {MAX_SEED}, got {value!r}")
+
+
+#: The most threads a ``workers`` or ``threads`` option may ask for: thread pools and the C
+#: libraries they are handed to take a C int (10^20 ended a run in scipy's FFT), and no
+#: machine has as many cores.
+MAX_THREADS = 4096
+
+
+def require_threads(value: int, option: str, auto: int, meaning: str) -> None:
+    """Raise :class:`ConfigError` for ``option`` unless ``value`` is ``auto`` (-1 or 0, which
+    means ``meaning``: all cores, the library's default) or a thread count from 1 to
+    :data:`MAX_THREADS`."""
+    if value != auto and not 1 <= value <= MAX_THREADS:
+        raise ConfigError(option, f"must be {auto} ({meaning}) or 1 to {MAX_THREADS}, got "
+                                  f"{value}")
 
 
 def require_finite(config: DataclassInstance) -> None:

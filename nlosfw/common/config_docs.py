@@ -56,18 +56,26 @@ def first_sentence(text: str) -> str:
     return _SENTENCE_END.split(" ".join(text.split()), maxsplit=1)[0]
 
 
-def option_docs(cls: type) -> tuple[OptionDoc, ...]:
-    """The options of config dataclass ``cls`` in field order, with type, default, unit, doc."""
+def option_docs(cls: type, groups: bool = False) -> tuple[OptionDoc, ...]:
+    """The options of config dataclass ``cls`` in field order, with type, default, unit, doc.
+
+    With ``groups`` an option that is a group of options (a nested config dataclass) is
+    given as its options, named ``group.option`` (as the command line writes them)."""
     if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
         raise TypeError(f"expected a dataclass type, got {cls!r}")
     hints = get_type_hints(cls)
     docs = attribute_docstrings(cls)
-    out = []
+    out: list[OptionDoc] = []
     for f in dataclasses.fields(cls):
         if not f.init:
             continue
+        tp = hints.get(f.name, Any)
+        if groups and isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            out += [dataclasses.replace(o, name=f"{f.name}.{o.name}")
+                    for o in option_docs(tp, groups)]
+            continue
         unit, doc = split_unit(docs.get(f.name, ""))
-        out.append(OptionDoc(name=f.name, type=type_text(hints.get(f.name, Any)),
+        out.append(OptionDoc(name=f.name, type=type_text(tp),
                              default=_plain(_default(f)), unit=unit, doc=doc))
     return tuple(out)
 

@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO
 
-from nlosfw.common.errors import DataError, StorageError
+from nlosfw.common.errors import ConfigError, DataError, StorageError
 
 #: errno values meaning "the disk (or the quota) is full".
 _FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
@@ -41,6 +41,22 @@ def is_regular_file(path: str | Path, follow: bool = True) -> bool:
     except (OSError, ValueError):
         return False
     return stat.S_ISREG(info.st_mode)
+
+
+def unwritable_reason(folder: str | Path) -> str | None:
+    """Why nothing can be created in the existing folder ``folder`` (``permission denied``,
+    ``read-only file system``), or None when it can."""
+    if os.access(folder, os.W_OK | os.X_OK):
+        return None
+    try:  # tell a read-only file system from missing permissions
+        probe = os.open(folder, os.O_RDONLY)
+        os.close(probe)
+        reason = "permission denied"
+        if hasattr(os, "statvfs") and os.statvfs(folder).f_flag & os.ST_RDONLY:
+            reason = "read-only file system"
+    except OSError as err:
+        reason = os.strerror(err.errno or errno.EACCES)
+    return reason
 
 
 def format_bytes(n: float) -> str:
@@ -85,6 +101,23 @@ def storage_error(path: Path, err: OSError, written: int | None = None) -> Stora
         reason = "read-only file system" if err.errno == errno.EROFS else "permission denied"
         return StorageError(f"{path.parent}: cannot write there ({reason})")
     return None
+
+
+def output_error(err: OSError, option: str, path: Path | None = None
+                 ) -> ConfigError | StorageError | None:
+    """The one-line error of ``err`` writing to ``path`` (else ``err.filename``) in the
+    output location ``option`` names: when it cannot be written (EROFS, EACCES, EPERM) a
+    refusal (:class:`ConfigError`, exit status 2) naming the nearest existing folder on the
+    way; a full disk's :func:`storage_error`; None for any other error."""
+    where = Path(path if path is not None else err.filename or ".")
+    if err.errno not in _UNWRITABLE:
+        return storage_error(where, err)
+    target = Path(os.path.abspath(where))
+    while not target.exists() and target != target.parent:
+        target = target.parent
+    reason = "read-only file system" if err.errno == errno.EROFS else "permission denied"
+    return ConfigError(option, f"{target} cannot be written ({reason}); choose another "
+                               "output directory")
 
 
 @contextlib.contextmanager

@@ -4,10 +4,12 @@ HDF5 can make a file's dataset read bytes from elsewhere: raw data stored in ext
 files (``/etc/passwd``), virtual datasets mapping other files, external links, and soft
 links through them. A capture is untrusted input, so :func:`open_checked` walks every link
 of a file before anything is read and refuses, in one line naming the file and the
-dataset, any of those; :func:`read_dataset` sizes a dataset (shape × dtype) before
-reading it and refuses one larger than :func:`dataset_limit` (the memory this process can
-still allocate, so a tiny file declaring an 800 GB dataset, or a 4 GB one on a machine with
-less free, is refused in one line instead of ending in MemoryError or swapping).
+dataset, any of those; :func:`read_dataset` checks a dataset's declared shape against the
+shapes its reader expects (:class:`Expected`, e.g. as many points as the transient has
+sensors) and sizes it (shape × dtype) before reading it, refusing one of another shape, or
+larger than :func:`dataset_limit` (the memory this process can still allocate): a tiny
+file declaring a huge dataset is refused in one line, from its header, instead of being
+read in full first (or ending in MemoryError or swapping).
 """
 
 from __future__ import annotations
@@ -15,7 +17,8 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -169,19 +172,71 @@ def check_size(node: h5py.Dataset, path: Path, where: str,
                         "reading it")
 
 
+@dataclass(frozen=True)
+class Expected:
+    """The shapes a dataset (or a MATLAB variable) may declare, checked from its header
+    before any of it is read: ``allows(shape)``, and ``what`` for the message."""
+
+    what: str
+    """What is expected, for the message ("one number", "64 points [N, 3]", ...)."""
+    allows: Callable[[tuple[int, ...]], bool]
+
+    def check(self, shape: tuple[int, ...] | None, path: Path, where: str,
+              noun: str = "dataset") -> None:
+        """Refuse (DataError naming ``path``, the ``noun`` and ``where``) a declared
+        ``shape`` this does not allow."""
+        declared = tuple(int(n) for n in (shape or ()))
+        if not self.allows(declared):
+            raise DataError(f"{path}: {noun} '{where}' declares shape {list(declared)}; "
+                            f"expected {self.what}; refused before reading it")
+
+
+#: A shape of any size (sized against the memory available only).
+ANY_SHAPE = Expected("any shape", lambda shape: True)
+
+
+def values(*counts: int, what: str = "") -> Expected:
+    """One of ``counts`` numbers, in any arrangement (a scalar, (1,), (1, 3), (3, 1), ...)."""
+    default = " or ".join(str(c) for c in counts) + (" number" if counts == (1,) else " numbers")
+    return Expected(what or default, lambda shape: math.prod(shape) in counts)
+
+
+def points(*counts: int, what: str) -> Expected:
+    """One of ``counts`` points of 3 coordinates: an axis of 3 first or last (N x 3 or
+    3 x N, a grid (X, Y, 3) or (3, Y, X)) and 3 x count numbers."""
+    numbers = {3 * c for c in counts}
+    return Expected(what, lambda shape: len(shape) >= 1 and 3 in (shape[0], shape[-1])
+                    and math.prod(shape) in numbers)
+
+
+def ranks(*allowed: int, what: str) -> Expected:
+    """A shape of any size with one of the ``allowed`` numbers of axes."""
+    return Expected(what, lambda shape: len(shape) in allowed)
+
+
 def is_numeric(node: h5py.Dataset) -> bool:
     """Whether a dataset holds real or complex numbers (or booleans), not text or
     references."""
     return np.dtype(node.dtype).kind in "biufc"
 
 
-def read_dataset(node: h5py.Dataset, path: Path, where: str,
-                 dtype: npt.DTypeLike | None = None
-                 ) -> np.ndarray | np.generic | bytes | str:
-    """The value of dataset ``node`` (storage and size checked first), converted to
-    ``dtype`` while reading if given; a read error becomes a one-line DataError."""
+def check_header(node: h5py.Dataset, path: Path, where: str, expected: Expected,
+                 dtype: npt.DTypeLike | None = None) -> None:
+    """Refuse, from its header alone, a dataset stored outside the file, larger (read as
+    ``dtype`` if given) than :func:`dataset_limit`, or of a shape ``expected`` does not
+    allow."""
     check_storage(node, path, where)
     check_size(node, path, where, dtype)
+    expected.check(node.shape, path, where)
+
+
+def read_dataset(node: h5py.Dataset, path: Path, where: str,
+                 dtype: npt.DTypeLike | None = None, *, expected: Expected
+                 ) -> np.ndarray | np.generic | bytes | str:
+    """The value of dataset ``node`` (storage, ``expected`` shape and size checked first,
+    from its header), converted to ``dtype`` while reading if given; a read error becomes a
+    one-line DataError."""
+    check_header(node, path, where, expected, dtype)
     try:
         if dtype is not None:
             return np.asarray(node.astype(dtype)[()])

@@ -11,12 +11,17 @@ mapping against the same twin:
 1. :func:`fill` writes a mapping into a schema node one value at a time, so that OmegaConf
    checks each name and type and a mistake names its exact option
    (``model.items[0].count``). On top of OmegaConf's rules, a bool must be written as a
-   bool (OmegaConf would read ``"yes"`` or ``1`` as true) and a whole float is accepted
-   as an integer. A node Hydra composed is already checked and needs no filling;
+   bool (OmegaConf would read ``"yes"`` or ``1`` as true), a whole float is accepted
+   as an integer, and text is kept as written (a ``${...}`` in it is never resolved). A
+   node Hydra composed is already checked and needs no filling;
 2. :func:`build` turns a checked node into the frozen dataclass: it refuses options added
    with ``+key=value`` and NaN numbers, makes tuples (checking fixed lengths), and runs
    each dataclass's ``__post_init__`` range checks with the option's dotted name
    prefixed to their errors.
+
+An option a config dataclass has renamed (its ``renamed_options``,
+:func:`renamed_option`) is refused in one line that gives the new
+name, wherever it is written: the command line, a preset, a Python mapping.
 """
 
 from __future__ import annotations
@@ -52,6 +57,7 @@ from omegaconf.errors import (
 )
 
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.text import omegaconf_literal
 
 _NONE_TYPE = type(None)
 
@@ -185,7 +191,11 @@ def _put(parent: Any, key: Any, value: Any, where: str) -> None:
         for i, item in enumerate(items):
             _put(child, i, item, f"{where}[{i}]")
     else:
-        _set(parent, key, value, where, value)
+        # a mapping's text is data: stored escaped, so that reading it back never resolves
+        # an interpolation in it (``${oc.env:NAME}`` in a file name or a scene's name)
+        stored = omegaconf_literal(value) if isinstance(value, str) and "${" in value \
+            else value
+        _set(parent, key, stored, where, value)
         kind = OmegaConf.get_type(parent, key)   # or a list index
         if kind is bool and not isinstance(value, bool):
             raise ConfigError(where, f"must be true or false, got {_describe(value)}")
@@ -221,9 +231,11 @@ def _set(parent: Any, key: Any, value: Any, where: str, given: Any) -> None:
                 raise
             _set(parent, key, int(value), where, given)     # 2.0 is the integer 2
     except (ConfigKeyError, ConfigAttributeError):
-        raise ConfigError(where, f"unknown option; valid options: {_keys(parent)}") from None
+        raise ConfigError(where, renamed(parent, str(key), where, given)
+                          or f"unknown option; valid options: {_keys(parent)}") from None
     except OmegaConfBaseException as err:
-        raise ConfigError(where, problem(err, given)) from None
+        raise ConfigError(where, renamed(parent, str(key), where, given)
+                          or problem(err, given)) from None
 
 
 # --------------------------------------------------------------------------- building
@@ -241,7 +253,9 @@ def build(cls: type, node: DictConfig, where: str) -> Any:
     for key in node:
         if str(key) not in known:
             valid = ", ".join(sorted(f.name for f in fields)) or "(none)"
-            raise ConfigError(_join(where, str(key)), f"unknown option; valid options: {valid}")
+            option = _join(where, str(key))
+            raise ConfigError(option, renamed(node, str(key), option)
+                              or f"unknown option; valid options: {valid}")
     hints = get_type_hints(cls)
     kwargs = {f.name: _python(_value(node, f.name, where), hints[f.name], _join(where, f.name))
               for f in fields}
@@ -288,10 +302,42 @@ def _python(value: Any, tp: Any, where: str) -> Any:
 
 
 # --------------------------------------------------------------------------- errors
+def renamed_option(cls: type, name: str) -> str | None:
+    """The name option ``name`` of config dataclass ``cls`` has now, if it was renamed (the
+    class's ``renamed_options``: old name -> new dotted name, e.g. ``depth_range`` ->
+    ``depth.range``), else None. An option that became a group of the same name
+    (``lobe`` -> ``lobe.exponent``) counts when it is given a plain value."""
+    table: Mapping[str, str] = getattr(cls, "renamed_options", None) or {}
+    return table.get(name)
+
+
+def renamed(parent: object, key: str, where: str, value: object = None) -> str | None:
+    """The refusal of option ``key`` of the schema node ``parent`` (written at the dotted
+    ``where``) when its config renamed it: the name to write instead; None otherwise. An
+    option that became a group of the same name counts only when given a plain value."""
+    if not isinstance(parent, DictConfig):
+        return None
+    schema_of = getattr(OmegaConf.get_type(parent), "schema_of", None)
+    new = renamed_option(schema_of, key) if isinstance(schema_of, type) else None
+    if new is None:
+        return None
+    prefix = where[:-len(key)] if where.endswith(key) else ""
+    if new.startswith(f"{key}."):
+        if isinstance(value, (Mapping, DictConfig)):
+            return None
+        return (f"is a group of options now; write {prefix}{new} (the option it was) or "
+                f"{prefix}{key}.<option>")
+    return f"was renamed; write {prefix}{new} instead"
+
+
 def problem(err: OmegaConfBaseException, value: Any) -> str:
     """What is wrong, in words, for OmegaConf's error ``err`` about ``value``."""
     if isinstance(err, MissingMandatoryValue):
         return "is required"
+    if err.key is not None and err.full_key:
+        moved = renamed(err.parent_node, str(err.key), str(err.full_key), value)
+        if moved is not None:
+            return moved
     if isinstance(err, (ConfigKeyError, ConfigAttributeError)) and isinstance(
             err.parent_node, DictConfig):
         if not dataclasses.is_dataclass(OmegaConf.get_type(err.parent_node)):

@@ -18,10 +18,11 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.source import check_files, file_transient_shape, load_file_capture
-from nlosfw.capture.thinning import photon_counts
+from nlosfw.capture.source import file_transient_shape, load_file_capture
+from nlosfw.capture.thinning import check_split, photon_counts
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem
+from nlosfw.compose.capture_checks import check_capture_kind, check_scene_preprocessing
 from nlosfw.compose.output_dirs import check_output_dirs
 from nlosfw.compose.store import hydra_session
 from nlosfw.pipeline.budget import check_memory
@@ -48,6 +49,8 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 _PLUGIN_GROUPS = tuple(k.value for k in RUN_KINDS)
+#: The plugins that take the capture as it is: they must take its kind.
+_TAKE_THE_CAPTURE = (PluginKind.PHASOR_TRANSFORM, PluginKind.IMAGER)
 _MAX_PREFLIGHT_COMPOSITIONS = 64
 
 
@@ -213,6 +216,10 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
                 raise ConfigError("split.thinning", "count splitting needs photon counts, but "
                                   "the simulated capture has no photon noise; set "
                                   "scene.noise.model=poisson")
+            if settings.capture.pileup_pulses is not None:
+                raise ConfigError("capture.pileup_pulses", "the pile-up correction needs "
+                                  "photon counts, but the simulated capture has no photon "
+                                  "noise; set scene.noise.model=poisson or leave it null")
             if counts_needed:
                 raise ConfigError("model.likelihood", "a Poisson likelihood needs photon "
                                   "counts, but the simulated capture has none; set "
@@ -223,13 +230,17 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
         simulator = host.registry.get(PluginKind.SIMULATOR, str(simulator_node.get("name")))
         simulator.create(_plugin_options(simulator_node, simulator.config_class())
                          ).check(scene)
-        check_files(settings.capture.options, formats)
+        layout = check_scene_preprocessing(scene, settings.capture.options, formats)
+        check_capture_kind(layout, cfg, host, f"scene {scene.name}'s capture "
+                           f"(scene.capture.type={scene.capture.type})",
+                           (PluginKind.SIMULATOR, *_TAKE_THE_CAPTURE))
         return
     # a malformed file, a wrong format or an option that does not fit the file must fail
     # here, before any output exists
     loaded = load_file_capture(settings.capture, formats)
+    check_capture_kind(loaded.prepared.capture, cfg, host, str(loaded.path))
     if settings.split.thinning:  # count splitting needs photon counts: refused here, not later
-        photon_counts(loaded.prepared.capture, str(loaded.path))
+        check_split(loaded.prepared.capture, settings.split.thinning_seed, str(loaded.path))
         _check_noise_floor(cfg, host, loaded.prepared.capture)
     if counts_needed:
         likelihood = ("model.likelihood", "the Poisson likelihood")

@@ -20,6 +20,7 @@ from pathlib import Path
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, one_line
 from nlosfw.common.files import write_text
+from nlosfw.common.logs import VisibleFormatter
 from nlosfw.compose.checks import composition_error, preflight
 from nlosfw.compose.store import (
     ensure_resolvers,
@@ -121,7 +122,7 @@ def _run_log(path: Path) -> Iterator[None]:
     own settings come back when the last run ends, whatever order they end in; each run.log
     keeps its own thread's records and its workers', not another run's."""
     handler = logging.FileHandler(path, encoding="utf-8")
-    handler.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] %(message)s"))
+    handler.setFormatter(VisibleFormatter())
     me = threading.get_ident()
     with _ROUTING_LOCK:
         routing = _Routing.enter(logging.getLogger("nlosfw"), me)

@@ -10,7 +10,6 @@ and applies the same verdict first, and checks that they can be written at all.
 
 from __future__ import annotations
 
-import errno
 import itertools
 import logging
 import os
@@ -19,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from nlosfw.common.errors import ConfigError
+from nlosfw.common.files import unwritable_reason
 from nlosfw.pipeline.files import PLANNED_NAMES
 from nlosfw.pipeline.lifecycle import (
     HYDRA_FILES,
@@ -92,15 +92,8 @@ def _check_writable(path: Path, option: str) -> None:
         target = target.parent
     if not target.is_dir():
         raise ConfigError(option, f"{target} is not a directory")
-    if not os.access(target, os.W_OK | os.X_OK):
-        try:  # tell a read-only file system from missing permissions
-            probe = os.open(target, os.O_RDONLY)
-            os.close(probe)
-            reason = "permission denied"
-            if hasattr(os, "statvfs") and os.statvfs(target).f_flag & os.ST_RDONLY:
-                reason = "read-only file system"
-        except OSError as err:
-            reason = os.strerror(err.errno or errno.EACCES)
+    reason = unwritable_reason(target)
+    if reason is not None:
         raise ConfigError(option, f"{target} cannot be written ({reason}); choose another "
                                   "output directory")
 

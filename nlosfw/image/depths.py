@@ -28,6 +28,7 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.signal import signal_depth_range
+from nlosfw.common.errors import ConfigError
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
@@ -66,6 +67,9 @@ def depth_span(capture: Capture) -> tuple[float, float]:
 
     A run's planes follow, in this order: ``reconstruction.depths``, then
     ``reconstruction.depth_range``, then this range."""
+    if not isinstance(capture, Capture):
+        raise ConfigError("capture", f"depth_span needs a Capture, got "
+                                     f"{type(capture).__name__}")
     truth = (capture.scene_info.get("ground_truth") or {}).get("depth")
     if truth is not None:
         depth = np.asarray(truth, dtype=float)

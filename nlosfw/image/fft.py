@@ -44,7 +44,7 @@ import scipy.fft
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.config import Choice, require
+from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.cores import run_tasks, worker_count
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
@@ -97,8 +97,7 @@ class FFTImagerConfig(PropagationConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        require(self.workers == -1 or self.workers >= 1, "workers",
-                f"must be -1 (all cores) or >= 1, got {self.workers}")
+        require_threads(self.workers, "workers", -1, "all cores")
         require(self.chunk_mb > 0, "chunk_mb", f"must be > 0 MiB, got {self.chunk_mb}")
 
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nlosfw.common.config import require
+from nlosfw.common.config import require, require_threads
 from nlosfw.common.cores import run_tasks, worker_count
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image.propagation import FrequencySum, PropagationConfig, PropagationImager
@@ -40,8 +40,7 @@ class RSDImagerConfig(PropagationConfig):
     def __post_init__(self) -> None:
         super().__post_init__()
         require(self.chunk_mb > 0, "chunk_mb", f"must be > 0 MiB, got {self.chunk_mb}")
-        require(self.workers == -1 or self.workers >= 1, "workers",
-                f"must be -1 (all cores) or >= 1, got {self.workers}")
+        require_threads(self.workers, "workers", -1, "all cores")
 
 
 class RSDImager(PropagationImager[RSDImagerConfig]):

@@ -17,6 +17,8 @@ the variant some papers report; the run's scores never use it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
@@ -110,6 +112,44 @@ def reconstruction_scores(reference: Reconstruction, test: Reconstruction,
             "depth_rmse_m": None if truth_depth is None else depth_rmse(test, truth_depth)}
 
 
+def scored(reference: Reconstruction, test: Reconstruction,
+           truth_depth: np.ndarray | None = None
+           ) -> tuple[dict[str, float | None], dict[str, str]]:
+    """:func:`reconstruction_scores` as a run records them: every score a finite number or
+    None, and why each None is (by score name; ``depth_rmse_m`` only with a
+    ``truth_depth``)."""
+    values = reconstruction_scores(reference, test)
+    ref, tst = amplitude(reference.as_volume()[0]), amplitude(test.as_volume()[0])
+    views = {"psnr": (ref.max(axis=0), tst.max(axis=0)), "ssim": (ref.max(axis=0),
+                                                                  tst.max(axis=0)),
+             "volume_psnr": (ref, tst), "volume_ssim": (ref, tst)}
+    reasons: dict[str, str] = {}
+    for name, (a, b) in views.items():
+        value = values[name]
+        if value is not None and math.isfinite(value):
+            continue
+        values[name] = None
+        reasons[name] = _undefined_image_score(name, value, a, b)
+    if truth_depth is not None:
+        values["depth_rmse_m"], reason = depth_error(test, truth_depth)
+        if reason is not None:
+            reasons["depth_rmse_m"] = reason
+    return values, reasons
+
+
+def _undefined_image_score(name: str, value: float | None, a: np.ndarray,
+                           b: np.ndarray) -> str:
+    """Why score ``name`` (None or not finite) of images ``a`` and ``b`` is undefined."""
+    if value is None and name.endswith("ssim"):
+        return (f"the image ({' x '.join(map(str, a.shape))}) is smaller than SSIM's "
+                f"{SSIM_WINDOW}-pixel window")
+    if value == math.inf:
+        if not np.any(a > 0) and not np.any(b > 0):
+            return "both images are zero everywhere: no error, so no finite PSNR"
+        return "identical images (each normalised to its maximum): no error, so no finite PSNR"
+    return f"not a number ({value}) on these images"
+
+
 def depth_rmse(recon: Reconstruction, truth_depth: np.ndarray) -> float | None:
     """RMS error (m) of the depth of the brightest voxel in each (y, x) column of ``recon``
     against ``truth_depth``, over the pixels where the truth has a surface (depth > 0).
@@ -117,14 +157,29 @@ def depth_rmse(recon: Reconstruction, truth_depth: np.ndarray) -> float | None:
     ``truth_depth`` is a (Y', X') image (y along rows) covering the same lateral extent
     as the voxel planes (the relay wall, as the pipeline's voxels and a simulated
     scene's ground truth both do); a different resolution is resampled to the voxels'
-    (Y, X) by nearest cell centre. None when the truth has no surface.
+    (Y, X) by nearest cell centre. None when it cannot be computed
+    (:func:`depth_error` says why): the truth has no surface, or a column of ``recon``
+    at a surface pixel is dark (zero), so it has no brightest voxel.
     """
+    return depth_error(recon, truth_depth)[0]
+
+
+def depth_error(recon: Reconstruction, truth_depth: np.ndarray) -> tuple[float | None,
+                                                                        str | None]:
+    """(:func:`depth_rmse`, None), or (None, why it cannot be computed)."""
     depth = recon.depth_map(threshold=0.0)
     truth = resample_nearest(np.asarray(truth_depth, dtype=np.float64), depth.shape)
     surface = np.isfinite(truth) & (truth > 0)
     if not np.any(surface):
-        return None
-    return float(np.sqrt(np.mean((depth[surface] - truth[surface]) ** 2)))
+        return None, "the scene's true depth has no surface in the voxels' view"
+    dark = int(np.count_nonzero(~np.isfinite(depth[surface])))
+    if dark == int(np.count_nonzero(surface)) and not np.any(np.isfinite(depth)):
+        return None, "the reconstruction is zero everywhere: no voxel is brightest, so no depth"
+    if dark:
+        return None, (f"the reconstruction is zero at {dark} of the "
+                      f"{int(np.count_nonzero(surface))} pixels where the scene has a surface: "
+                      "they have no depth")
+    return float(np.sqrt(np.mean((depth[surface] - truth[surface]) ** 2))), None
 
 
 def resample_nearest(image: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:

@@ -47,7 +47,7 @@ import numpy as np
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.hints import HINTS_KEY, ImagingHints
-from nlosfw.common.config import Choice, require
+from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image.interface import Imager, ImagerConfig
@@ -83,8 +83,7 @@ class TransientImagerConfig(ImagerConfig):
     def __post_init__(self) -> None:
         require(self.samples_per_wavelength >= 2, "samples_per_wavelength",
                 f"must be >= 2 (Nyquist), got {self.samples_per_wavelength}")
-        require(self.workers == -1 or self.workers >= 1, "workers",
-                f"must be -1 (all cores) or >= 1, got {self.workers}")
+        require_threads(self.workers, "workers", -1, "all cores")
 
 
 

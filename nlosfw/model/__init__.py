@@ -1,33 +1,32 @@
 """Stage 3, field models: continuous F(x, y, f) -> P fitted to sparse phasor fields,
 and the protocol that scores them.
 
-A neural field model is a network plus the shared trainer (:class:`NeuralFieldModel`):
-a network plugin supplies a factory building a torch or JAX module for a
-:class:`FieldShape` and a config deriving from :class:`NeuralFieldConfig`; the
-backend's :class:`Engine` runs it. The thesis's tanh, PE and SIREN networks are
-described backend-neutrally in :mod:`nlosfw.model.thesis_networks`.
+The root holds the :class:`FieldModel` interface, the ``interp`` baseline, the model files
+and what users import (the models' configs); the model families are subpackages:
+
+* :mod:`nlosfw.model.neural`: neural fields, a network plus the shared trainer
+  (:class:`~nlosfw.model.neural.NeuralFieldModel`); its ``__all__`` is the API the torch
+  and JAX backend plugins and network plugins build on (the backend's
+  :class:`~nlosfw.model.neural.Backend`, the network catalogue);
+* :mod:`nlosfw.model.physics`: the physics-constrained fit ``rsd_prior`` (scene operator,
+  solver, lattice, its terms and likelihoods);
+* :mod:`nlosfw.model.hybrid`: the hybrids ``rsd_residual_<backend>`` and
+  ``neural_volume_<backend>``, which build on both.
 
 The names in ``__all__`` are the public API of this stage: plugins, examples and docs
-import only these."""
+import only these and the subpackages' ``__all__``. The names the backends use that this
+package exported before (``Engine``, ``NetworkBuild``, ``PlaneStack``, ...) still load from
+here for one minor version, with a :class:`DeprecationWarning` naming their new place."""
 
 
 from typing import TYPE_CHECKING
 
+from nlosfw.common.deprecation import moved_names
 from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
-    from nlosfw.model.engine import Engine, NetworkBuild, SmoothnessBatch
-    from nlosfw.model.inr_networks import (
-        HASH_PRIMES,
-        FinerFieldConfig,
-        FourierFieldConfig,
-        HashGridFieldConfig,
-        HashGridLayout,
-        WireFieldConfig,
-        field_network_state,
-        hash_grid_layout,
-        wire_widths,
-    )
+    from nlosfw.model.hybrid.residual import RSDResidualConfig
+    from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig
     from nlosfw.model.interface import (
         FieldModel,
         FieldModelConfig,
@@ -38,21 +37,10 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     )
     from nlosfw.model.interp import InterpConfig, InterpFieldModel
     from nlosfw.model.model_files import read_model_file, write_model_file
-    from nlosfw.model.neural_config import (
-        FieldMode,
-        FieldShape,
-        LRSchedule,
-        NeuralFieldConfig,
-        Preset,
-    )
-    from nlosfw.model.neural_volume import (
-        NeuralVolumeConfig,
-        NeuralVolumeFieldModel,
-        TrainedVolume,
-        VolumeProblem,
-        volume_coordinates,
-    )
-    from nlosfw.model.normalisation import FieldNormalisation
+    from nlosfw.model.neural.catalogue import preset_config
+    from nlosfw.model.neural.config import NeuralFieldConfig
+    from nlosfw.model.physics.config import RSDPriorConfig
+    from nlosfw.model.physics.prior import RSDPriorFieldModel
     from nlosfw.model.protocol import (
         FieldSplit,
         SpatialSampling,
@@ -60,98 +48,48 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         parameter_data_ratio,
         split_field,
     )
-    from nlosfw.model.rsd_residual import RSDResidualConfig, RSDResidualFieldModel
-    from nlosfw.model.rsd_sampling import WallSamples, training_grid, voxel_lattice, wall_samples
-    from nlosfw.model.scene_operator import OperatorOptions, SceneOperator, VoxelLattice
-    from nlosfw.model.spectra_folding import FoldedSpectra, fold_spectra
-    from nlosfw.model.thesis_networks import (
-        Architecture,
-        ThesisNetwork,
-        forward_numpy,
-        init_parameters,
-        network_inputs,
-        preset_config,
-        reference_state,
-        resolve_architecture,
-        thesis_architecture,
-    )
-    from nlosfw.model.trainer import NeuralFieldModel
-    from nlosfw.model.volume_training import (
-        BestStep,
-        PlaneStack,
-        aligned_empty,
-        history_entry,
-        plane_stack,
-        stack_bytes,
-        validation_split,
-    )
 
 __all__ = [
-    "FieldNormalisation",
-    "forward_numpy",
-    "network_inputs",
-    "resolve_architecture",
-    "check_training_field",
     "check_query",
-    "Architecture",
-    "Engine",
+    "check_training_field",
     "field_metrics",
-    "FieldMode",
     "FieldModel",
     "FieldModelConfig",
-    "FieldShape",
     "FieldSplit",
-    "FinerFieldConfig",
     "FitReport",
-    "FourierFieldConfig",
-    "hash_grid_layout",
-    "HASH_PRIMES",
-    "HashGridFieldConfig",
-    "HashGridLayout",
-    "init_parameters",
-    "field_network_state",
     "InterpConfig",
     "InterpFieldModel",
-    "LRSchedule",
-    "NetworkBuild",
-    "OperatorOptions",
     "NeuralFieldConfig",
-    "NeuralFieldModel",
-    "BestStep",
-    "history_entry",
     "NeuralVolumeConfig",
-    "NeuralVolumeFieldModel",
-    "PlaneStack",
-    "FoldedSpectra",
-    "fold_spectra",
-    "aligned_empty",
-    "plane_stack",
-    "stack_bytes",
-    "validation_split",
     "parameter_data_ratio",
-    "Preset",
     "preset_config",
     "read_model_file",
-    "reference_state",
+    "RSDPriorConfig",
+    "RSDPriorFieldModel",
     "RSDResidualConfig",
-    "RSDResidualFieldModel",
-    "SceneOperator",
-    "SmoothnessBatch",
     "SpatialSampling",
     "split_field",
-    "thesis_architecture",
-    "ThesisNetwork",
-    "training_grid",
-    "TrainedVolume",
     "TrainingStep",
-    "volume_coordinates",
-    "VolumeProblem",
-    "VoxelLattice",
-    "voxel_lattice",
-    "wall_samples",
-    "WallSamples",
-    "wire_widths",
-    "WireFieldConfig",
     "write_model_file",
 ]
-__getattr__, __dir__ = lazy_exports(__name__, __file__)
+
+_NEURAL = ("Architecture", "field_network_state", "FieldMode", "FieldNormalisation",
+           "FieldShape", "FinerFieldConfig", "forward_numpy", "FourierFieldConfig",
+           "HASH_PRIMES", "hash_grid_layout", "HashGridFieldConfig", "HashGridLayout",
+           "init_parameters", "LRSchedule", "network_inputs", "NetworkBuild",
+           "NeuralFieldModel", "Preset", "reference_state", "resolve_architecture",
+           "SmoothnessBatch", "thesis_architecture", "ThesisNetwork", "wire_widths",
+           "WireFieldConfig")
+_PHYSICS = ("OperatorOptions", "SceneOperator", "training_grid", "validation_split",
+            "VoxelLattice", "voxel_lattice", "wall_samples", "WallSamples")
+_HYBRID = ("aligned_empty", "BestStep", "fold_spectra", "FoldedSpectra", "history_entry",
+           "NeuralVolumeFieldModel", "plane_stack", "PlaneStack", "RSDResidualFieldModel",
+           "stack_bytes", "TrainedVolume", "volume_coordinates", "VolumeProblem")
+#: The names this package exported before the families became subpackages -> their place.
+MOVED = {"Engine": "nlosfw.model.neural:Backend",
+         **{n: f"nlosfw.model.neural:{n}" for n in _NEURAL},
+         **{n: f"nlosfw.model.physics:{n}" for n in _PHYSICS},
+         **{n: f"nlosfw.model.hybrid:{n}" for n in _HYBRID}}
+
+_lazy_getattr, __dir__ = lazy_exports(__name__, __file__)
+__getattr__ = moved_names(__name__, MOVED, _lazy_getattr)

@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from nlosfw.capture.geometry import CaptureGeometry
-from nlosfw.common.config import Configurable, require
+from nlosfw.common.config import Configurable, require, require_seed
 from nlosfw.common.errors import DataError, FitError
 from nlosfw.transform.field import PhasorField
 
@@ -27,6 +27,7 @@ class FieldModelConfig:
     """Where to train: ``auto`` (a GPU when present), ``cpu``, or a backend device name."""
 
     def __post_init__(self) -> None:
+        require_seed(self.seed, "seed")
         require(bool(self.device), "device", "must be auto, cpu or a device name")
 
     @property

@@ -7,7 +7,7 @@ training grid's y, x and frequency axes; real and imaginary parts are
 interpolated together (the spline is linear in the data). Axes with two
 samples fall back to linear interpolation, axes with one sample to a constant.
 By default the field is first demodulated by its common path delay (the same
-normalisation the neural models use, :func:`nlosfw.model.normalisation.estimate_delay`),
+normalisation the neural models use, :func:`nlosfw.model.neural.normalisation.estimate_delay`),
 so that the comparison isolates what the networks add.
 
 Scattered wall samples (a random scan: a field with one row of wall points, see
@@ -52,7 +52,7 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, write_model_file
-from nlosfw.model.normalisation import estimate_delay
+from nlosfw.model.neural.normalisation import estimate_delay
 from nlosfw.transform.field import PhasorField
 
 #: Frequencies interpolated at once (bounds memory to about F_chunk * points * X values).

@@ -9,15 +9,17 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
-from nlosfw.common.config import config_to_dict
-from nlosfw.common.errors import DataError
+from nlosfw.common.config import config_from_mapping, config_to_dict, with_current_names
+from nlosfw.common.errors import ConfigError, DataError
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
+
+C = TypeVar("C")
 
 #: Format tag written in every field-model file.
 FILE_FORMAT = "nlosfw-field-model"
@@ -67,3 +69,14 @@ def read_model_file(path: str | Path, expected: str | tuple[str, ...]
         raise DataError(f"model file {path}: holds a {header.get('model')!r} field model, not "
                         f"{' or '.join(repr(n) for n in names)}")
     return header, arrays
+
+
+def stored_config(cls: type[C], header: Mapping[str, object]) -> C:
+    """The config (dataclass ``cls``) a model file's ``header`` holds, its options renamed
+    since the file was written read under their new names
+    (:func:`~nlosfw.common.config.with_current_names`); a ConfigError (``model.<option>``)
+    for an option ``cls`` does not have. A KeyError when the header holds no config."""
+    stored = header["config"]
+    if not isinstance(stored, Mapping):
+        raise ConfigError("model", f"the stored config is not a mapping of options: {stored!r}")
+    return config_from_mapping(cls, with_current_names(cls, stored), "model")

@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from nlosfw.common.config import Choice
-from nlosfw.common.errors import DataError
+from nlosfw.common.config import MAX_SEED, Choice, is_seed
+from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.transform.field import PhasorField
 
 
@@ -71,6 +71,9 @@ class SpatialSampling:
         if self.fraction is not None and not 0 < self.fraction <= 1:
             raise DataError(f"spatial sampling: fraction must be in (0, 1], got "
                             f"{self.fraction}")
+        if not is_seed(self.seed):
+            raise DataError(f"spatial sampling: seed must be an integer from 0 to {MAX_SEED}, "
+                            f"got {self.seed!r}")
 
     @property
     def kept_fraction(self) -> float:
@@ -190,15 +193,20 @@ def split_field(field: PhasorField, spatial_step: int | SpatialSampling = 2,
     is held out: they hold every frequency.
     """
     if not isinstance(field, PhasorField):
-        raise DataError(f"split_field: expected a PhasorField, got {type(field).__name__}")
-    sampling = (spatial_step if isinstance(spatial_step, SpatialSampling)
-                else SpatialSampling(step=spatial_step))
-    if spectral not in tuple(SpectralSplit):
-        raise DataError(f"split_field: spectral must be interleaved, tail or none, got "
-                        f"{spectral!r}")
-    if not 0 < spectral_fraction < 1:
-        raise DataError(f"split_field: spectral_fraction must be in (0, 1), got "
-                        f"{spectral_fraction}")
+        raise ConfigError("field", f"split_field needs a PhasorField, got "
+                                   f"{type(field).__name__}")
+    if isinstance(spatial_step, SpatialSampling):
+        sampling = spatial_step
+    elif _is_number(spatial_step) and float(spatial_step) >= 1 and \
+            float(spatial_step).is_integer():
+        sampling = SpatialSampling(step=int(spatial_step))
+    else:
+        raise ConfigError("spatial_step", f"must be an integer >= 1 (or a SpatialSampling), "
+                                          f"got {spatial_step!r}")
+    if not isinstance(spectral, str) or spectral not in tuple(SpectralSplit):
+        raise ConfigError("spectral", f"must be interleaved, tail or none, got {spectral!r}")
+    if not _is_number(spectral_fraction) or not 0 < spectral_fraction < 1:
+        raise ConfigError("spectral_fraction", f"must be in (0, 1), got {spectral_fraction!r}")
     mask = sampling.mask(field.grid_shape)
     held = heldout_frequency_indices(field.n_frequencies, spectral, spectral_fraction)
     train = np.setdiff1d(np.arange(field.n_frequencies), held)
@@ -211,6 +219,12 @@ def split_field(field: PhasorField, spatial_step: int | SpatialSampling = 2,
         train_field = scattered_field(field.select(train), mask)
     return FieldSplit(train_field=train_field, spatial_mask=mask, train_frequencies=train,
                       heldout_frequencies=held, sampling=sampling, spectral=str(spectral))
+
+
+def _is_number(value: object) -> bool:
+    """Whether ``value`` is a real number (not a bool), finite or not."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and \
+        not isinstance(value, (bool, np.bool_))
 
 
 def error_metrics(true: np.ndarray, predicted: np.ndarray) -> dict[str, Any]:
@@ -265,9 +279,11 @@ def field_metrics(true_field: PhasorField | np.ndarray, predicted_field: PhasorF
     often dominates ``heldout_pixels``). Sets that are empty (no spatial or no spectral
     hold-out) have None values.
     """
-    t = true_field.values if isinstance(true_field, PhasorField) else np.asarray(true_field)
-    p = (predicted_field.values if isinstance(predicted_field, PhasorField)
-         else np.asarray(predicted_field))
+    if not isinstance(split, FieldSplit):
+        raise ConfigError("split", f"field_metrics needs the FieldSplit the fields were split "
+                                   f"by (split_field's), got {type(split).__name__}")
+    t = _field_values(true_field, "true_field")
+    p = _field_values(predicted_field, "predicted_field")
     if t.shape != p.shape or t.ndim != 3:
         raise DataError(f"field_metrics: true {t.shape} and predicted {p.shape} must both be the "
                         "full (frequency, y, x) field")
@@ -287,6 +303,22 @@ def field_metrics(true_field: PhasorField | np.ndarray, predicted_field: PhasorF
         "all": error_metrics(t, p),
         "heldout_pixels_inside": error_metrics(t[tf][:, inside], p[tf][:, inside]),
     }
+
+
+def _field_values(field: object, option: str) -> np.ndarray:
+    """The complex values of a PhasorField or of a numeric array; a ConfigError naming
+    ``option`` for anything else."""
+    if isinstance(field, PhasorField):
+        return field.values
+    try:
+        values = np.asarray(field) if isinstance(field, (np.ndarray, list, tuple)) else None
+    except (TypeError, ValueError):          # a ragged list
+        values = None
+    if values is None or values.dtype.kind not in "biufc" or values.ndim != 3:
+        got = (type(field).__name__ if values is None
+               else f"an array of shape {values.shape} of {values.dtype}")
+        raise ConfigError(option, f"expected a PhasorField or its values (F, Y, X), got {got}")
+    return values
 
 
 def hull_mask(spatial_mask: np.ndarray) -> np.ndarray:

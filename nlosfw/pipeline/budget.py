@@ -15,8 +15,10 @@ the fields         16·F·S·(2 + M) (true, raw, each model's prediction)
 the voxels         8·D·S·(3 + (2 + M)·(1 + single-frequency images)); D, when it is
                    automatic, at most the time window over half a wall spacing
 training logs      400 bytes per evaluation (steps / eval_every) of neural models
-neural models      their runtime (PyTorch, JAX) and training memory, from figures measured
-                   per backend (:mod:`nlosfw.pipeline.model_budget`); given ``requires``
+neural models      their runtime (PyTorch, JAX), training memory and network parameters
+                   (with their gradients and Adam's moments), from figures measured per
+                   backend and the networks' own layer shapes
+                   (:mod:`nlosfw.pipeline.model_budget`); given ``requires``
 the program        with ``program=True``: this process's resident memory now (Python,
                    numpy, h5py, Hydra and the plugins loaded), which the run keeps
 =================  ===========================================================
@@ -33,18 +35,23 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.files import format_bytes
 from nlosfw.common.memory import available_memory
 from nlosfw.pipeline.model_budget import (
+    ModelCatalogue,
     ModelRequires,
     backend_of,
+    parameter_bytes,
     runtime_bytes,
     training_bytes,
 )
 from nlosfw.pipeline.settings import NO_MODEL
+
+if TYPE_CHECKING:
+    from nlosfw.model.neural import FieldShape
 
 #: Sizes a capture file from its header: (time bins, sensor points, laser points), or None.
 FileShape = Callable[[Path], tuple[int, int, int] | None]
@@ -185,15 +192,31 @@ def _array_parts(config: Any, shape: tuple[int, int, int, str]) -> list[MemoryPa
     ]
 
 
+def _field_shape(config: Mapping[str, object], sensors: int, freqs: int) -> FieldShape:
+    """The shape of the field a network trains on: the scene's wall grid, or for a file
+    the square grid of as many sensor points."""
+    from nlosfw.model.neural import FieldMode, FieldShape
+
+    res = _get(config, "scene.wall.resolution")
+    if _get(config, "capture.path") is None and res is not None and len(res) == 2:
+        grid = (int(res[1]), int(res[0]))
+    else:
+        side = max(1, math.isqrt(max(sensors - 1, 0)) + 1)
+        grid = (side, side)
+    return FieldShape(FieldMode.multi, grid, freqs)
+
+
 def _model_parts(config: Mapping[str, object], shape: tuple[int, int, int, str],
                  requires: ModelRequires) -> list[MemoryPart]:
-    """The neural models' runtime and training memory (none for other models)."""
+    """The neural models' runtime, training and parameter memory (none for other models)."""
     bins, sensors, lasers, _ = shape
-    samples = float(_n_frequencies(config, bins)) * sensors * lasers
+    freqs = _n_frequencies(config, bins)
+    samples = float(freqs) * sensors * lasers
+    field = _field_shape(config, sensors, freqs)
     model = _get(config, "model") or {}
     compare = _get(config, "compare", {}) or {}
-    backends, data, activations = [], 0.0, 0.0
-    for options in (model, *compare.values()):
+    backends, data, activations, weights, counted = [], 0.0, 0.0, 0.0, []
+    for where, options in (("model", model), *((f"compare.{k}", v) for k, v in compare.items())):
         name = str(_get(options, "name"))
         backend = None if name == NO_MODEL else backend_of(requires(name))
         if backend is None:
@@ -201,13 +224,23 @@ def _model_parts(config: Mapping[str, object], shape: tuple[int, int, int, str],
         backends.append(backend)
         held, batch = training_bytes(options, backend, samples)
         data, activations = data + held, activations + batch
+        count = (requires.parameters(name, options, field)
+                 if isinstance(requires, ModelCatalogue) else None)
+        if count:
+            weights += parameter_bytes(count, backend)
+            counted.append(f"{where} ({name}): {count:,} parameters")
     if not backends:
         return []
     names = " and ".join(sorted(set(backends)))
-    return [MemoryPart("the model's runtime", f"{names} and its first training",
-                       runtime_bytes(backends)),
-            MemoryPart("the model's training", f"{samples:.0f} samples, model.batch_size × "
-                       "model.hidden", data + activations)]
+    parts = [MemoryPart("the model's runtime", f"{names} and its first training",
+                        runtime_bytes(backends)),
+             MemoryPart("the model's training", f"{samples:.0f} samples, model.batch_size × "
+                        "model.hidden", data + activations)]
+    if counted:
+        parts.append(MemoryPart("the networks' parameters",
+                                f"{'; '.join(counted)}, each with its gradient and Adam's two "
+                                "moments", weights))
+    return parts
 
 
 def check_memory(config: Mapping[str, object], available: int | None = None,

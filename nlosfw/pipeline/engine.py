@@ -79,6 +79,7 @@ class Pipeline:
         """What the stages produced so far (all of it once :meth:`run` has returned)."""
         self.stage_reached: str | None = None
         """The stage running now, or the last one started."""
+        self._ended = False
 
     @property
     def metrics(self) -> RunMetrics:
@@ -119,19 +120,29 @@ class Pipeline:
             self.events.run_start(str(self.run_dir), shown)
             self.files.write_text("config", yaml_safe.dump(shown))
             self._stages()
+            metrics = self._finish(shown, started)
         except BaseException as err:  # any failure, ours or a bug: record it, then re-raise
             self._record_end(err, time.perf_counter() - started)
             raise
+        return objective(metrics)
+
+    def _finish(self, shown: dict[str, object], started: float) -> RunMetrics:
+        """After the last stage, as part of the report: report.html, then metrics.json
+        saying completed (or stopped) once everything before it is written, then
+        ``on_run_end`` (the console's summary). A failure in any of them is the run's:
+        :meth:`_record_end` records it, replacing that metrics.json."""
         settings = self.plan.settings
         status: Literal["completed", "stopped"] = (
             "completed" if settings.stop_after is None else "stopped")
         metrics = self.recorder.finish(
             status, time.perf_counter() - started,
             stopped_after=None if status == "completed" else settings.last_stage)
-        self.files.write_metrics(metrics)
+        self.stage_reached = "report"
         self.events.write_page(self.files, metrics, shown)
+        self.files.write_metrics(metrics)
+        self._ended = True
         self.events.run_end(str(self.run_dir), metrics, status)
-        return objective(metrics)
+        return metrics
 
     def _stages(self) -> None:
         context = StageContext(
@@ -165,8 +176,10 @@ class Pipeline:
         return stage.name == "report" and self.stage_results.capture is not None
 
     def _record_end(self, err: BaseException, seconds: float) -> None:
-        """metrics.json with status failed or interrupted, the stage and the one-line reason,
-        and the on_run_end hook, never masking the error."""
+        """metrics.json with status failed or interrupted, the stage and the one-line reason
+        (replacing one the run wrote before it failed; only what ran, the error and the
+        timings when the sections cannot be written), and the on_run_end hook unless it
+        was the hook that failed, never masking the error."""
         interruption = as_interruption(err)
         status: Status = "failed" if interruption is None else "interrupted"
         if interruption is not None:
@@ -178,8 +191,16 @@ class Pipeline:
             error = RunError(stage=self.stage_reached, message=message)
         try:
             metrics = self.recorder.finish(status, seconds, error)
-            self.files.write_metrics(metrics)
-            self.events.run_end(str(self.run_dir), metrics, status)
+            try:
+                self.files.write_metrics(metrics, replace=True)
+            except TypeError as unwritable:   # a value its type does not admit: a bug
+                log.error("metrics.json: its sections cannot be written (%s); it holds the "
+                          "error and the timings only", one_line(unwritable))
+                metrics = self.recorder.bare(error)
+                self.files.write_metrics(metrics, replace=True)
+            if not self._ended:
+                self._ended = True
+                self.events.run_end(str(self.run_dir), metrics, status)
         except Exception as failure:  # the original failure is what the user must see
             log.error("could not record the %s run in %s: %s", status, self.run_dir,
                       one_line(failure))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import re
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -18,7 +19,7 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.thinning import count_scale, photon_counts
 from nlosfw.common.config import config_to_dict
-from nlosfw.common.errors import ConfigError
+from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.common.hashing import cache_key
 from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
 from nlosfw.image.transient import measured_band_frequencies
@@ -147,7 +148,10 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
                         spectral_fraction=s.spectral_fraction)
     models = []
     for planned in run.plan.models:
-        report = planned.model.fit(split.train_field, on_step=_training_steps(run, planned))
+        try:
+            report = planned.model.fit(split.train_field, on_step=_training_steps(run, planned))
+        except (ConfigError, FitError) as err:
+            raise named_for(err, planned.source) from None
         run.events.progress(f"fit {planned.name}", report.steps, report.steps,
                             f"loss {report.final_loss:.3g}")
         models.append(FittedModel(source=planned.source, plugin=planned.name,
@@ -156,6 +160,24 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
             run.files.write("field_model", planned.model.save, kind="field_model",
                             keep_as=Artefact.model)
     return FitResult(split=split, models=tuple(models))
+
+
+#: ``model.<option>`` in an error's text (not a module path such as ``nlosfw.model.x``).
+_MODEL_OPTION = re.compile(r"(?<![\w.])model\.(?=[a-z_])")
+
+
+def named_for(err: ConfigError | FitError, source: str) -> ConfigError | FitError:
+    """The error of the model fitted as ``source``, naming its options as the user does: a
+    ``compare`` model's are ``compare.<label>.*``, where the model's own errors say
+    ``model.*`` (the selected model and the interp baseline: unchanged)."""
+    if source in ("model", "interp"):
+        return err
+    prefix = f"compare.{source}."
+    if isinstance(err, ConfigError):
+        if not err.option.startswith("model."):
+            return err
+        return ConfigError(prefix + err.option.removeprefix("model."), err.problem)
+    return FitError(_MODEL_OPTION.sub(prefix, str(err)))
 
 
 def predict_stage(run: StageContext, done: StageResults) -> ImagedFields:

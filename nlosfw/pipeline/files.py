@@ -91,22 +91,33 @@ class RunFiles:
         self.events.artefact_written(str(final), kind or name)
         return final
 
-    def write_text(self, name: str, text: str, kind: str | None = None) -> Path:
-        """Create the text file ``name`` atomically, report it."""
+    def write_text(self, name: str, text: str, kind: str | None = None,
+                   overwrite: bool = False) -> Path:
+        """Create the text file ``name`` atomically (``overwrite``: replace this run's own
+        file of that name), report it."""
         self._claim(self.path(name))
-        final = write_text(self.path(name), text)
+        final = write_text(self.path(name), text, overwrite=overwrite)
         self.events.artefact_written(str(final), kind or name)
         return final
 
-    def write_metrics(self, metrics: RunMetrics) -> Path:
-        """``metrics.json``, and its JSON Schema ``metrics.schema.json`` beside it."""
+    def write_metrics(self, metrics: RunMetrics, replace: bool = False) -> Path:
+        """``metrics.json``, and its JSON Schema ``metrics.schema.json`` beside it.
+
+        ``replace``: a metrics.json this run wrote already is replaced (a failure after
+        it); when that fails too, it is removed, so that it never says how the run did not
+        end (without one the run reads as unfinished)."""
         path = self.path("metrics")
-        if path.exists():
+        if path.exists() and not replace:
             raise DataError(f"{path}: already exists; refusing to overwrite it")
         text = metrics.dumps()
         if not self.path("metrics_schema").exists():  # a failed finish may have written it
             self.write_text("metrics_schema", metrics_schema_text())
-        return self.write_text("metrics", text)
+        try:
+            return self.write_text("metrics", text, overwrite=replace)
+        except BaseException:
+            if replace:
+                path.unlink(missing_ok=True)
+            raise
 
     def size(self) -> int:
         """Bytes in the run directory (every file, Hydra's and the log included)."""

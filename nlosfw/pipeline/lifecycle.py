@@ -42,7 +42,7 @@ from typing import IO, TypedDict
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.common.files import TEMPORARY_NAME, open_locked, storage_error, write_text
+from nlosfw.common.files import TEMPORARY_NAME, open_locked, output_error, write_text
 from nlosfw.common.hashing import canonical_digest
 
 log = logging.getLogger(__name__)
@@ -258,7 +258,10 @@ def _differs(run_dir: Path, config: Mapping[str, object]) -> ConfigError:
     if found is None:
         return ConfigError("", f"{run_dir}: {hint}")
     key, before, now = found
-    return ConfigError(key, f"is {now!r} but {before!r} in the run in {run_dir}; {hint}")
+    new = key not in _flatten(_result_options(old))     # an option added or renamed since
+    return ConfigError(key, (f"is an option the run in {run_dir} did not have (options "
+                             "renamed since: nlosfw's changelog)" if new else
+                             f"is {now!r} but {before!r} in the run in {run_dir}") + f"; {hint}")
 
 
 # --------------------------------------------------------------------------- holding
@@ -287,7 +290,8 @@ class RunHold:
             existed = lock_path.exists()
             lock = open_locked(lock_path, blocking=False, mode="a+")
         except OSError as err:
-            raise (storage_error(lock_path, err) or err) from None
+            option = "hydra.sweep.dir" if resume else "hydra.run.dir"
+            raise (output_error(err, option, lock_path) or err) from None
         if lock is None:
             holder = _lock_holder(lock_path) or "unknown"
             raise ConfigError("", f"{run_dir}: another nlosfw run (process {holder}) is "

@@ -9,7 +9,7 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.image.reconstruction import Reconstruction
-from nlosfw.image.scores import reconstruction_scores
+from nlosfw.image.scores import scored
 from nlosfw.model.heldout import HeldoutMeasurement, heldout_measurement
 from nlosfw.model.protocol import FieldSplit, SpatialPattern
 from nlosfw.pipeline.metrics import (
@@ -26,6 +26,7 @@ from nlosfw.pipeline.metrics import (
     ThinningMetrics,
     TransformMetrics,
 )
+from nlosfw.pipeline.nulls import is_number, not_finite
 from nlosfw.pipeline.results import CaptureResult, FittedModel, Reconstructions, TransformResult
 from nlosfw.transform.field import PhasorField
 
@@ -97,15 +98,26 @@ def fit_metrics(fitted: FittedModel, split: FieldSplit) -> FieldMetrics:
 
 def denoising_metrics(clean: PhasorField, noisy: PhasorField,
                       predicted: PhasorField) -> DenoisingMetrics:
-    """Errors against the noise-free field: of the noisy full field and of a prediction."""
+    """Errors against the noise-free field: of the noisy full field and of a prediction
+    (null, with why, where undefined: a zero noise-free field, an error of zero)."""
     norm = float(np.linalg.norm(clean.values))
+    if not norm > 0:
+        why = "the noise-free field is zero (the scene reflects nothing): no error relative to it"
+        return DenoisingMetrics(noisy_relative_l2=None, relative_l2=None, gain_db=None,
+                                null_reasons=dict.fromkeys(
+                                    ("noisy_relative_l2", "relative_l2", "gain_db"), why))
 
     def rel(field: PhasorField) -> float:
         return float(np.linalg.norm(field.values - clean.values)) / norm
 
     noisy_error, model_error = rel(noisy), rel(predicted)
+    if noisy_error > 0 and model_error > 0:
+        return DenoisingMetrics(noisy_relative_l2=noisy_error, relative_l2=model_error,
+                                gain_db=float(20 * np.log10(noisy_error / model_error)))
+    why = ("the prediction equals the noise-free field: the gain is infinite"
+           if model_error == 0 else "the noisy field equals the noise-free field (no noise)")
     return DenoisingMetrics(noisy_relative_l2=noisy_error, relative_l2=model_error,
-                            gain_db=float(20 * np.log10(noisy_error / model_error)))
+                            gain_db=None, null_reasons={"gain_db": why})
 
 
 def heldout_measurement_metrics(predicted: PhasorField, measured: PhasorField,
@@ -113,24 +125,46 @@ def heldout_measurement_metrics(predicted: PhasorField, measured: PhasorField,
                                 ) -> HeldoutMeasurementMetrics:
     """Count splitting: a prediction's error at the held-out wall points against half B's
     field, its noise floor and the excess (:func:`nlosfw.model.heldout.heldout_measurement`)."""
+    held = ~np.asarray(split.spatial_mask, dtype=bool)
+    at_held = np.asarray(measured.values)[:, held]
+    if held.any() and not float(np.sum(np.abs(at_held) ** 2)) > 0:
+        why = "half B's field is zero at the held-out wall points: no error relative to it"
+        return HeldoutMeasurementMetrics(
+            nmse_db=None, floor_db=None, excess_db=None, excess=None, n_samples=at_held.size,
+            null_reasons=dict.fromkeys(("nmse_db", "floor_db", "excess_db", "excess"), why))
     score = heldout_measurement(predicted.values, measured.values, variance, split.spatial_mask)
     db = HeldoutMeasurement.db
+    reasons = {}
+    if db(score.error) is None:
+        reasons["nmse_db"] = ("the prediction equals half B's field at the held-out points: "
+                              "zero error" if score.error == 0 else not_finite(score.error))
+    if db(score.floor) is None:
+        reasons["floor_db"] = ("half B's field carries no noise variance at the held-out "
+                               "points" if score.floor == 0 else not_finite(score.floor))
+    if db(score.excess) is None:
+        reasons["excess_db"] = ("the error is within the noise floor (excess <= 0)"
+                                if is_number(score.excess) else not_finite(score.excess))
+    excess = score.excess if is_number(score.excess) else None
+    if excess is None:
+        reasons["excess"] = not_finite(score.excess)
     return HeldoutMeasurementMetrics(nmse_db=db(score.error), floor_db=db(score.floor),
-                                     excess_db=db(score.excess), excess=score.excess,
-                                     n_samples=score.n_samples)
+                                     excess_db=db(score.excess), excess=excess,
+                                     n_samples=score.n_samples, null_reasons=reasons or None)
 
 
 def image_scores(recons: Mapping[str, Reconstruction],
                  seconds: Mapping[str, float] | None = None,
                  truth_depth: np.ndarray | None = None) -> dict[str, ImageScores]:
     """Every reconstruction scored against the ``true`` one
-    (:func:`nlosfw.image.reconstruction_scores`); ``truth_depth`` (Y, X) adds the depth RMSE."""
+    (:func:`nlosfw.image.scores.scored`: a score that cannot be computed is None, with
+    why); ``truth_depth`` (Y, X) adds the depth RMSE."""
     reference = recons["true"]
     scores = {}
     for source, recon in recons.items():
-        values = reconstruction_scores(reference, recon, truth_depth)
+        values, reasons = scored(reference, recon, truth_depth)
         scores[source] = ImageScores(**values,
-                                     seconds=None if seconds is None else seconds[source])
+                                     seconds=None if seconds is None else seconds[source],
+                                     null_reasons=reasons or None)
     return scores
 
 

@@ -27,23 +27,32 @@ from nlosfw.common.typed_json import (
     Absent,
     Document,
     doc,
-    encode,
     from_json,
     json_schema,
     outline,
     to_json,
 )
 from nlosfw.model.interface import FitReport
+from nlosfw.pipeline.nulls import Number, error_values, fit_values, with_explicit_nulls
 
-SchemaVersion = Literal[7]
+SchemaVersion = Literal[8]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 7
+SCHEMA_VERSION: Final[SchemaVersion] = 8
 
 #: Older versions :meth:`RunMetrics.from_json` still reads: each later version only added
-#: optional keys (6: count splitting, ``capture.thinning`` and
-#: ``field.*.splits.heldout_measurement``; 7: ``field.*.fit.fitted``), so such a file reads
-#: as this version.
-READABLE_VERSIONS: Final = (5, 6, 7)
+#: optional keys or allowed null where a number was required (6: count splitting,
+#: ``capture.thinning`` and ``field.*.splits.heldout_measurement``; 7:
+#: ``field.*.fit.fitted``; 8: ``null_reasons`` in each section of scores, null for
+#: ``depth_rmse_m``, a ``fitted`` number and the held-out ``excess``), so such a file
+#: reads as this version.
+READABLE_VERSIONS: Final = (5, 6, 7, 8)
+
+#: A section's ``null_reasons``: why each of its null values is null (one line each), by
+#: its key (``fitted.<name>`` for a fitted number); absent when none is
+#: (:mod:`nlosfw.pipeline.nulls`).
+NullReasons = Annotated[Absent[dict[str, str]], doc(
+    "why each null value of this section is null, in one line, by its key (fitted.<name> "
+    "for a fitted number); absent when none is", key="key")]
 
 Status = Literal["running", "completed", "stopped", "failed", "interrupted"]
 """``running`` only while the run is in progress: metrics.json is written when it ends.
@@ -160,26 +169,29 @@ class FitMetrics(Document, frozen=True, kw_only=True):
     final_loss: float | None
     best_val_loss: float | None
     stopped_early: bool
-    fitted: Annotated[Absent[dict[str, float]], doc(
+    fitted: Annotated[Absent[dict[str, float | None]], doc(
         "numbers the fit estimated besides the model's parameters, by name (rsd_prior with "
         "background=constant: background_rms_ratio and background_max_ratio, the RMS and "
         "largest offset |b_f| over the training frequencies / the field's RMS; with "
         "temporal_response=gaussian: response_sigma_ps, the fitted jitter's standard deviation; "
         "with time_offset=true: time_offset_ps, how late the capture's signal is (ps); with "
-        "fit_lobe=true: lobe_exponent, the glossy lobe's k)")] = None
+        "fit_lobe=true: lobe_exponent, the glossy lobe's k; null where undefined)")] = None
+    null_reasons: NullReasons = None
 
     @classmethod
     def of(cls, report: FitReport) -> "FitMetrics":
+        """How a fit went, from its report (a NaN or inf loss or number null, with why)."""
+        values = fit_values(report.final_loss, report.best_val_loss, report.fitted)
         return cls(steps=int(report.steps), seconds=round(report.seconds, 3),
-                   final_loss=report.final_loss, best_val_loss=report.best_val_loss,
+                   final_loss=values.final_loss, best_val_loss=values.best_val_loss,
                    stopped_early=bool(report.stopped_early),
-                   fitted={k: float(v) for k, v in report.fitted.items()} or None)
+                   fitted=values.fitted or None, null_reasons=values.reasons or None)
 
 
 class ErrorMetrics(Document, frozen=True, kw_only=True):
-    """Complex errors of a predicted field on one set of samples (null when the set is
-    empty): relative_l2 = |P^ - P| / |P|, nmse_db = 20 log10 of it, phase_error is
-    magnitude-weighted (radians)."""
+    """Complex errors of a predicted field on one set of samples (null where undefined: the
+    set is empty, the true field is zero there, the prediction is exact): relative_l2 =
+    |P^ - P| / |P|, nmse_db = 20 log10 of it, phase_error is magnitude-weighted (radians)."""
 
     relative_l2: float | None
     nmse_db: float | None
@@ -187,6 +199,15 @@ class ErrorMetrics(Document, frozen=True, kw_only=True):
     relative_amplitude_rmse: float | None
     phase_error: float | None
     n_samples: int
+    null_reasons: NullReasons = None
+
+    @classmethod
+    def of(cls, values: Mapping[str, Number]) -> "ErrorMetrics":
+        """From one set of :func:`nlosfw.model.field_metrics`'s result (each value that is
+        not a finite number null, with why)."""
+        checked, reasons = error_values(values)
+        return cls(**checked, n_samples=int(values.get("n_samples") or 0),
+                   null_reasons=reasons or None)
 
 
 class HeldoutMeasurementMetrics(Document, frozen=True, kw_only=True):
@@ -200,8 +221,10 @@ class HeldoutMeasurementMetrics(Document, frozen=True, kw_only=True):
     excess_db: Annotated[float | None, doc(
         "the error minus the floor (linear units, then dB): the error against B's "
         "noise-free field; null when the error is within the floor")]
-    excess: Annotated[float, doc("the error minus the floor as a ratio (may be <= 0)")]
+    excess: Annotated[float | None, doc(
+        "the error minus the floor as a ratio (may be <= 0; null where undefined)")]
     n_samples: Annotated[int, doc("held-out samples (points x frequencies)")]
+    null_reasons: NullReasons = None
 
 
 class SplitErrors(Document, frozen=True, kw_only=True):
@@ -222,7 +245,7 @@ class SplitErrors(Document, frozen=True, kw_only=True):
     def of(cls, errors: Mapping[str, Mapping[str, Any]],
            heldout: HeldoutMeasurementMetrics | None = None) -> "SplitErrors":
         """From :func:`nlosfw.model.field_metrics`'s result (and count splitting's score)."""
-        return cls(**{name: ErrorMetrics(**values) for name, values in errors.items()},
+        return cls(**{name: ErrorMetrics.of(values) for name, values in errors.items()},
                    heldout_measurement=heldout)
 
     def by_set(self) -> dict[str, ErrorMetrics]:
@@ -237,6 +260,7 @@ class DenoisingMetrics(Document, frozen=True, kw_only=True):
     noisy_relative_l2: Annotated[float | None, doc("of the noisy full field")]
     relative_l2: Annotated[float | None, doc("of the prediction")]
     gain_db: Annotated[float | None, doc("20 log10(noisy_relative_l2 / relative_l2)")]
+    null_reasons: NullReasons = None
 
 
 class FieldMetrics(Document, frozen=True, kw_only=True):
@@ -259,18 +283,20 @@ class ImageScores(Document, frozen=True, kw_only=True):
     """A reconstruction against the full capture's (source ``true``; with count splitting
     half B's full scan, and source ``ceiling`` is half A's full scan), on amplitudes (the
     square root of the intensity) each normalised to its maximum, with scikit-image's
-    PSNR and SSIM at their defaults (null where undefined: PSNR of identical images,
-    SSIM of images under 7 pixels a side)."""
+    PSNR and SSIM at their defaults (null where undefined, with why: PSNR of identical
+    images, SSIM of images under 7 pixels a side, the depth of a dark reconstruction)."""
 
     rmse: Annotated[float | None, doc("of the front view: the maximum over depth")]
     psnr: Annotated[float | None, doc("dB, of the front view")]
     ssim: Annotated[float | None, doc("of the front view")]
     volume_psnr: Annotated[float | None, doc("dB, of the whole (z, y, x) volume")]
     volume_ssim: Annotated[float | None, doc("of the whole (z, y, x) volume")]
-    depth_rmse_m: Annotated[Absent[float], doc(
+    depth_rmse_m: Annotated[Absent[float | None], doc(
         "RMS error (m) of the depth of each column's brightest voxel against the scene's "
-        "true depth, over the pixels with a surface (scenes with ground truth)")] = None
+        "true depth, over the pixels with a surface (scenes with ground truth; null when "
+        "it cannot be computed: no surface, or a dark column there)")] = None
     seconds: Annotated[Absent[float], doc("time to reconstruct; a timing")] = None
+    null_reasons: NullReasons = None
 
 
 class SingleFrequencyMetrics(Document, frozen=True, kw_only=True):
@@ -335,12 +361,13 @@ class RunMetrics(Document, frozen=True, kw_only=True):
     timings: Timings = msgspec.field(default_factory=Timings)
 
     def to_json(self) -> dict[str, object]:
-        """The JSON object of metrics.json."""
-        return to_json(self)
+        """The JSON object of metrics.json: every value ``null_reasons`` explains is there,
+        as null (one that may be absent, such as ``depth_rmse_m``, too)."""
+        return with_explicit_nulls(to_json(self))
 
     def dumps(self) -> str:
         """The text of metrics.json (json's layout: indented, ASCII, floats as repr)."""
-        return json.dumps(json.loads(encode(self)), indent=2) + "\n"
+        return json.dumps(self.to_json(), indent=2) + "\n"
 
     @classmethod
     def from_json(cls, data: object, where: str = "") -> "RunMetrics":

@@ -22,6 +22,7 @@ from nlosfw.pipeline.measure import (
     truth_depth_image,
 )
 from nlosfw.pipeline.metrics import FieldMetrics, RunError, RunInfo, RunMetrics, SplitErrors, Status
+from nlosfw.pipeline.nulls import explained
 from nlosfw.pipeline.results import (
     CaptureResult,
     FitResult,
@@ -72,12 +73,19 @@ class MetricsRecorder:
 
     def finish(self, status: Status, total_seconds: float, error: RunError | None = None,
                stopped_after: str | None = None) -> RunMetrics:
-        """The final metrics: how the run ended, and its total time."""
+        """The final metrics: how the run ended, and its total time; a NaN or inf a section
+        of scores still holds is null there, with why (:func:`~nlosfw.pipeline.nulls.explained`)."""
         self._record_time("total", total_seconds)
         run = self.metrics.run if stopped_after is None else replace(
             self.metrics.run, stopped_after=stopped_after)
-        self.metrics = replace(self.metrics, status=status, error=error, run=run)
+        self.metrics = explained(replace(self.metrics, status=status, error=error, run=run))
         return self.metrics
+
+    def bare(self, error: RunError) -> RunMetrics:
+        """The record of a failed run whose sections cannot be written (a value their types
+        do not admit): what ran, the error and the timings only."""
+        return RunMetrics(run=self.metrics.run, status="failed", error=error,
+                          timings=self.metrics.timings)
 
     def _record_predictions(self, fields: ImagedFields) -> None:
         """Every model's field errors against the full field (and denoising gains)."""

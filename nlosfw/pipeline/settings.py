@@ -14,7 +14,7 @@ from typing import Any
 from omegaconf import MISSING
 
 from nlosfw.capture.source import CaptureSource
-from nlosfw.common.config import Choice, config_from_mapping, require
+from nlosfw.common.config import Choice, config_from_mapping, require, require_seed
 from nlosfw.common.schema import is_schema_node
 from nlosfw.model.protocol import SpatialPattern, SpatialSampling, SpectralSplit
 from nlosfw.simulate.scene import Scene
@@ -74,6 +74,8 @@ class SplitSettings:
     """The seed of the binomial split (count splitting)."""
 
     def __post_init__(self) -> None:
+        require_seed(self.seed, "seed")
+        require_seed(self.thinning_seed, "thinning_seed")
         require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
         require(self.spatial_fraction is None or 0 < self.spatial_fraction <= 1,
                 "spatial_fraction", f"must be in (0, 1] or null, got {self.spatial_fraction}")
@@ -124,6 +126,11 @@ class ReconstructionSettings:
         require(self.single_frequency_images >= 0, "single_frequency_images", "must be >= 0")
 
 
+#: The resolutions a figure may have (dots per inch): a figure of 10 x 8 inches at 1200 dpi
+#: is 115 million pixels already; beyond, drawing it ends in an out-of-memory error.
+MIN_DPI, MAX_DPI = 30, 1200
+
+
 @dataclass(frozen=True)
 class FigureSettings:
     """The PNG figures of a run (``figures/``)."""
@@ -131,10 +138,11 @@ class FigureSettings:
     enabled: bool = True
     """Draw the figures (false: metrics and files only)."""
     dpi: int = 110
-    """Resolution of the PNG files (dots per inch)."""
+    """Resolution of the PNG files (dots per inch, 30 to 1200)."""
 
     def __post_init__(self) -> None:
-        require(self.dpi >= 30, "dpi", f"must be >= 30, got {self.dpi}")
+        require(MIN_DPI <= self.dpi <= MAX_DPI, "dpi",
+                f"must be {MIN_DPI} to {MAX_DPI} (dots per inch), got {self.dpi}")
 
 
 @dataclass(frozen=True)

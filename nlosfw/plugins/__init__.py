@@ -6,9 +6,10 @@ the registries imports the plugin modules only: factories (and with them
 torch, JAX, mitsuba or embreex) are imported when a plugin is instantiated.
 Plugins declare what they can do from their kind's :data:`CAPABILITIES` vocabulary.
 Networks registered through ``register_networks`` become field models
-``<name>_<engine>`` (:mod:`nlosfw.plugins.networks`).
+``<name>_<backend>`` (:mod:`nlosfw.plugins.networks`).
 """
 
+from nlosfw.common.deprecation import moved_names
 from nlosfw.plugins.capabilities import DEFAULTS as DEFAULT_CAPABILITIES
 from nlosfw.plugins.capabilities import VOCABULARY as CAPABILITIES
 from nlosfw.plugins.capabilities import Capability
@@ -23,8 +24,8 @@ from nlosfw.plugins.manager import (
     registered_networks,
 )
 from nlosfw.plugins.networks import (
-    ENGINES,
-    NetworkEngine,
+    BACKENDS,
+    NetworkBackend,
     NetworkKwargs,
     NetworkOptions,
     NetworkRegistrar,
@@ -49,12 +50,12 @@ __all__ = [
     "CAPABILITIES",
     "DEFAULT_CAPABILITIES",
     "Capability",
-    "ENGINES",
+    "BACKENDS",
     "ENTRY_POINT_GROUP",
     "ENV_VAR",
     "INTERFACES",
     "LazyFactory",
-    "NetworkEngine",
+    "NetworkBackend",
     "NetworkKwargs",
     "NetworkOptions",
     "NetworkRegistrar",
@@ -79,3 +80,7 @@ __all__ = [
     "registered_networks",
     "thesis_network_model",
 ]
+
+#: Names this package exported before "engine" came to mean the run engine only.
+__getattr__ = moved_names(__name__, {"NetworkEngine": "nlosfw.plugins.networks:NetworkBackend",
+                                     "ENGINES": "nlosfw.plugins.networks:BACKENDS"})

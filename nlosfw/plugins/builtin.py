@@ -62,8 +62,8 @@ def register_field_models(register: Registrar) -> None:
     )
     register(
         "rsd_prior",
-        "nlosfw.model.rsd_prior:RSDPriorFieldModel",
-        config="nlosfw.model.rsd_prior:RSDPriorConfig",
+        "nlosfw.model.physics.prior:RSDPriorFieldModel",
+        config="nlosfw.model.physics.prior:RSDPriorConfig",
         description="Non-negative hidden albedo fitted by FISTA, propagated to the wall (RSD)",
         test_config={"iterations": 150, "amplitude": "point", "l1_weight": 0.001,
                      "workers": 1},

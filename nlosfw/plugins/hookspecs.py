@@ -47,9 +47,10 @@ def register_field_models(register: Registrar) -> None:
 def register_networks(register: NetworkRegistrar) -> None:
     """Register networks for the shared neural trainer (see :mod:`nlosfw.plugins.networks`).
 
-    ``register(name, engine="torch" | "jax", factory="module:function",
+    ``register(name, backend="torch" | "jax", factory="module:function",
     config="module:Config", description=..., test_config=..., requires=..., presets=...)``;
-    each becomes the field-model plugin ``<name>_<engine>``.
+    each becomes the field-model plugin ``<name>_<backend>`` (``engine=``, ``backend``'s
+    old name, is deprecated).
     """
 
 

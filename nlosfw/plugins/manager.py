@@ -21,7 +21,7 @@ from nlosfw.plugins.networks import NetworkRegistrar, NetworkSpec
 from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
 
 if TYPE_CHECKING:
-    from nlosfw.model.trainer import NeuralFieldModel
+    from nlosfw.model.neural.trainer import NeuralFieldModel
 
 log = logging.getLogger(__name__)
 
@@ -130,7 +130,7 @@ def load_plugins(env: Mapping[str, str] | None = None,
         origins[key] = (dist, name)
 
     registry = Registry()
-    # networks register field models (``<name>_<engine>``), after the kinds' own hooks
+    # networks register field models (``<name>_<backend>``), after the kinds' own hooks
     hooks = [*_HOOK_OF_KIND.items(), (PluginKind.FIELD_MODEL, _NETWORK_HOOK)]
     for kind, hook_name in hooks:
         for key, (dist, ep_name) in origins.items():
@@ -142,25 +142,25 @@ def load_plugins(env: Mapping[str, str] | None = None,
     return PluginHost(manager=manager, registry=registry, broken=broken)
 
 
-def _network_specs(engine: str) -> dict[str, PluginSpec]:
+def _network_specs(backend: str) -> dict[str, PluginSpec]:
     return {spec.factory.name: spec for spec in load_plugins().registry.specs("model")
-            if isinstance(spec.factory, NetworkSpec) and spec.factory.engine.value == engine}
+            if isinstance(spec.factory, NetworkSpec) and spec.factory.backend.value == backend}
 
 
-def registered_networks(engine: str) -> list[str]:
-    """The names of the networks registered through ``register_networks`` for ``engine``
+def registered_networks(backend: str) -> list[str]:
+    """The names of the networks registered through ``register_networks`` for ``backend``
     (``torch``, ``jax``), sorted."""
-    return sorted(_network_specs(engine))
+    return sorted(_network_specs(backend))
 
 
-def registered_network(name: str, engine: str) -> type[NeuralFieldModel]:
+def registered_network(name: str, backend: str) -> type[NeuralFieldModel]:
     """The field-model class of the network ``name`` registered through ``register_networks``
-    for ``engine`` (``siren`` and ``torch``: ``siren_torch``'s class). A one-line
+    for ``backend`` (``siren`` and ``torch``: ``siren_torch``'s class). A one-line
     ConfigError on ``model.network`` lists the valid names."""
-    networks = _network_specs(engine)
+    networks = _network_specs(backend)
     if name not in networks:
         raise ConfigError("model.network", f"{name!r} is not a network registered for "
-                          f"{engine}; valid: {', '.join(sorted(networks)) or 'none'}")
+                          f"{backend}; valid: {', '.join(sorted(networks)) or 'none'}")
     model: type[NeuralFieldModel] = networks[name].load()
     return model
 

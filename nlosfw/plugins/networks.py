@@ -2,30 +2,37 @@
 
 A plugin module registers a network in its ``register_networks(register)`` hook::
 
-    register("example_fourier", engine="torch",
+    register("example_fourier", backend="torch",
              factory="my_package.network:build",      # factory(config, shape) -> nn.Module
              config="my_package.hooks:FourierConfig",  # derives from NeuralFieldConfig
              description="Fourier-feature MLP")
 
 and the registry then holds the field-model plugin ``example_fourier_torch``: a
-:class:`~nlosfw.model.NeuralFieldModel` bound to that network and to the engine,
+:class:`~nlosfw.model.neural.NeuralFieldModel` bound to that network and to the backend,
 selectable as ``model=example_fourier_torch`` and checked by the conformance kit.
 Nothing is imported at registration: the factory, and with it torch or JAX, is
-imported when the model is first used.
+imported when the model is first used. (``engine=``, the keyword's old name, still works,
+with a DeprecationWarning.)
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import TYPE_CHECKING, Any, TypedDict
 
+from nlosfw.common.deprecation import REMOVED_IN, moved_names
 from nlosfw.common.errors import PluginError
-from nlosfw.model.inr_networks import FIELD_NETWORKS
-from nlosfw.model.neural_config import NeuralFieldConfig, Preset
-from nlosfw.model.thesis_networks import THESIS_NETWORKS, THESIS_TEST_CONFIG, presets_of
-from nlosfw.model.trainer import NeuralFieldModel
+from nlosfw.model.neural.catalogue import (
+    FIELD_NETWORKS,
+    THESIS_NETWORKS,
+    THESIS_TEST_CONFIG,
+    presets_of,
+)
+from nlosfw.model.neural.config import NeuralFieldConfig, Preset
+from nlosfw.model.neural.trainer import NeuralFieldModel
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import (
     LazyFactory,
@@ -38,8 +45,8 @@ if TYPE_CHECKING:
     from typing_extensions import Unpack
 
 
-class NetworkEngine(str, Enum):
-    """The engines a network can run on (the backend plugin that provides each)."""
+class NetworkBackend(str, Enum):
+    """The backends a network can run on (the plugin that provides each)."""
 
     torch = "torch"
     """A ``torch.nn.Module`` (any); ``factory(config, shape)``; plugin ``nlosfw-torch``."""
@@ -47,17 +54,20 @@ class NetworkEngine(str, Enum):
     """An equinox module trained with optax; ``factory(config, shape, key)``; ``nlosfw-jax``."""
 
 
-#: Engine class and the (module, pip requirement) pairs it needs, per engine.
-ENGINES: dict[NetworkEngine, tuple[str, Mapping[str, str]]] = {
-    NetworkEngine.torch: ("nlosfw_torch.engine:TorchEngine",
-                          {"nlosfw_torch": "nlosfw-torch", "torch": "torch==2.13.0"}),
-    NetworkEngine.jax: ("nlosfw_jax.engine:JaxEngine",
-                        {"nlosfw_jax": "nlosfw-jax", "jax": "jax", "optax": "optax",
-                         "equinox": "equinox"}),
+#: Backend class and the (module, pip requirement) pairs it needs, per backend.
+BACKENDS: dict[NetworkBackend, tuple[str, Mapping[str, str]]] = {
+    NetworkBackend.torch: ("nlosfw_torch.backend:TorchBackend",
+                           {"nlosfw_torch": "nlosfw-torch", "torch": "torch==2.13.0"}),
+    NetworkBackend.jax: ("nlosfw_jax.backend:JaxBackend",
+                         {"nlosfw_jax": "nlosfw-jax", "jax": "jax", "optax": "optax",
+                          "equinox": "equinox"}),
 }
 
+#: This module's names before "engine" came to mean the run engine only (deprecated).
+__getattr__ = moved_names(__name__, {"NetworkEngine": f"{__name__}:NetworkBackend",
+                                     "ENGINES": f"{__name__}:BACKENDS"})
 
-_ENGINE_TITLES = {"torch": "PyTorch", "jax": "JAX"}
+_TITLES = {"torch": "PyTorch", "jax": "JAX"}
 
 #: What every network trained by the shared trainer can do, unless it declares otherwise.
 NETWORK_CAPABILITIES = (Capability.MULTI_FREQUENCY, Capability.SAVE_LOAD, Capability.NEURAL,
@@ -69,7 +79,7 @@ class NetworkSpec(LazyFactory):
     """One registered network: builds its field-model class on first use."""
 
     name: str
-    engine: NetworkEngine
+    backend: NetworkBackend
     factory: str | Callable[..., Any]
     """``factory(config, shape)`` (JAX: ``(config, shape, key)``), or ``"module:function"``."""
     config: str | type
@@ -81,8 +91,15 @@ class NetworkSpec(LazyFactory):
 
     @property
     def model_name(self) -> str:
-        """The field model's name: ``<name>_<engine>``."""
-        return f"{self.name}_{self.engine.value}"
+        """The field model's name: ``<name>_<backend>``."""
+        return f"{self.name}_{self.backend.value}"
+
+    @property
+    def engine(self) -> NetworkBackend:
+        """Deprecated: :attr:`backend`."""
+        warnings.warn(f"NetworkSpec.engine is deprecated and will be removed in nlosfw "
+                      f"{REMOVED_IN}: use NetworkSpec.backend", DeprecationWarning, stacklevel=2)
+        return self.backend
 
     def load(self) -> type[NeuralFieldModel]:
         """The :class:`NeuralFieldModel` subclass running this network (imported once)."""
@@ -91,16 +108,16 @@ class NetworkSpec(LazyFactory):
         return self._bound["model"]
 
     def import_paths(self) -> tuple[str, ...]:
-        """The engine's, the factory's and the config's import paths."""
-        return tuple(p for p in (ENGINES[self.engine][0], self.factory, self.config)
+        """The backend's, the factory's and the config's import paths."""
+        return tuple(p for p in (BACKENDS[self.backend][0], self.factory, self.config)
                      if isinstance(p, str))
 
 
 def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
-    """A :class:`NeuralFieldModel` subclass for ``spec`` (imports the factory and engine)."""
+    """A :class:`NeuralFieldModel` subclass for ``spec`` (imports the factory and backend)."""
     what = f"model plugin '{spec.model_name}'"
     try:
-        engine = import_object(ENGINES[spec.engine][0])
+        backend = import_object(BACKENDS[spec.backend][0])
         factory = import_object(spec.factory) if isinstance(spec.factory, str) else spec.factory
         config = import_object(spec.config) if isinstance(spec.config, str) else spec.config
     except (ImportError, AttributeError) as err:
@@ -110,11 +127,11 @@ def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
                           "nlosfw.model.NeuralFieldConfig")
     title = "".join(part.capitalize() for part in spec.model_name.split("_"))
     return type(title, (NeuralFieldModel,), {
-        "__doc__": spec.description or f"The network {spec.name} on the {spec.engine.value} "
-                                       "engine.",
+        "__doc__": spec.description or f"The network {spec.name} on the "
+                                       f"{spec.backend.value} backend.",
         "__module__": __name__,
-        "config_class": config, "family": spec.name, "backend": spec.engine.value,
-        "engine_class": engine, "network_factory": staticmethod(factory),
+        "config_class": config, "family": spec.name, "backend": spec.backend.value,
+        "backend_class": backend, "network_factory": staticmethod(factory),
         "network_presets": dict(spec.presets),
     })
 
@@ -123,13 +140,15 @@ def network_model(spec: NetworkSpec) -> type[NeuralFieldModel]:
 class NetworkOptions:
     """The keyword options of ``register(name, **options)`` in a ``register_networks`` hook."""
 
-    engine: str
-    """``torch`` or ``jax``: the field model is named ``<name>_<engine>``."""
     factory: str | Callable[..., Any]
     """Builds the network: ``"module:function"`` (imported on first use) or a callable."""
     config: str | type
     """Its options, a dataclass deriving from NeuralFieldConfig (or ``"module:Class"`` in a
     module that imports neither torch nor JAX: the CLI reads it to list the options)."""
+    backend: str = ""
+    """``torch`` or ``jax`` (required): the field model is named ``<name>_<backend>``."""
+    engine: str = ""
+    """Deprecated: ``backend``'s old name (a DeprecationWarning; give one of the two)."""
     description: str = ""
     requires: Mapping[str, str] | None = None
     """Further importable modules the network needs -> their pip requirements."""
@@ -146,9 +165,10 @@ class NetworkOptions:
 
 class NetworkKwargs(TypedDict, total=False):
     """The keyword options of a ``register(name, ...)`` call in a ``register_networks`` hook,
-    typed (what they mean: :class:`NetworkOptions`; ``engine``, ``factory`` and ``config``
+    typed (what they mean: :class:`NetworkOptions`; ``backend``, ``factory`` and ``config``
     are required)."""
 
+    backend: str
     engine: str
     factory: str | Callable[..., Any]
     config: str | type
@@ -168,19 +188,29 @@ class NetworkRegistrar:
     models: Registrar
 
     def __call__(self, name: str, **options: Unpack[NetworkKwargs]) -> None:
-        """Register network ``name`` as the field model ``<name>_<engine>`` (see
+        """Register network ``name`` as the field model ``<name>_<backend>`` (see
         :class:`NetworkOptions`)."""
         who = f"{self.models.distribution}: network {name!r}"
         opts = registration_options(NetworkOptions, options, who)
+        if opts.engine:
+            if opts.backend:
+                raise PluginError(f"{who} is registered with both backend and engine (its "
+                                  "old name); give backend only")
+            warnings.warn(f"{who}: register(..., engine=...) is deprecated and will be "
+                          f"removed in nlosfw {REMOVED_IN}: write backend=...",
+                          DeprecationWarning, stacklevel=2)
+        chosen = opts.backend or opts.engine
+        valid = ", ".join(b.value for b in NetworkBackend)
+        if not chosen:
+            raise PluginError(f"{who} is registered with no 'backend'; valid: {valid}")
         try:
-            engine = NetworkEngine(opts.engine)
+            backend = NetworkBackend(chosen)
         except ValueError:
-            valid = ", ".join(e.value for e in NetworkEngine)
-            raise PluginError(f"{who} names engine {opts.engine!r}; valid: {valid}") from None
-        network = NetworkSpec(name, engine, opts.factory, opts.config, opts.description,
+            raise PluginError(f"{who} names backend {chosen!r}; valid: {valid}") from None
+        network = NetworkSpec(name, backend, opts.factory, opts.config, opts.description,
                               dict(opts.presets or {}))
         self.models(network.model_name, network, config=opts.config,
-                    requires={**ENGINES[engine][1], **dict(opts.requires or {})},
+                    requires={**BACKENDS[backend][1], **dict(opts.requires or {})},
                     description=opts.description, test_config=opts.test_config,
                     expected_failures=opts.expected_failures,
                     capabilities=(NETWORK_CAPABILITIES if opts.capabilities is None
@@ -196,78 +226,80 @@ _THESIS_KNOWN_FAILURES = {
 }
 
 
-def register_thesis_networks(register: Callable[..., None], engine: str, factory: str) -> None:
-    """Register tanh, pe and siren for ``engine``, all built by ``factory`` (which reads the
-    network from its config's class, see :func:`nlosfw.model.thesis_architecture`)."""
+def register_thesis_networks(register: Callable[..., None], backend: str, factory: str
+                             ) -> None:
+    """Register tanh, pe and siren for ``backend``, all built by ``factory`` (which reads the
+    network from its config's class, see :func:`nlosfw.model.neural.thesis_architecture`)."""
     for name, network in THESIS_NETWORKS.items():
-        register(name, engine=engine, factory=factory, config=network.config,
-                 description=f"{network.description}, {_ENGINE_TITLES[engine]}",
+        register(name, backend=backend, factory=factory, config=network.config,
+                 description=f"{network.description}, {_TITLES[backend]}",
                  test_config={**THESIS_TEST_CONFIG, "lr": network.test_lr},
                  presets=presets_of(name),
                  capabilities=(*NETWORK_CAPABILITIES, Capability.SINGLE_FREQUENCY),
                  expected_failures=_THESIS_KNOWN_FAILURES.get(name))
 
 
-def register_field_networks(register: Callable[..., None], engine: str, factory: str) -> None:
-    """Register fourier, wire, finer and hashgrid (issue 12) for ``engine``, all built by
+def register_field_networks(register: Callable[..., None], backend: str, factory: str) -> None:
+    """Register fourier, wire, finer and hashgrid for ``backend``, all built by
     ``factory`` (which reads the network from its config's class)."""
     for name, network in FIELD_NETWORKS.items():
-        register(name, engine=engine, factory=factory, config=network.config,
-                 description=f"{network.description}, {_ENGINE_TITLES[engine]}",
+        register(name, backend=backend, factory=factory, config=network.config,
+                 description=f"{network.description}, {_TITLES[backend]}",
                  test_config=dict(network.test_config),
                  capabilities=(*NETWORK_CAPABILITIES, Capability.SINGLE_FREQUENCY))
 
 
-def thesis_network_model(name: str, engine: str, factory: str) -> type[NeuralFieldModel]:
-    """The field-model class of thesis network ``name`` on ``engine`` (as registered)."""
+def thesis_network_model(name: str, backend: str, factory: str) -> type[NeuralFieldModel]:
+    """The field-model class of thesis network ``name`` on ``backend`` (as registered)."""
     network = THESIS_NETWORKS[name]
-    return NetworkSpec(name, NetworkEngine(engine), factory, network.config,
-                       f"{network.description}, {_ENGINE_TITLES[engine]}",
+    return NetworkSpec(name, NetworkBackend(backend), factory, network.config,
+                       f"{network.description}, {_TITLES[backend]}",
                        presets_of(name)).load()
 
 
-#: Small, fast options of ``rsd_residual_<engine>`` for the conformance kit: a short physics
+#: Small, fast options of ``rsd_residual_<backend>`` for the conformance kit: a short physics
 #: fit (the kit's plane-wave field is no hidden scene's) and a small network for the rest.
 RSD_RESIDUAL_TEST_CONFIG: Mapping[str, object] = {
-    "iterations": 10, "amplitude": "point", "l1_weight": 0.2, "workers": 1,
-    "depth_range": [0.3, 0.7], "depth_step": 0.1, "fit_frequencies": 0, "power_iterations": 5,
+    "prior": {"iterations": 10, "amplitude": "point", "l1_weight": 0.2, "workers": 1,
+              "depth": {"range": [0.3, 0.7], "step": 0.1}, "fit_frequencies": 0,
+              "power_iterations": 5},
     "residual_weight": 0.0, "network_steps": 150, "network_lr": 2e-3, "network_batch_size": 0,
     "network_validation_fraction": 0.0}
 
 
-def register_rsd_residual(register: Callable[..., None], engine: str, factory: str) -> None:
-    """Register ``rsd_residual_<engine>`` (``register`` is a ``register_field_models``
+def register_rsd_residual(register: Callable[..., None], backend: str, factory: str) -> None:
+    """Register ``rsd_residual_<backend>`` (``register`` is a ``register_field_models``
     hook's): rsd_prior's field plus a penalised residual network, the class ``factory``
-    (a subclass of :class:`nlosfw.model.RSDResidualFieldModel` for ``engine``)."""
+    (a subclass of :class:`nlosfw.model.hybrid.RSDResidualFieldModel` for ``backend``)."""
     register(
-        f"rsd_residual_{engine}", factory,
-        config="nlosfw.model.rsd_residual:RSDResidualConfig",
-        requires=dict(ENGINES[NetworkEngine(engine)][1]),
+        f"rsd_residual_{backend}", factory,
+        config="nlosfw.model.hybrid.residual:RSDResidualConfig",
+        requires=dict(BACKENDS[NetworkBackend(backend)][1]),
         description=f"rsd_prior's field plus a small penalised residual network, "
-                    f"{_ENGINE_TITLES[engine]}",
+                    f"{_TITLES[backend]}",
         test_config=dict(RSD_RESIDUAL_TEST_CONFIG),
         # not physical_prior: the residual network represents fields no hidden scene makes
         capabilities=NETWORK_CAPABILITIES)
 
 
-#: Small, fast options of ``neural_volume_<engine>`` for the conformance kit (the kit's
+#: Small, fast options of ``neural_volume_<backend>`` for the conformance kit (the kit's
 #: point scatterer at 0.5 m, amplitude "point"): a few planes, a small network.
 NEURAL_VOLUME_TEST_CONFIG: Mapping[str, object] = {
-    "amplitude": "point", "depth_range": [0.4, 0.6], "depth_step": 0.05, "workers": 1,
+    "prior": {"amplitude": "point", "depth": {"range": [0.4, 0.6], "step": 0.05}, "workers": 1},
     "network_hidden": [32, 32], "steps": 200, "device": "cpu"}
 
 
-def register_neural_volume(register: Callable[..., None], engine: str, factory: str) -> None:
-    """Register ``neural_volume_<engine>`` (``register`` is a ``register_field_models``
+def register_neural_volume(register: Callable[..., None], backend: str, factory: str) -> None:
+    """Register ``neural_volume_<backend>`` (``register`` is a ``register_field_models``
     hook's): a registered network's non-negative albedo on rsd_prior's lattice, propagated
-    by RSD, the class ``factory`` (a subclass of :class:`nlosfw.model.NeuralVolumeFieldModel`
-    for ``engine``)."""
+    by RSD, the class ``factory`` (a subclass of
+    :class:`nlosfw.model.hybrid.NeuralVolumeFieldModel` for ``backend``)."""
     register(
-        f"neural_volume_{engine}", factory,
-        config="nlosfw.model.neural_volume:NeuralVolumeConfig",
-        requires=dict(ENGINES[NetworkEngine(engine)][1]),
+        f"neural_volume_{backend}", factory,
+        config="nlosfw.model.hybrid.volume_config:NeuralVolumeConfig",
+        requires=dict(BACKENDS[NetworkBackend(backend)][1]),
         description=f"a network's non-negative hidden albedo propagated to the wall by RSD, "
-                    f"{_ENGINE_TITLES[engine]}",
+                    f"{_TITLES[backend]}",
         test_config=dict(NEURAL_VOLUME_TEST_CONFIG),
         # physical_prior: like rsd_prior it makes only fields a hidden scene can produce
         capabilities=(*NETWORK_CAPABILITIES, Capability.PHYSICAL_PRIOR))

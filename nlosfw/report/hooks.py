@@ -9,12 +9,15 @@ matplotlib is imported only when a figure is drawn.
 
 from __future__ import annotations
 
+import logging
 from typing import TYPE_CHECKING
 
 from nlosfw.plugins import hookimpl
 
 if TYPE_CHECKING:
     from nlosfw.pipeline import CaptureResult, RunFiles, RunMetrics, RunResults, RunSettings
+
+log = logging.getLogger(__name__)
 
 
 @hookimpl
@@ -53,11 +56,17 @@ def write_capture_report(files: RunFiles, capture: CaptureResult,
 def write_run_page(files: RunFiles, metrics: RunMetrics, config: dict[str, object]) -> None:
     """report.html: the run's figures, metrics, timings and configuration in one page."""
     from nlosfw.common import yaml_safe
+    from nlosfw.common.errors import DataError
     from nlosfw.report.html_report import run_report
+    from nlosfw.report.inputs import read_inside
 
     overrides: list[str] = []
     path = files.run_dir / ".hydra" / "overrides.yaml"
-    if path.is_file():
-        overrides = [str(o) for o in yaml_safe.load(path.read_text(encoding="utf-8")) or []]
+    if path.exists():
+        try:  # Hydra's record of the command line, read only inside the run's folder
+            text = read_inside(path, files.run_dir).decode("utf-8")
+            overrides = [str(o) for o in yaml_safe.load(text) or []]
+        except (DataError, UnicodeDecodeError) as err:
+            log.warning("the page shows no overrides: %s", err)
     files.write_text("report.html", run_report(files.run_dir, metrics, config, overrides),
                      kind="report")

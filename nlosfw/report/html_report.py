@@ -19,9 +19,10 @@ import msgspec
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import Scalar
-from nlosfw.common.text import href, html_text
+from nlosfw.common.text import MAX_SHOWN, href, html_block, html_text, shortened
 from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.pipeline.reference import REFERENCE, REFERENCE_TITLE
+from nlosfw.report.inputs import figure_inside, inside
 from nlosfw.report.quality import QualityTable, parse_overrides
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import format_cell
@@ -45,19 +46,24 @@ pre { background: #f7f7f7; padding: 0.8em; overflow-x: auto; font-size: 0.85em; 
 """
 
 
+#: The most characters of a block of text (a configuration) a page shows.
+MAX_BLOCK = 64 * MAX_SHOWN
+
+
 def page(title: str, sections: Sequence[str]) -> str:
     """A whole HTML document: ``title`` as its heading, then ``sections`` (HTML)."""
     body = "\n".join(sections)
     return (f"<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
             f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n"
-            f"<title>{html.escape(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
-            f"<h1>{html.escape(title)}</h1>\n{body}\n</body>\n</html>\n")
+            f"<title>{html_text(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
+            f"<h1>{html_text(title)}</h1>\n{body}\n</body>\n</html>\n")
 
 
 def table(header: Sequence[str], rows: Sequence[Sequence[Scalar]]) -> str:
-    """An HTML table; cells are escaped, None is empty, floats have 4 significant digits."""
-    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(format_cell(c))}</td>" for c in row)
+    """An HTML table; cells are escaped (control characters made visible), None is empty,
+    floats have 4 significant digits."""
+    head = "".join(f"<th>{html_text(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{html_text(format_cell(c))}</td>" for c in row)
                    + "</tr>"
                    for row in rows)
     return (f"<div class=\"scroll\"><table>\n<thead><tr>{head}</tr></thead>\n<tbody>{body}"
@@ -67,21 +73,22 @@ def table(header: Sequence[str], rows: Sequence[Sequence[Scalar]]) -> str:
 def png_figure(data: bytes, caption: str, wide: bool = False) -> str:
     """A PNG embedded as a data URI, with its caption (``wide``: twice a view's width)."""
     encoded = base64.b64encode(data).decode("ascii")
-    text = html.escape(caption)
+    text = html_text(caption)
     kind = ' class="wide"' if wide else ""
     return (f"<figure{kind}><img src=\"data:image/png;base64,{encoded}\" alt=\"{text}\">"
             f"<figcaption>{text}</figcaption></figure>")
 
 
 def preformatted(text: str, summary: str | None = None) -> str:
-    """Text as is (escaped), folded under ``summary`` when given."""
-    block = f"<pre>{html.escape(text)}</pre>"
+    """Text as is (escaped, control characters made visible, at most :data:`MAX_BLOCK`
+    characters of it), folded under ``summary`` when given."""
+    block = f"<pre>{html_block(shortened(text, MAX_BLOCK))}</pre>"
     return block if summary is None else (
-        f"<details><summary>{html.escape(summary)}</summary>{block}</details>")
+        f"<details><summary>{html_text(summary)}</summary>{block}</details>")
 
 
 def _section(title: str, *parts: str) -> str:
-    return f"<h2>{html.escape(title)}</h2>\n" + "\n".join(parts)
+    return f"<h2>{html_text(title)}</h2>\n" + "\n".join(parts)
 
 
 def _timings(metrics: RunMetrics) -> dict[str, float]:
@@ -102,12 +109,12 @@ def run_report(run_dir: Path, metrics: RunMetrics, config: Mapping[str, object],
     """The HTML of a run's ``report.html`` (figures read from ``run_dir/figures``)."""
     info = metrics.run
     title = f"nlosfw run: {run_title(info)}"
-    meta = (f"<p class=\"meta\">status <b>{html.escape(metrics.status)}</b>"
-            f"{' after ' + html.escape(info.stopped_after) if info.stopped_after else ''}"
-            f" · started {html.escape(info.started)} · nlosfw {html.escape(info.nlosfw_version)}"
-            f" · {html.escape(info.dir)}</p>")
+    meta = (f"<p class=\"meta\">status <b>{html_text(metrics.status)}</b>"
+            f"{' after ' + html_text(info.stopped_after) if info.stopped_after else ''}"
+            f" · started {html_text(info.started)} · nlosfw {html_text(info.nlosfw_version)}"
+            f" · {html_text(info.dir)}</p>")
     if overrides:
-        meta += f"<p class=\"meta\">overrides: <code>{html.escape(' '.join(overrides))}</code></p>"
+        meta += f"<p class=\"meta\">overrides: <code>{html_text(' '.join(overrides))}</code></p>"
     sections = [meta, _run_views(run_dir, metrics), *_run_metrics(metrics),
                 _run_figures(run_dir),
                 _section("Timings (s)", table(["stage", "seconds"], list(_timings(metrics)
@@ -126,18 +133,18 @@ def _run_metrics(metrics: RunMetrics) -> list[str]:
         if list(rec.sources) == ["true"]:  # model=none: the capture alone, nothing to score
             seconds = rec.sources["true"].seconds
             return [_section("Reconstruction", (
-                f"<p>The capture imaged with <code>{html.escape(rec.imager)}</code> on "
+                f"<p>The capture imaged with <code>{html_text(rec.imager)}</code> on "
                 f"{len(rec.depths)} depth planes from {min(rec.depths):.3g} to "
                 f"{max(rec.depths):.3g} m" + ("" if seconds is None else f" in {seconds:.3g} s")
                 + "; no field model (model=none), so no scores.</p>"))]
         rows = [[s, v.ssim, v.psnr, v.rmse, v.seconds] for s, v in rec.sources.items()]
         parts = [f"<p>Max-intensity image of each field against the true field's, imager "
-                 f"<code>{html.escape(rec.imager)}</code>, {len(rec.depths)} depth planes "
+                 f"<code>{html_text(rec.imager)}</code>, {len(rec.depths)} depth planes "
                  f"from {min(rec.depths):.3g} to {max(rec.depths):.3g} m.</p>",
                  table(["source", "SSIM", "PSNR (dB)", "RMSE", "seconds"], rows)]
         for index, single in rec.single_frequency.items():
             parts.append(f"<h3>From frequency {index} alone: f = {single.frequency:.4g} "
-                         f"cycles/m ({html.escape(single.split)})</h3>")
+                         f"cycles/m ({html_text(single.split)})</h3>")
             parts.append(table(["source", "SSIM", "PSNR (dB)", "RMSE"],
                                [[s, v.ssim, v.psnr, v.rmse] for s, v in single.sources.items()]))
         out.append(_section("Reconstructions", *parts))
@@ -169,36 +176,37 @@ def _run_views(run_dir: Path, metrics: RunMetrics) -> str:
     sources = list(metrics.reconstruction.sources) if metrics.reconstruction else []
     rows = []
     for source in sources:
-        figures = _view_figures(folder, source)
+        figures = _view_figures(run_dir, source)
         if figures:
             name = "the capture" if sources == ["true"] else source
-            rows.append(f"<h3>{html.escape(name)} · imager {html.escape(imager)}</h3>"
+            rows.append(f"<h3>{html_text(name)} · imager {html_text(imager)}</h3>"
                         f"<div class=\"views\">{''.join(figures)}</div>")
-    reference = _view_figures(folder, REFERENCE)
+    reference = _view_figures(run_dir, REFERENCE)
     if reference:
-        rows.append(f"<h3>{html.escape(REFERENCE_TITLE)} · imager {html.escape(imager)}</h3>"
+        rows.append(f"<h3>{html_text(REFERENCE_TITLE)} · imager {html_text(imager)}</h3>"
                     "<p class=\"muted\">The whole capture's histograms at their native bin "
                     "width (every DFT bin), imaged as the authors' code images them, on the "
                     "same planes: the picture to compare the sources with. Not scored: every "
                     "scored source is imaged from the same band.</p>"
                     f"<div class=\"views\">{''.join(reference)}</div>")
-    profile = folder / "time_profile.png"
-    if profile.is_file():
-        rows.append(png_figure(profile.read_bytes(), "time_profile.png: the capture's "
+    profile = figure_inside(folder / "time_profile.png", run_dir)
+    if profile is not None:
+        rows.append(png_figure(profile, "time_profile.png: the capture's "
                                "histograms summed over the wall, the planes' depth range "
                                "shaded"))
     return _section("Views", *rows) if rows else ""
 
 
-def _view_figures(folder: Path, source: str) -> list[str]:
-    """The front view, depth map and depth slices of ``source`` that ``folder`` holds."""
+def _view_figures(run_dir: Path, source: str) -> list[str]:
+    """The front view, depth map and depth slices of ``source`` that ``run_dir/figures``
+    holds (regular files inside ``run_dir``)."""
+    folder = run_dir / "figures"
     shown = [(folder / f"{view}_{source}.png", caption) for view, caption in (
         ("front", "front view over the planes' depths"),
         ("depth", "depth map (grey: no signal)"),
         ("slices", "depth slices"))]
-    return [png_figure(path.read_bytes(), f"{path.name}: {caption}",
-                       wide=path.name.startswith("slices_"))
-            for path, caption in shown if path.is_file()]
+    return [png_figure(data, f"{path.name}: {caption}", wide=path.name.startswith("slices_"))
+            for path, caption in shown if (data := figure_inside(path, run_dir)) is not None]
 
 
 def _run_figures(run_dir: Path) -> str:
@@ -206,7 +214,9 @@ def _run_figures(run_dir: Path) -> str:
     parts = []
     for pattern, caption in _FIGURES:
         for path in sorted(folder.glob(pattern)) if folder.is_dir() else []:
-            parts.append(png_figure(path.read_bytes(), f"{path.name}: {caption}"))
+            data = figure_inside(path, run_dir)
+            if data is not None:
+                parts.append(png_figure(data, f"{path.name}: {caption}"))
     if not parts and folder.is_dir() and any(folder.glob("*.png")):
         return ""  # the views are all there is (model=none)
     if not parts:
@@ -235,7 +245,7 @@ def _run_inputs(metrics: RunMetrics) -> str:
 
 def _files(run_dir: Path) -> str:
     rows = []
-    for path in sorted(p for p in run_dir.rglob("*") if p.is_file()):
+    for path in sorted(p for p in run_dir.rglob("*") if inside(p, run_dir)):
         rel = path.relative_to(run_dir).as_posix()
         if rel.startswith(".") or "/." in rel or rel == "report.html":
             continue
@@ -251,21 +261,21 @@ def sweep_report(root: Path, out_dir: Path, records: Sequence[RunRecord],
     """The HTML of a sweep's ``report/report.html``: ``figure`` (the quality plot's PNG) and
     its ``tables``, every run's ``rows`` (report.csv's) with a link to the run's page, the
     timings and the configuration (``records``: the runs' :class:`RunRecord`)."""
-    sections = [f"<p class=\"meta\">{len(records)} runs under {html.escape(str(root))}</p>",
+    sections = [f"<p class=\"meta\">{len(records)} runs under {html_text(root)}</p>",
                 _section("Quality against the swept parameter",
                          png_figure(figure, "quality against the swept parameter (report.png)"),
-                         *(f"<h3>{html.escape(t.heading)}</h3>" + table(t.header, t.rows)
+                         *(f"<h3>{html_text(t.heading)}</h3>" + table(t.header, t.rows)
                            for t in tables))]
     columns = list(rows[0]) if rows else []
     linked = []
     for record, row in zip(records, rows, strict=True):
         page_path = root / record.name / "report.html"
         link = (f"<a href=\"{html.escape(href(_relative(page_path, out_dir)))}\">"
-                f"{html_text(record.name)}</a>" if page_path.is_file()
+                f"{html_text(record.name)}</a>" if inside(page_path, root)
                 else html_text(record.name))
-        cells = "".join(f"<td>{html.escape(row[c])}</td>" for c in columns[1:])
+        cells = "".join(f"<td>{html_text(row[c])}</td>" for c in columns[1:])
         linked.append(f"<tr><td>{link}</td>{cells}</tr>")
-    head = "".join(f"<th>{html.escape(c)}</th>" for c in columns)
+    head = "".join(f"<th>{html_text(c)}</th>" for c in columns)
     sections.append(_section("Every run", "<div class=\"scroll\"><table>\n<thead><tr>" + head
                              + "</tr></thead>\n<tbody>" + "".join(linked)
                              + "</tbody>\n</table></div>"))
@@ -289,10 +299,9 @@ def _sweep_config(root: Path, records: Sequence[RunRecord]) -> list[str]:
               and all(k in run for run in by_run)]
     parts = [table(["swept", "values"], [[k, ", ".join(dict.fromkeys(
         run.get(k, "(default)") for run in by_run))] for k in swept]),
-        f"<p>Overrides every run shares: <code>{html.escape(' '.join(common) or '(none)')}"
+        f"<p>Overrides every run shares: <code>{html_text(' '.join(common) or '(none)')}"
         "</code></p>"]
-    first = root / records[0].name / "config.yaml" if records else None
-    if first is not None and first.is_file():
-        parts.append(preformatted(first.read_text(encoding="utf-8"),
+    if records and records[0].config:
+        parts.append(preformatted(yaml_safe.dump(dict(records[0].config)),
                                   f"the resolved configuration of {records[0].name}"))
     return parts

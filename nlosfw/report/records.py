@@ -1,4 +1,10 @@
-"""Finished runs as reports see them: a name, the typed metrics, overrides, thesis numbers."""
+"""Finished runs as reports see them: a name, the typed metrics, overrides, thesis numbers.
+
+A run's files are read as :mod:`nlosfw.report.inputs` reads them (regular files inside the
+reported folder, bounded), and every text in them is cut to
+:data:`~nlosfw.common.text.MAX_SHOWN` characters: a record holds only what a report can
+show.
+"""
 
 from __future__ import annotations
 
@@ -7,12 +13,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import yaml
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import DataError
 from nlosfw.common.files import is_regular_file
+from nlosfw.common.text import shortened_data
 from nlosfw.pipeline.metrics import RunMetrics
+from nlosfw.report.inputs import read_inside
 
 
 @dataclass(frozen=True)
@@ -25,6 +34,8 @@ class RunRecord:
     overrides: tuple[str, ...] = ()
     thesis: Mapping[str, Any] = field(default_factory=dict)
     """The run's ``thesis`` config (reference values of a thesis preset), if any."""
+    config: Mapping[str, object] = field(default_factory=dict)
+    """The run's resolved configuration (its config.yaml), if it has one."""
 
 
 def find_runs(root: Path) -> list[Path]:
@@ -34,25 +45,31 @@ def find_runs(root: Path) -> list[Path]:
 
 
 def read_run(run_dir: Path, root: Path) -> RunRecord:
-    """The record of the run in ``run_dir``; a one-line :class:`DataError` names a file
-    that cannot be read (an unreadable or older metrics.json, a broken config)."""
-    metrics = RunMetrics.read(run_dir / "metrics.json")
-    overrides = _yaml(run_dir / ".hydra" / "overrides.yaml") or []
-    config = _yaml(run_dir / "config.yaml") or {}
+    """The record of the run in ``run_dir``, reading only regular files inside ``root``; a
+    one-line :class:`DataError` names a file that cannot be read (a link leaving ``root``,
+    an oversized, unreadable or older metrics.json, a broken config)."""
+    path = run_dir / "metrics.json"
+    try:
+        data = msgspec.json.decode(read_inside(path, root))
+    except msgspec.DecodeError as err:
+        raise DataError(f"{path}: unreadable ({err})") from None
+    metrics = RunMetrics.from_json(shortened_data(data), where=str(path))
+    overrides = _yaml(run_dir / ".hydra" / "overrides.yaml", root) or []
+    config = _yaml(run_dir / "config.yaml", root) or {}
     if not isinstance(overrides, list) or not isinstance(config, dict):
         raise DataError(f"{run_dir}: .hydra/overrides.yaml must hold a list and config.yaml "
                         "a mapping")
     return RunRecord(name=str(run_dir.relative_to(root)) or ".", metrics=metrics,
                      overrides=tuple(str(o) for o in overrides),
-                     thesis=config.get("thesis") or {})
+                     thesis=config.get("thesis") or {}, config=config)
 
 
-def _yaml(path: Path) -> Any:
-    if not path.exists():
+def _yaml(path: Path, root: Path) -> Any:
+    """The YAML data of ``path`` (None when there is no such file), its texts shortened."""
+    if not path.exists() and not path.is_symlink():
         return None
-    if not is_regular_file(path):  # a FIFO would block the read
-        raise DataError(f"{path}: not a regular file; it is not read")
+    text = read_inside(path, root)
     try:
-        return yaml_safe.load(path.read_text(encoding="utf-8"))  # bounded: no alias bombs
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        return shortened_data(yaml_safe.load(text.decode("utf-8")))  # bounded: no alias bombs
+    except (UnicodeDecodeError, yaml.YAMLError) as err:
         raise DataError(f"{path}: unreadable ({' '.join(str(err).split())})") from None

@@ -1,7 +1,8 @@
 """A sweep's report (``python -m nlosfw report DIR``): every run under DIR in one report.
 
-Writes into ``DIR/report/`` (or ``report-2``, ... if that exists: earlier reports are
-never overwritten):
+Reads only regular files inside DIR, each bounded (:mod:`nlosfw.report.inputs`), and
+writes into a new ``DIR/report/`` (or ``report-2``, ... if that exists: earlier reports
+are never overwritten; a report that fails leaves no folder behind):
 
 * ``report.csv``: one row per run (its scene or capture file, sparsity, seed, field
   errors and reconstruction scores);
@@ -21,16 +22,19 @@ never overwritten):
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import errno
 import io
 import logging
-from collections.abc import Callable, Sequence
+import os
+from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
 
 from nlosfw.common.config import Scalar
-from nlosfw.common.errors import DataError
-from nlosfw.common.files import atomic_path, write_text
+from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.common.files import atomic_path, storage_error, unwritable_reason, write_text
 from nlosfw.common.text import csv_cell
 from nlosfw.common.text import markdown as markdown_text
 from nlosfw.pipeline.metrics import (
@@ -165,13 +169,51 @@ def to_markdown(rows: list[dict[str, str]], columns: Sequence[str] | None = None
     return markdown_table(columns, [[row.get(c, "") for c in columns] for row in rows])
 
 
-def _free_dir(root: Path) -> Path:
-    target = root / "report"
-    n = 2
-    while target.exists():
-        target = root / f"report-{n}"
+#: The files a report writes into its folder.
+REPORT_FILES = ("report.csv", "study.csv", "report.md", "report.png", "report.html")
+
+
+def _new_report_dir(root: Path) -> Path:
+    """A new folder ``root/report`` (``report-2``, ... when the name is taken), made now; a
+    one-line error when ``root`` cannot be written (exit status 2), a link to nowhere is in
+    the way (2) or the disk is full (1)."""
+    reason = unwritable_reason(root)
+    if reason is not None:
+        raise ConfigError("", f"{root}: a report cannot be written there ({reason})")
+    n = 1
+    while True:
+        target = root / ("report" if n == 1 else f"report-{n}")
         n += 1
-    return target
+        try:
+            target.mkdir()
+        except FileExistsError:
+            if target.is_symlink() and not target.exists():
+                raise ConfigError("", f"{target}: a link to {os.readlink(target)}, which does "
+                                      "not exist; remove it to write the report there") from None
+            continue
+        except OSError as err:
+            if err.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+                raise ConfigError("", f"{root}: a report cannot be written there "
+                                      f"({err.strerror})") from None
+            raise (storage_error(target, err) or err) from None
+        return target
+
+
+@contextlib.contextmanager
+def _report_dir(root: Path) -> Iterator[Path]:
+    """A new report folder under ``root`` (:func:`_new_report_dir`) for the block to write
+    into; when the block fails (a full disk, an interruption), what it wrote there and the
+    folder are removed: no half-written report is left."""
+    out = _new_report_dir(root)
+    try:
+        yield out
+    except BaseException:
+        for name in REPORT_FILES:
+            with contextlib.suppress(OSError):
+                (out / name).unlink()
+        with contextlib.suppress(OSError):
+            out.rmdir()
+        raise
 
 
 #: What the study table means with count splitting.
@@ -201,42 +243,41 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
     # (a count-splitting study even at one sparsity: its table holds the held-out scores)
     by_sparsity = x is None and (len({(r.pattern, r.undersampling) for r in study}) > 1
                                  or any(r.scores["heldout_excess_db"].n for r in study))
-    out = _free_dir(root)
-    out.mkdir(parents=True)
-    write_text(out / "report.csv", to_csv(rows))
-    write_text(out / "study.csv", csv_text(*study_csv_rows(study)))
-    markdown = f"# nlosfw report: {markdown_text(str(root))}\n\n{len(rows)} runs.\n\n"
-    if by_sparsity:
-        header, cells = study_table(study)
-        tables = [QualityTable(heading="reconstruction quality against sparsity, mean ± "
-                                       "standard deviation over seeds",
-                               header=tuple(header), rows=tuple(tuple(c) for c in cells))]
-        markdown += ("## Reconstruction quality against sparsity\n\n"
-                     "![reconstruction quality against sparsity](report.png)\n\n"
-                     "Scores against the full capture's reconstruction (amplitudes, each "
-                     "normalised to its maximum; scikit-image PSNR and SSIM at their "
-                     "defaults), mean ± standard deviation over the runs of each row "
-                     "(seeds); `true` is the full capture itself.\n\n"
-                     + (_THINNING_NOTE if any(r.scores["heldout_excess_db"].n for r in study)
-                        else "")
-                     + markdown_table(header, cells) + "\n")
-    else:
-        tables = quality_tables(points, layout)
-        label = markdown_text(layout.x_label)
-        markdown += (f"## Quality against {label}\n\n![quality against "
-                     f"{label}](report.png)\n\n{quality_table(points, layout)}\n")
-    markdown += f"## Every run\n\n{to_markdown(rows)}"
-    thesis_tables = thesis_comparison(records)
-    if thesis_tables:
-        markdown += "\n## Next to the thesis\n\n" + thesis_tables
-    write_text(out / "report.md", markdown)
-    with atomic_path(out / "report.png") as tmp:
+    with _report_dir(root) as out:
+        write_text(out / "report.csv", to_csv(rows))
+        write_text(out / "study.csv", csv_text(*study_csv_rows(study)))
+        markdown = f"# nlosfw report: {markdown_text(str(root))}\n\n{len(rows)} runs.\n\n"
         if by_sparsity:
-            study_figure(study, tmp)
+            header, cells = study_table(study)
+            tables = [QualityTable(heading="reconstruction quality against sparsity, mean ± "
+                                           "standard deviation over seeds",
+                                   header=tuple(header), rows=tuple(tuple(c) for c in cells))]
+            markdown += ("## Reconstruction quality against sparsity\n\n"
+                         "![reconstruction quality against sparsity](report.png)\n\n"
+                         "Scores against the full capture's reconstruction (amplitudes, each "
+                         "normalised to its maximum; scikit-image PSNR and SSIM at their "
+                         "defaults), mean ± standard deviation over the runs of each row "
+                         "(seeds); `true` is the full capture itself.\n\n"
+                         + (_THINNING_NOTE if any(r.scores["heldout_excess_db"].n for r in study)
+                            else "")
+                         + markdown_table(header, cells) + "\n")
         else:
-            from nlosfw.report.plain_text import literal_text
+            tables = quality_tables(points, layout)
+            label = markdown_text(layout.x_label)
+            markdown += (f"## Quality against {label}\n\n![quality against "
+                         f"{label}](report.png)\n\n{quality_table(points, layout)}\n")
+        markdown += f"## Every run\n\n{to_markdown(rows)}"
+        thesis_tables = thesis_comparison(records)
+        if thesis_tables:
+            markdown += "\n## Next to the thesis\n\n" + thesis_tables
+        write_text(out / "report.md", markdown)
+        with atomic_path(out / "report.png") as tmp:
+            if by_sparsity:
+                study_figure(study, tmp)
+            else:
+                from nlosfw.report.plain_text import literal_text
 
-            literal_text(quality_figure(points, layout)).savefig(tmp, dpi=110, format="png")
-    write_text(out / "report.html", sweep_report(root, out, records, rows,
-                                                 (out / "report.png").read_bytes(), tables))
+                literal_text(quality_figure(points, layout)).savefig(tmp, dpi=110, format="png")
+        write_text(out / "report.html", sweep_report(root, out, records, rows,
+                                                     (out / "report.png").read_bytes(), tables))
     return out, rows

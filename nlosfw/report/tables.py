@@ -5,16 +5,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from nlosfw.common.config import Scalar
-from nlosfw.common.text import markdown
+from nlosfw.common.text import markdown, shortened
 
 
 def format_cell(value: Scalar) -> str:
-    """A table cell: empty for None, 4 significant digits for a float, else ``str``."""
+    """A table cell: empty for None, 4 significant digits for a float, else ``str`` (at most
+    :data:`~nlosfw.common.text.MAX_SHOWN` characters of it)."""
     if value is None:
         return ""
     if isinstance(value, float):
         return f"{value:.4g}"
-    return str(value)
+    return shortened(str(value))
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:

@@ -41,6 +41,7 @@ class AnalyticConfig(SimulatorConfig):
     """Element-sensor pairs evaluated at once (bounds memory to about 150 bytes per pair)."""
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         require(self.patch_size > 0, "patch_size", f"must be > 0 metres, got {self.patch_size}")
         require(self.max_pairs >= 1, "max_pairs", f"must be >= 1, got {self.max_pairs}")
 

@@ -12,7 +12,7 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import GridFormat, HFormat
-from nlosfw.common.config import Configurable, config_to_dict
+from nlosfw.common.config import Configurable, config_to_dict, require_seed
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.simulate.geometry import SceneGeometry
 from nlosfw.simulate.scene import Scene
@@ -24,6 +24,9 @@ class SimulatorConfig:
 
     seed: int = 0
     """Seed of every random choice (sampling and noise): same seed, same capture."""
+
+    def __post_init__(self) -> None:
+        require_seed(self.seed, "seed")
 
 
 SimulatorConfigT = TypeVar("SimulatorConfigT", bound=SimulatorConfig)

@@ -7,6 +7,7 @@ It is built from the ``scene`` Hydra config group with
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -156,6 +157,14 @@ class NoiseModel(Choice):
     poisson = "poisson"
 
 
+#: The most photons a simulated capture may expect in all (signal and dark counts): its
+#: counts stay exact integers (below 2^53, as count splitting needs them) and within what
+#: numpy's Poisson sampler draws (1e19 ended the capture stage in "lam value too large").
+MAX_EXPECTED_PHOTONS = 1e15
+#: The most laser pulses per scan point (numpy's multinomial draw takes a 64-bit integer).
+MAX_PULSES = 2**63 - 1
+
+
 @dataclass(frozen=True)
 class NoiseConfig:
     """Measurement noise applied after rendering (see :mod:`nlosfw.simulate.noise`)."""
@@ -174,12 +183,15 @@ class NoiseConfig:
 
     def __post_init__(self) -> None:
         require_finite(self)
-        require(self.pulses is None or self.pulses >= 1, "pulses",
-                f"must be >= 1 or null, got {self.pulses}")
+        require(self.pulses is None or 1 <= self.pulses <= MAX_PULSES, "pulses",
+                f"must be >= 1 and at most {MAX_PULSES} (2^63 - 1), or null, got "
+                f"{self.pulses}")
         require(self.pulses is None or self.model == NoiseModel.poisson, "pulses",
                 "a detector's pile-up needs photon counts: set model poisson, or pulses null")
-        require(self.photons > 0, "photons", f"must be > 0, got {self.photons}")
-        require(self.dark_counts >= 0, "dark_counts", f"must be >= 0, got {self.dark_counts}")
+        require(0 < self.photons <= MAX_EXPECTED_PHOTONS, "photons",
+                f"must be > 0 and at most {MAX_EXPECTED_PHOTONS:g}, got {self.photons}")
+        require(0 <= self.dark_counts <= MAX_EXPECTED_PHOTONS, "dark_counts",
+                f"must be 0 to {MAX_EXPECTED_PHOTONS:g}, got {self.dark_counts}")
         require(self.jitter_ps >= 0, "jitter_ps", f"must be >= 0, got {self.jitter_ps}")
 
 
@@ -204,6 +216,13 @@ class Scene:
 
     def __post_init__(self) -> None:
         require(len(self.geometry) > 0, "geometry", "the hidden scene needs at least one item")
+        if self.noise.model == NoiseModel.poisson:
+            sensors = math.prod(self.wall.resolution)
+            dark = self.noise.dark_counts * sensors
+            require(self.noise.photons + dark <= MAX_EXPECTED_PHOTONS, "noise.dark_counts",
+                    f"{self.noise.dark_counts:g} per sensor over {sensors} sensors and "
+                    f"{self.noise.photons:g} signal photons expect more than "
+                    f"{MAX_EXPECTED_PHOTONS:g} photons in all")
 
     @property
     def is_confocal(self) -> bool:

@@ -29,8 +29,9 @@ with the pip command that installs them.
 
 from __future__ import annotations
 
+from nlosfw.common.deprecation import moved_names
 from nlosfw.testing import fixtures
-from nlosfw.testing.engines import ENGINE_CASES, assert_engine_matches_numpy
+from nlosfw.testing.backends import BACKEND_CASES, assert_backend_matches_numpy
 from nlosfw.testing.fixtures import (
     Agreement,
     analytic_agreement,
@@ -65,7 +66,7 @@ __all__ = [
     "DEVICE_LEGS",
     "Agreement",
     "analytic_agreement",
-    "ENGINE_CASES",
+    "BACKEND_CASES",
     "FREQUENCY_MODES",
     "GEOMETRIES",
     "VOXEL_LAYOUTS",
@@ -73,7 +74,7 @@ __all__ = [
     "CheckPlan",
     "PlannedCheck",
     "Variant",
-    "assert_engine_matches_numpy",
+    "assert_backend_matches_numpy",
     "check_cases",
     "check_plan",
     "checks_for",
@@ -89,3 +90,8 @@ __all__ = [
     "tiny_scene_config",
     "variant",
 ]
+
+#: Names this package exported before "engine" came to mean the run engine only.
+__getattr__ = moved_names(__name__, {
+    "ENGINE_CASES": "nlosfw.testing.backends:BACKEND_CASES",
+    "assert_engine_matches_numpy": "nlosfw.testing.backends:assert_backend_matches_numpy"})

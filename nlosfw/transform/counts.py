@@ -1,6 +1,6 @@
 """Photon counts of wall points summed into wider time bins, and their temporal DFT: what a
 fit by the counts' own likelihood works on (``rsd_prior``'s ``poisson_counts``,
-:mod:`nlosfw.model.rsd_counts`). Sums of whole bins of Poisson counts are Poisson counts."""
+:mod:`nlosfw.model.physics.counts`). Sums of whole bins of Poisson counts are Poisson counts."""
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ class FourierConfig(NeuralFieldConfig):
 
 @hookimpl
 def register_networks(register: NetworkRegistrar) -> None:
-    register("example_fourier", engine="torch",
+    register("example_fourier", backend="torch",
              factory="nlosfw_example_network.network:FourierFeatureMLP",
              config=FourierConfig,
              description="Fourier-feature MLP (Tancik et al. 2020), an example plugin",

@@ -5,7 +5,7 @@ import math
 import torch
 from torch import nn
 
-from nlosfw.model import FieldShape
+from nlosfw.model.neural import FieldShape
 from nlosfw_example_network.hooks import FourierConfig
 
 

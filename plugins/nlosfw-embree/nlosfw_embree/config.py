@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from nlosfw.common import Choice, require
+from nlosfw.common import Choice, require, require_threads
 from nlosfw.simulate import SimulatorConfig
 
 
@@ -34,8 +34,9 @@ class EmbreeConfig(SimulatorConfig):
     """[m] Distance rays start off a surface, to avoid hitting their own triangle."""
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         require(self.samples >= 1, "samples", f"must be >= 1, got {self.samples}")
-        require(self.threads >= 0, "threads", f"must be >= 0 (0: all cores), got {self.threads}")
+        require_threads(self.threads, "threads", 0, "all cores")
         require(self.batch >= 16, "batch", f"must be >= 16 samples, got {self.batch}")
         require(0 < self.ray_offset < 0.01, "ray_offset",
                 f"must be in (0, 0.01) metres, got {self.ray_offset}")

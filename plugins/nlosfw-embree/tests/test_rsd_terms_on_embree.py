@@ -27,9 +27,9 @@ JITTER_PS = 80.0
 SHIFT_BINS = 4
 #: One voxel plane at the patch's depth, voxels a quarter of the kept points' spacing apart
 #: (on coarser voxels the albedo's blur in depth and across voxels absorbs part of the terms).
-OPTIONS = {"depth_range": [0.5, 0.5], "lateral_step": 1 / 32, "l1_weight": 1e-3,
+OPTIONS = {"depth": {"range": [0.5, 0.5]}, "lateral_step": 1 / 32, "l1_weight": 1e-3,
            "iterations": 300, "workers": 1}
-TERMS = {"temporal_response": "gaussian", "time_offset": True, "background": "constant"}
+TERMS = {"response": {"temporal": "gaussian", "time_offset": True}, "background": "constant"}
 
 
 @pytest.fixture(scope="module")
@@ -80,24 +80,23 @@ def test_jitter_offset_and_background_are_recovered_together(captures):
     assert with_terms < without - 25.0, (with_terms, without)
 
 
-@pytest.mark.parametrize("term", ["temporal_response", "time_offset"])
+@pytest.mark.parametrize("term", ["temporal", "time_offset"])
 def test_each_response_term_alone_finds_its_value(captures, term):
     """The jitter alone (no shift, no tail): sigma to 5% (measured 78.9 ps); the shift alone:
     tau to half a bin (77.1 ps)."""
     transform, _, _ = captures
     config = tiny_scene_config(resolution=16, bins=300, bin_width=BIN, target=(0.03, -0.02, 0.5),
                                patch=0.08)
-    if term == "temporal_response":
+    if term == "temporal":
         config["noise"] = {"jitter_ps": JITTER_PS}
     capture = EmbreeSimulator({"samples": 1 << 12}).simulate(scene_from_config(config))
     if term == "time_offset":
         shifted = np.zeros_like(capture.H)
         shifted[SHIFT_BINS:] = capture.H[:-SHIFT_BINS]
         capture = capture.replace(H=shifted)
-    option = {"temporal_response": "gaussian"} if term == "temporal_response" else \
-        {"time_offset": True}
-    _, fitted, _ = _fit(transform.transform(capture), option)
-    if term == "temporal_response":
+    option = {"temporal": "gaussian"} if term == "temporal" else {"time_offset": True}
+    _, fitted, _ = _fit(transform.transform(capture), {"response": option})
+    if term == "temporal":
         assert fitted.keys() == {"response_sigma_ps"}
         assert fitted["response_sigma_ps"] == pytest.approx(JITTER_PS, rel=0.05)
     else:
@@ -113,8 +112,8 @@ def test_the_counts_likelihood_recovers_the_dark_counts_with_the_jitter(tmp_path
     out = run(["simulator=embree", "scene=tiny", "scene.noise.model=poisson",
                "scene.noise.photons=1e6", "scene.noise.dark_counts=256",
                f"scene.noise.jitter_ps={JITTER_PS}", "model=rsd_prior",
-               "model.likelihood=poisson_counts", "model.temporal_response=gaussian",
-               "model.counts_stop=likelihood", "split.spectral=none",
+               "model.likelihood=poisson_counts", "model.response.temporal=gaussian",
+               "model.counts.stop=likelihood", "split.spectral=none",
                "transform.n_frequencies=21", "reconstruction.n_depths=4",
                "figures.enabled=false"], output_dir=tmp_path / "run")
     fitted = json.loads((out.dir / "metrics.json").read_text())["field"]["model"]["fit"][

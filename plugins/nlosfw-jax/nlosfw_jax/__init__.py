@@ -1,6 +1,6 @@
-"""JAX engine of nlosfw's neural fields (equinox modules, optax's Adam), and the thesis
+"""JAX backend of nlosfw's neural fields (equinox modules, optax's Adam), and the thesis
 networks ``tanh_jax``, ``pe_jax`` and ``siren_jax``.
 
-Importing this package does not import jax; :mod:`nlosfw_jax.engine`,
+Importing this package does not import jax; :mod:`nlosfw_jax.backend`,
 :mod:`nlosfw_jax.networks` and :mod:`nlosfw_jax.models` do.
 """

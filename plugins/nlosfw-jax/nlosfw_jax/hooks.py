@@ -18,12 +18,12 @@ from nlosfw.plugins import (
 
 @hookimpl
 def register_networks(register: NetworkRegistrar) -> None:
-    register_thesis_networks(register, engine="jax", factory="nlosfw_jax.networks:thesis_network")
-    register_field_networks(register, engine="jax", factory="nlosfw_jax.networks:field_network")
+    register_thesis_networks(register, backend="jax", factory="nlosfw_jax.networks:thesis_network")
+    register_field_networks(register, backend="jax", factory="nlosfw_jax.networks:field_network")
 
 
 @hookimpl
 def register_field_models(register: Registrar) -> None:
-    register_rsd_residual(register, engine="jax", factory="nlosfw_jax.models:RSDResidualJax")
-    register_neural_volume(register, engine="jax",
+    register_rsd_residual(register, backend="jax", factory="nlosfw_jax.models:RSDResidualJax")
+    register_neural_volume(register, backend="jax",
                            factory="nlosfw_jax.neural_volume:NeuralVolumeJax")

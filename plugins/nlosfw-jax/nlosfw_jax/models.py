@@ -1,4 +1,4 @@
-"""The thesis networks on the JAX engine as field-model classes, for use from Python,
+"""The thesis networks on the JAX backend as field-model classes, for use from Python,
 and the physics field with a JAX residual network.
 
 They are the classes the registry holds as ``tanh_jax``, ``pe_jax``, ``siren_jax`` and
@@ -7,9 +7,11 @@ They are the classes the registry holds as ``tanh_jax``, ``pe_jax``, ``siren_jax
 
 from __future__ import annotations
 
-from nlosfw.model import NeuralFieldModel, RSDResidualFieldModel
+from nlosfw.common import moved_names
+from nlosfw.model.hybrid import RSDResidualFieldModel
+from nlosfw.model.neural import NeuralFieldModel
 from nlosfw.plugins import registered_network, thesis_network_model
-from nlosfw_jax.engine import JaxEngine
+from nlosfw_jax.backend import JaxBackend
 
 _FACTORY = "nlosfw_jax.networks:thesis_network"
 
@@ -19,8 +21,8 @@ SirenJax = thesis_network_model("siren", "jax", _FACTORY)
 
 
 class RSDResidualJax(RSDResidualFieldModel):
-    """rsd_prior's field plus a penalised residual network on the JAX engine
-    (:class:`nlosfw.model.RSDResidualFieldModel`); on a GPU when JAX sees one."""
+    """rsd_prior's field plus a penalised residual network on the JAX backend
+    (:class:`nlosfw.model.hybrid.RSDResidualFieldModel`); on a GPU when JAX sees one."""
 
     backend = "jax"
 
@@ -30,4 +32,6 @@ class RSDResidualJax(RSDResidualFieldModel):
         return registered_network(name, "jax")
 
 
-__all__ = ["JaxEngine", "PEJax", "RSDResidualJax", "SirenJax", "TanhJax"]
+__all__ = ["JaxBackend", "PEJax", "RSDResidualJax", "SirenJax", "TanhJax"]
+#: ``JaxEngine``, the backend's name here before "engine" meant the run engine only.
+__getattr__ = moved_names(__name__, {"JaxEngine": "nlosfw_jax.backend:JaxBackend"})

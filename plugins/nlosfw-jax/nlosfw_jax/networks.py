@@ -7,7 +7,7 @@ and the torch plugin share, so their files load across backends), :class:`Sine`,
 :class:`ComplexLinear`, :class:`Gabor` and :class:`HashGridEncoding`. The factories
 :func:`thesis_network` and :func:`field_network` build the networks for the shared
 trainer; they start from backend-neutral numpy weights
-(:func:`nlosfw.model.reference_state`, :func:`nlosfw.model.field_network_state`), so
+(:func:`nlosfw.model.neural.reference_state`, :func:`nlosfw.model.neural.field_network_state`), so
 JAX and torch train the same network.
 """
 
@@ -22,7 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from nlosfw.model import (
+from nlosfw.model import NeuralFieldConfig
+from nlosfw.model.neural import (
     HASH_PRIMES,
     Architecture,
     FieldShape,
@@ -30,7 +31,6 @@ from nlosfw.model import (
     FourierFieldConfig,
     HashGridFieldConfig,
     HashGridLayout,
-    NeuralFieldConfig,
     WireFieldConfig,
     field_network_state,
     hash_grid_layout,
@@ -38,7 +38,7 @@ from nlosfw.model import (
     thesis_architecture,
     wire_widths,
 )
-from nlosfw_jax.engine import Fixed
+from nlosfw_jax.backend import Fixed
 
 #: An activation: a function (or parameter-free module) of one array.
 Activation = Callable[[jax.Array], jax.Array]
@@ -175,7 +175,7 @@ class ThesisNetwork(MLP):
         return super().__call__(self.inputs(x))
 
     def initial_state(self, n_networks: int, seed: int) -> dict[str, np.ndarray]:
-        """The backend-neutral initial weights (see :func:`nlosfw.model.init_parameters`)."""
+        """The backend-neutral initial weights (see :func:`nlosfw.model.neural.init_parameters`)."""
         return reference_state(self.arch, n_networks, seed)
 
 
@@ -283,7 +283,7 @@ class HashGridEncoding(eqx.Module):
 
 # --------------------------------------------------------------------------- issue 12 networks
 class _FromNumpy(eqx.Module):
-    """A network whose initial weights are :func:`nlosfw.model.field_network_state`'s."""
+    """A network whose initial weights are :func:`nlosfw.model.neural.field_network_state`'s."""
 
     config: NeuralFieldConfig = eqx.field(static=True)
     shape: FieldShape = eqx.field(static=True)

@@ -1,8 +1,9 @@
 """``neural_volume_jax``: a registered JAX network's non-negative albedo on rsd_prior's
-lattice, propagated to the wall by RSD in JAX (:class:`nlosfw.model.NeuralVolumeFieldModel`).
+lattice, propagated to the wall by RSD in JAX
+(:class:`nlosfw.model.hybrid.NeuralVolumeFieldModel`).
 
 :class:`JaxPlaneOperator` is ``SceneOperator.forward`` in JAX (differentiable,
-``jnp.fft``), from the numpy constants of :func:`nlosfw.model.plane_stack`.
+``jnp.fft``), from the numpy constants of :func:`nlosfw.model.hybrid.plane_stack`.
 """
 
 from __future__ import annotations
@@ -19,24 +20,23 @@ import numpy as np
 import optax
 
 from nlosfw.common import FitError
-from nlosfw.model import (
+from nlosfw.model import TrainingStep
+from nlosfw.model.hybrid import (
     BestStep,
-    NetworkBuild,
-    NeuralFieldModel,
     NeuralVolumeFieldModel,
     PlaneStack,
     TrainedVolume,
-    TrainingStep,
     VolumeProblem,
     aligned_empty,
     history_entry,
 )
+from nlosfw.model.neural import NetworkBuild, NeuralFieldModel
 from nlosfw.plugins import registered_network
-from nlosfw_jax.engine import Fixed, JaxEngine, resolve_device
+from nlosfw_jax.backend import Fixed, JaxBackend, resolve_device
 
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
-#: Adam as torch.optim.Adam with its defaults (the engine's).
+#: Adam as torch.optim.Adam with its defaults (the backend's).
 _ADAM = optax.scale_by_adam(b1=0.9, b2=0.999, eps=1e-8)
 #: Voxels per piece of the network's pass on the CPU (see :func:`volume_albedo`).
 CPU_CHUNK = 4096
@@ -71,7 +71,7 @@ def _is_fixed(node: Any) -> bool:
 
 class JaxPlaneOperator:
     """A a for an albedo a (Z, Y, X), real: the wall fields (F, ny, nx), complex, on
-    ``device`` (None: JAX's default; see :class:`nlosfw.model.PlaneStack`).
+    ``device`` (None: JAX's default; see :class:`nlosfw.model.hybrid.PlaneStack`).
 
     A confocal scan on the CPU sums over planes as one product per lattice point (an
     ``einsum`` over the spectra reordered once as (Ly Lx, F, Z), as the torch operator
@@ -135,10 +135,10 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         """Adam on the relative squared error of the propagated albedo (full batch)."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
-        engine = JaxEngine(NetworkBuild(problem.network.network_factory,
+        net = JaxBackend(NetworkBuild(problem.network.network_factory,
                                         problem.network_config, problem.network_shape,
                                         who=who))
-        device = engine.device
+        device = net.device
         op = JaxPlaneOperator(problem.stack, device)
         coords, gain, data, train = (
             jax.device_put(a, device)
@@ -175,7 +175,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
             params = jax.tree.map(lambda p, u: p - lr * u, params, updates)
             return params, opt_state, loss, error, current
 
-        params, rest = engine.params, engine.rest
+        params, rest = net.params, net.rest
         opt_state = _ADAM.init(params)
         history: list[dict[str, float]] = []
         best = BestStep(cfg.patience)
@@ -201,7 +201,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         _, (error, current) = jax.jit(loss_of)(params, rest, constants)
         best.offer(k + 1, float(error) if has_val else None, current)
         fitted = np.asarray(jax.device_get(best.albedo))
-        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network,
+        return TrainedVolume(fitted, history, loss_value, net.parameters_per_network,
                              steps=k + 1, best_validation=best.validation)
 
 

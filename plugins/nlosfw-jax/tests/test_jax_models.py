@@ -15,7 +15,7 @@ from nlosfw_jax.models import PEJax, SirenJax, TanhJax
 
 from nlosfw.common import ConfigError, DataError, FitError
 from nlosfw.model import preset_config
-from nlosfw.testing import ENGINE_CASES, assert_engine_matches_numpy, fixtures
+from nlosfw.testing import BACKEND_CASES, assert_backend_matches_numpy, fixtures
 
 FAST = {"steps": 150, "eval_every": 25, "batch_size": 256, "device": "cpu"}
 
@@ -25,9 +25,9 @@ def _point_field(n: int = 24, n_f: int = 12):
                                        frequencies=np.linspace(2.0, 3.0, n_f))
 
 
-@pytest.mark.parametrize(("family", "mode"), ENGINE_CASES)
+@pytest.mark.parametrize(("family", "mode"), BACKEND_CASES)
 def test_forward_matches_numpy_reference(family, mode):
-    assert_engine_matches_numpy({"tanh": TanhJax, "pe": PEJax, "siren": SirenJax}[family], mode)
+    assert_backend_matches_numpy({"tanh": TanhJax, "pe": PEJax, "siren": SirenJax}[family], mode)
 
 
 def test_fit_learns_and_is_deterministic():

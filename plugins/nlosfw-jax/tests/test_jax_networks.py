@@ -13,7 +13,7 @@ eqx = pytest.importorskip("equinox")
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from nlosfw_jax.engine import Fixed  # noqa: E402
+from nlosfw_jax.backend import Fixed  # noqa: E402
 
 from nlosfw.common import FitError  # noqa: E402
 from nlosfw.model import NeuralFieldConfig  # noqa: E402
@@ -50,7 +50,7 @@ def _registry(**networks):
     @hookimpl
     def register_networks(register):
         for name, factory in networks.items():
-            register(name, engine="jax", factory=factory, config=NeuralFieldConfig)
+            register(name, backend="jax", factory=factory, config=NeuralFieldConfig)
 
     module = types.ModuleType("in_process_jax_networks")
     module.register_networks = register_networks

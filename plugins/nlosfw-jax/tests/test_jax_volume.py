@@ -12,10 +12,10 @@ eqx = pytest.importorskip("equinox")
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-from nlosfw_jax.engine import Fixed, JaxEngine  # noqa: E402
+from nlosfw_jax.backend import Fixed, JaxBackend  # noqa: E402
 from nlosfw_jax.neural_volume import volume_albedo  # noqa: E402
 
-from nlosfw.model import FieldMode, FieldShape, NetworkBuild  # noqa: E402
+from nlosfw.model.neural import FieldMode, FieldShape, NetworkBuild  # noqa: E402
 from nlosfw.plugins import registered_network, registered_networks  # noqa: E402
 from nlosfw.testing import fixtures  # noqa: E402
 
@@ -27,7 +27,7 @@ def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
     4 x 23 x 31 voxels (1e-6), and so do the gradients of a weighted sum by every
     parameter (1e-4 of the largest entry). The network sees pieces of 1000 points."""
     network = registered_network(name, "jax")
-    engine = JaxEngine(NetworkBuild(network.network_factory, network.config_class(
+    engine = JaxBackend(NetworkBuild(network.network_factory, network.config_class(
         seed=3, hidden=[32, 32], device="cpu", steps=10), FieldShape(FieldMode.multi, (23, 31), 4)))
     sizes: list[int] = []
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from nlosfw.common import Choice, require
+from nlosfw.common import Choice, require, require_threads
 from nlosfw.simulate import SimulatorConfig
 
 
@@ -54,12 +54,13 @@ class MitsubaConfig(SimulatorConfig):
     mitransient's own limit); passes use different seeds and are averaged."""
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         require(self.spp >= 1, "spp", f"must be >= 1, got {self.spp}")
         require(self.bounces == -1 or self.bounces >= 3, "bounces",
                 f"must be -1 (every order) or >= 3 (3 = third bounce), got {self.bounces}")
         require(self.max_bounces >= 3, "max_bounces", f"must be >= 3, got {self.max_bounces}")
         require(self.bounces == -1 or self.max_bounces >= self.bounces, "max_bounces",
                 f"must be >= bounces ({self.bounces}), got {self.max_bounces}")
-        require(self.threads >= 0, "threads", f"must be >= 0 (0: all cores), got {self.threads}")
+        require_threads(self.threads, "threads", 0, "all cores")
         require(self.spp_per_pass >= 0, "spp_per_pass",
                 f"must be >= 0 (0: automatic), got {self.spp_per_pass}")

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from nlosfw.model import HASH_PRIMES, HashGridLayout
+from nlosfw.model.neural import HASH_PRIMES, HashGridLayout
 
 #: The most bytes :meth:`HashGridEncoding.corners` may hold for a trainer's fixed inputs.
 CORNERS_MAX_BYTES = 1 << 30

@@ -18,13 +18,14 @@ from nlosfw.plugins import (
 
 @hookimpl
 def register_networks(register: NetworkRegistrar) -> None:
-    register_thesis_networks(register, engine="torch",
+    register_thesis_networks(register, backend="torch",
                              factory="nlosfw_torch.networks:thesis_network")
-    register_field_networks(register, engine="torch", factory="nlosfw_torch.networks:field_network")
+    register_field_networks(register, backend="torch",
+                            factory="nlosfw_torch.networks:field_network")
 
 
 @hookimpl
 def register_field_models(register: Registrar) -> None:
-    register_rsd_residual(register, engine="torch", factory="nlosfw_torch.models:RSDResidualTorch")
-    register_neural_volume(register, engine="torch",
+    register_rsd_residual(register, backend="torch", factory="nlosfw_torch.models:RSDResidualTorch")
+    register_neural_volume(register, backend="torch",
                            factory="nlosfw_torch.neural_volume:NeuralVolumeTorch")

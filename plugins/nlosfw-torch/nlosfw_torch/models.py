@@ -1,4 +1,4 @@
-"""The thesis networks on the torch engine as field-model classes, for use from Python,
+"""The thesis networks on the torch backend as field-model classes, for use from Python,
 and the physics field with a torch residual network.
 
 They are the classes the registry holds as ``tanh_torch``, ``pe_torch``,
@@ -7,9 +7,11 @@ They are the classes the registry holds as ``tanh_torch``, ``pe_torch``,
 
 from __future__ import annotations
 
-from nlosfw.model import NeuralFieldModel, RSDResidualFieldModel
+from nlosfw.common import moved_names
+from nlosfw.model.hybrid import RSDResidualFieldModel
+from nlosfw.model.neural import NeuralFieldModel
 from nlosfw.plugins import registered_network, thesis_network_model
-from nlosfw_torch.engine import TorchEngine
+from nlosfw_torch.backend import TorchBackend
 
 _FACTORY = "nlosfw_torch.networks:thesis_network"
 
@@ -19,8 +21,8 @@ SirenTorch = thesis_network_model("siren", "torch", _FACTORY)
 
 
 class RSDResidualTorch(RSDResidualFieldModel):
-    """rsd_prior's field plus a penalised residual network on the torch engine
-    (:class:`nlosfw.model.RSDResidualFieldModel`); on a GPU when torch sees one."""
+    """rsd_prior's field plus a penalised residual network on the torch backend
+    (:class:`nlosfw.model.hybrid.RSDResidualFieldModel`); on a GPU when torch sees one."""
 
     backend = "torch"
 
@@ -30,4 +32,6 @@ class RSDResidualTorch(RSDResidualFieldModel):
         return registered_network(name, "torch")
 
 
-__all__ = ["PETorch", "RSDResidualTorch", "SirenTorch", "TanhTorch", "TorchEngine"]
+__all__ = ["PETorch", "RSDResidualTorch", "SirenTorch", "TanhTorch", "TorchBackend"]
+#: ``TorchEngine``, the backend's name here before "engine" meant the run engine only.
+__getattr__ = moved_names(__name__, {"TorchEngine": "nlosfw_torch.backend:TorchBackend"})

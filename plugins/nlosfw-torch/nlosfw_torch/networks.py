@@ -9,7 +9,7 @@ one), :class:`FourierFeatures`, :class:`Finer`, :class:`ComplexLinear`,
 (:class:`~nlosfw_torch.hash_grid.HashGridEncoding`). The factories
 :func:`thesis_network` and :func:`field_network` build the networks for the shared
 trainer; they start from backend-neutral numpy weights
-(:func:`nlosfw.model.reference_state`, :func:`nlosfw.model.field_network_state`), so
+(:func:`nlosfw.model.neural.reference_state`, :func:`nlosfw.model.neural.field_network_state`), so
 torch and JAX train the same network.
 """
 
@@ -23,13 +23,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from nlosfw.model import (
+from nlosfw.model import NeuralFieldConfig
+from nlosfw.model.neural import (
     Architecture,
     FieldShape,
     FinerFieldConfig,
     FourierFieldConfig,
     HashGridFieldConfig,
-    NeuralFieldConfig,
     WireFieldConfig,
     field_network_state,
     hash_grid_layout,
@@ -135,7 +135,7 @@ class ThesisNetwork(MLP):
         return super().forward(self.inputs(x))
 
     def initial_state(self, n_networks: int, seed: int) -> dict[str, np.ndarray]:
-        """The backend-neutral initial weights (see :func:`nlosfw.model.init_parameters`)."""
+        """The backend-neutral initial weights (see :func:`nlosfw.model.neural.init_parameters`)."""
         return reference_state(self.arch, n_networks, seed)
 
 
@@ -205,7 +205,7 @@ class Gabor(nn.Module):
 
 # --------------------------------------------------------------------------- issue 12 networks
 class _FromNumpy:
-    """A network whose initial weights are :func:`nlosfw.model.field_network_state`'s."""
+    """A network whose initial weights are :func:`nlosfw.model.neural.field_network_state`'s."""
 
     config: NeuralFieldConfig
     shape: FieldShape

@@ -1,8 +1,9 @@
 """``neural_volume_torch``: a registered torch network's non-negative albedo on rsd_prior's
-lattice, propagated to the wall by RSD in torch (:class:`nlosfw.model.NeuralVolumeFieldModel`).
+lattice, propagated to the wall by RSD in torch
+(:class:`nlosfw.model.hybrid.NeuralVolumeFieldModel`).
 
 :class:`TorchPlaneOperator` is ``SceneOperator.forward`` in torch (differentiable,
-``torch.fft``), from the numpy constants of :func:`nlosfw.model.plane_stack`.
+``torch.fft``), from the numpy constants of :func:`nlosfw.model.hybrid.plane_stack`.
 """
 
 from __future__ import annotations
@@ -16,21 +17,20 @@ import torch
 from torch.utils.checkpoint import checkpoint
 
 from nlosfw.common import FitError
-from nlosfw.model import (
+from nlosfw.model import TrainingStep
+from nlosfw.model.hybrid import (
     BestStep,
     FoldedSpectra,
-    NetworkBuild,
-    NeuralFieldModel,
     NeuralVolumeFieldModel,
     PlaneStack,
     TrainedVolume,
-    TrainingStep,
     VolumeProblem,
     fold_spectra,
     history_entry,
 )
+from nlosfw.model.neural import NetworkBuild, NeuralFieldModel
 from nlosfw.plugins import registered_network
-from nlosfw_torch.engine import TorchEngine, resolve_device
+from nlosfw_torch.backend import TorchBackend, resolve_device
 
 #: Steps between entries of the fit history.
 HISTORY_EVERY = 10
@@ -62,7 +62,7 @@ class _SpectraProduct(torch.autograd.Function):
 
 class TorchPlaneOperator:
     """A a for an albedo a (Z, Y, X), real: the wall fields (F, ny, nx), complex, on
-    ``device`` (see :class:`nlosfw.model.PlaneStack`).
+    ``device`` (see :class:`nlosfw.model.hybrid.PlaneStack`).
 
     A confocal scan on the CPU sums over planes as one batched matrix product per lattice
     point (the spectra reordered once as (Ly Lx, F, Z), a copy as large as the product the
@@ -72,7 +72,7 @@ class TorchPlaneOperator:
     GPU and the single-spot case keep that sum (measured on the H200; each plane's laser
     leg makes the inputs differ per frequency there).
 
-    Where the confocal spectra have the symmetry of :func:`nlosfw.model.fold_spectra`
+    Where the confocal spectra have the symmetry of :func:`nlosfw.model.hybrid.fold_spectra`
     (``rsd_prior``'s lattices around a regular grid of kept points do), the product is one
     per orbit of up to 8 lattice points instead of one per point (``fold=False``: per
     point): forward and backward 0.13 s against 0.61 to 0.76 s on 2 cores (two runs;
@@ -176,10 +176,10 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         """Adam on the relative squared error of the propagated albedo (full batch)."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
-        engine = TorchEngine(NetworkBuild(problem.network.network_factory,
+        net = TorchBackend(NetworkBuild(problem.network.network_factory,
                                           problem.network_config, problem.network_shape,
                                           who=who))
-        device = engine.device
+        device = net.device
         op = TorchPlaneOperator(problem.stack, device)
         coords = torch.from_numpy(problem.coords).to(device)
         gain = torch.from_numpy(problem.gain).to(device)
@@ -190,12 +190,12 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         power = torch.abs(data) ** 2
         train_power = float(torch.sum(power * train).item())
         val_power = None if val is None else float(torch.sum(power * val).item())
-        state = {**engine.fixed, **engine.params}
-        opt = torch.optim.Adam(list(engine.params.values()), lr=cfg.lr)
+        state = {**net.fixed, **net.params}
+        opt = torch.optim.Adam(list(net.params.values()), lr=cfg.lr)
         chunk = CPU_CHUNK if device.type == "cpu" else None
 
         def network(x: torch.Tensor) -> torch.Tensor:
-            return cast(torch.Tensor, torch.func.functional_call(engine.network, state, (x,)))
+            return cast(torch.Tensor, torch.func.functional_call(net.network, state, (x,)))
 
         def albedo() -> torch.Tensor:
             return volume_albedo(network, coords, gain, problem.shift, chunk)
@@ -242,7 +242,7 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                 fitted = cast(torch.Tensor, best.albedo).cpu().numpy()
         finally:
             torch.set_num_threads(before)
-        return TrainedVolume(fitted, history, loss_value, engine.parameters_per_network,
+        return TrainedVolume(fitted, history, loss_value, net.parameters_per_network,
                              steps=k + 1, best_validation=best.validation)
 
 

@@ -11,12 +11,7 @@ torch = pytest.importorskip("torch")
 import nlosfw_torch.networks as networks  # noqa: E402
 from nlosfw_torch.hash_grid import HashGridEncoding, weighted_rows  # noqa: E402
 
-from nlosfw.model import (  # noqa: E402
-    FieldMode,
-    FieldShape,
-    HashGridFieldConfig,
-    hash_grid_layout,
-)
+from nlosfw.model.neural import FieldMode, FieldShape, HashGridFieldConfig, hash_grid_layout  # noqa: E402
 from nlosfw.plugins import load_plugins  # noqa: E402
 from nlosfw.testing import fixtures  # noqa: E402
 

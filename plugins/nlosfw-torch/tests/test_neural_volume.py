@@ -13,23 +13,19 @@ import pytest
 pytest.importorskip("torch")
 
 import torch
-from nlosfw_torch.engine import TorchEngine
+from nlosfw_torch.backend import TorchBackend
 from nlosfw_torch.neural_volume import TorchPlaneOperator, volume_albedo
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.common import ConfigError, FitError
 from nlosfw.image import grid_layout
-from nlosfw.model import (
-    FieldMode,
-    FieldShape,
-    NetworkBuild,
+from nlosfw.model import SpatialSampling, split_field
+from nlosfw.model.hybrid import plane_stack, stack_bytes
+from nlosfw.model.neural import FieldMode, FieldShape, NetworkBuild
+from nlosfw.model.physics import (
     OperatorOptions,
     SceneOperator,
-    SpatialSampling,
     VoxelLattice,
-    plane_stack,
-    split_field,
-    stack_bytes,
     training_grid,
     validation_split,
     voxel_lattice,
@@ -158,7 +154,7 @@ def test_the_albedo_in_pieces_equals_the_whole_and_so_does_its_gradient(name):
     network = registered_network(name, "torch")
     build = NetworkBuild(network.network_factory, network.config_class(
         seed=3, hidden=[32, 32], device="cpu", steps=10), FieldShape(FieldMode.multi, (23, 31), 4))
-    engine = TorchEngine(build)
+    engine = TorchBackend(build)
     state = {**engine.fixed, **engine.params}
     sizes: list[int] = []
 
@@ -190,8 +186,8 @@ FREQUENCIES = np.linspace(3.0, 6.0, 10)
 DEPTHS = [0.4, 0.6]
 #: Bright voxels (row, column of the lattice) on the plane at 0.5 m; the first is brightest.
 BRIGHT = [((12, 20), 1.0), ((22, 9), 0.4), ((8, 8), 0.3)]
-OPTIONS = {"depth_range": DEPTHS, "depth_step": 0.05, "lateral_step": 1 / N,
-           "workers": 1, "device": "cpu"}
+OPTIONS = {"prior": {"depth": {"range": DEPTHS, "step": 0.05}, "lateral_step": 1 / N,
+                     "workers": 1}, "device": "cpu"}
 
 
 @pytest.fixture(scope="module")
@@ -254,9 +250,13 @@ def test_bad_options_are_one_line_errors_naming_the_option(sparse_scene):
     with pytest.raises(ConfigError, match=r"model\.network.*no_such_network.*valid: .*siren"):
         model.fit(train)
     for option, value in (("steps", 0), ("network_hidden", []), ("albedo_start", 1.5),
-                          ("depth_range", [0.5])):
-        with pytest.raises(ConfigError, match=option):
-            load_plugins().registry.create("model", "neural_volume_torch", {option: value})
+                          ("prior.depth.range", [0.5]), ("prior.likelihood", "poisson")):
+        *groups, name = option.split(".")
+        options: dict = {name: value}
+        for group in reversed(groups):
+            options = {group: options}
+        with pytest.raises(ConfigError, match=option.replace(".", r"\.")):
+            load_plugins().registry.create("model", "neural_volume_torch", options)
 
 
 @pytest.fixture(scope="module")
@@ -356,7 +356,7 @@ def test_a_confocal_fit_is_refused_without_room_for_both_copies(backend, sparse_
         sizes.append(stack_bytes(op))
         return sizes[-1]
 
-    core = "nlosfw.model.neural_volume"
+    core = "nlosfw.model.hybrid.volume"
     monkeypatch.setattr(f"{core}.stack_bytes", counted)
     monkeypatch.setattr(f"{core}.available_memory", lambda: int(1.5 * sizes[-1]))
     monkeypatch.setattr(f"{core}.plane_stack", lambda op: pytest.fail("stack built"))
@@ -434,7 +434,7 @@ def test_a_random_scan_fits_like_a_grid(backend, sparse_scene):
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_fitted_lobe_carries_into_the_network(backend):
     """An 8 cm patch with a k = 8 lobe (analytic simulator, confocal 16 x 16 scan, every
-    other point kept): with ``fit_lobe`` rsd_prior's search finds k (7.3) and the network
+    other point kept): with ``lobe.fit`` rsd_prior's search finds k (7.3) and the network
     trains through the operator with it, predicting the held-out points far better than
     the Lambertian volume (measured, torch and JAX: -20.3 against -9.0 dB)."""
     from nlosfw.simulate import AnalyticSimulator, scene_from_config
@@ -449,11 +449,11 @@ def test_a_fitted_lobe_carries_into_the_network(backend):
     split = split_field(field, spatial_step=2, spectral="none")
     unseen = ~split.spatial_mask
     host = load_plugins()
-    options = {"depth_range": [0.5, 0.5], "lateral_step": 1 / 32, "workers": 1,
-               "device": "cpu", "seed": 1}
+    prior = {"depth": {"range": [0.5, 0.5]}, "lateral_step": 1 / 32, "workers": 1}
     errors, fitted = {}, {}
-    for name, extra in (("lambertian", {}), ("fitted", {"fit_lobe": True})):
-        model = host.registry.create("model", f"neural_volume_{backend}", {**options, **extra})
+    for name, lobe in (("lambertian", {}), ("fitted", {"lobe": {"fit": True}})):
+        model = host.registry.create("model", f"neural_volume_{backend}",
+                                     {"prior": {**prior, **lobe}, "device": "cpu", "seed": 1})
         fitted[name] = model.fit(split.train_field).fitted
         errors[name] = _heldout_nmse_db(field, unseen, model.predict(field.wall_xyz[..., :2],
                                                                      field.frequencies))

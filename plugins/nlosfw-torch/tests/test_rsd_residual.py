@@ -24,7 +24,7 @@ N = 12                                   # 12 x 12 wall points, 1/12 m apart
 FREQUENCIES = np.linspace(2.0, 4.0, 8)
 #: rsd_prior's options (a point scatterer in 0.3-0.7 m) and a small, short network.
 PRIOR = {"iterations": 60, "amplitude": "point", "l1_weight": 0.001, "workers": 1,
-         "depth_range": [0.3, 0.7]}
+         "depth": {"range": [0.3, 0.7]}}
 NETWORK = {"network_steps": 200, "network_lr": 2e-3, "network_batch_size": 0,
            "network_validation_fraction": 0.0, "network_hidden": [16, 16], "device": "cpu"}
 
@@ -54,7 +54,7 @@ def scene():
 
 def _residual_model(backend: str, **options):
     return load_plugins().registry.create("model", f"rsd_residual_{backend}",
-                                          {**PRIOR, **NETWORK, **options})
+                                          {"prior": PRIOR, **NETWORK, **options})
 
 
 def _heldout_nmse_db(full, held, predicted) -> float:
@@ -102,7 +102,7 @@ def test_the_residual_learns_a_smooth_term_the_physics_cannot_represent(backend,
 
 def test_the_penalty_scales_the_residual_by_one_over_one_plus_the_weight(scene):
     """Same seed, weights 0 and 3: the second's departure from rsd_prior is a quarter of
-    the first's at every point (the penalised minimiser, see nlosfw.model.rsd_residual)."""
+    the first's at every point (the penalised minimiser, see nlosfw.model.hybrid.residual)."""
     full, train, _, physics = scene
     departures = []
     for weight in (0.0, 3.0):

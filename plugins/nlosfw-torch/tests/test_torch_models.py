@@ -13,15 +13,10 @@ torch = pytest.importorskip("torch")
 from nlosfw_torch.models import PETorch, SirenTorch, TanhTorch  # noqa: E402
 
 from nlosfw.common import ConfigError, DataError, FitError  # noqa: E402
-from nlosfw.model import (  # noqa: E402
-    TrainingStep,
-    field_metrics,
-    preset_config,
-    split_field,
-)
+from nlosfw.model import TrainingStep, field_metrics, preset_config, split_field  # noqa: E402
 from nlosfw.testing import (  # noqa: E402
-    ENGINE_CASES,
-    assert_engine_matches_numpy,
+    BACKEND_CASES,
+    assert_backend_matches_numpy,
     fixtures,
 )
 
@@ -35,9 +30,9 @@ def _point_field(n: int = 24, n_f: int = 12):
                                        frequencies=np.linspace(2.0, 3.0, n_f))
 
 
-@pytest.mark.parametrize(("family", "mode"), ENGINE_CASES)
+@pytest.mark.parametrize(("family", "mode"), BACKEND_CASES)
 def test_forward_matches_numpy_reference(family, mode):
-    assert_engine_matches_numpy(MODELS[family], mode)
+    assert_backend_matches_numpy(MODELS[family], mode)
 
 
 def test_fit_learns_and_reports_progress():

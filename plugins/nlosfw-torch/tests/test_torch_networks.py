@@ -13,16 +13,15 @@ torch = pytest.importorskip("torch")
 from nlosfw_torch.models import PETorch, SirenTorch  # noqa: E402
 
 from nlosfw.common import DataError, FitError, PluginError  # noqa: E402
-from nlosfw.model import (  # noqa: E402
+from nlosfw.model import NeuralFieldConfig, preset_config  # noqa: E402
+from nlosfw.model.neural import (  # noqa: E402
     FieldNormalisation,
-    NeuralFieldConfig,
     forward_numpy,
     init_parameters,
     network_inputs,
-    preset_config,
     resolve_architecture,
 )
-from nlosfw.plugins import NetworkEngine, hookimpl, load_plugins  # noqa: E402
+from nlosfw.plugins import NetworkBackend, hookimpl, load_plugins  # noqa: E402
 from nlosfw.testing import fixtures  # noqa: E402
 
 FAST = {"steps": 60, "eval_every": 20, "batch_size": 0, "device": "cpu"}
@@ -56,7 +55,7 @@ def _registry(**networks):
     @hookimpl
     def register_networks(register):
         for name, factory in networks.items():
-            register(name, engine="torch", factory=factory, config=NeuralFieldConfig,
+            register(name, backend="torch", factory=factory, config=NeuralFieldConfig,
                      test_config=FAST)
 
     module = types.ModuleType("in_process_networks")
@@ -68,7 +67,7 @@ def _field():
     return fixtures.smooth_field(n=8, frequencies=np.linspace(2.0, 3.0, 5), seed=4)
 
 
-def test_a_registered_network_is_a_field_model_named_after_its_engine():
+def test_a_registered_network_is_a_field_model_named_after_its_backend():
     registry = _registry(pairs=PairNet)
     spec = registry.get("model", "pairs_torch")
     assert spec.distribution == "my-dist" and spec.entry_point == "mine"
@@ -113,23 +112,38 @@ def test_a_wrong_output_shape_is_a_one_line_fit_error():
     assert "\n" not in str(err.value)
 
 
-def test_registration_names_a_valid_engine():
+def test_registration_names_a_valid_backend():
     @hookimpl
     def register_networks(register):
-        register("bad", engine="tensorflow", factory="x:y", config=NeuralFieldConfig)
+        register("bad", backend="tensorflow", factory="x:y", config=NeuralFieldConfig)
 
     module = types.ModuleType("bad_networks")
     module.register_networks = register_networks
-    with pytest.raises(PluginError, match="engine 'tensorflow'; valid: torch, jax"):
+    with pytest.raises(PluginError, match="backend 'tensorflow'; valid: torch, jax"):
         load_plugins(env={}, extra=[("bad-dist", "bad", module)])
-    assert [e.value for e in NetworkEngine] == ["torch", "jax"]
+    assert [e.value for e in NetworkBackend] == ["torch", "jax"]
+
+
+def test_the_old_engine_keyword_still_registers_with_a_warning():
+    @hookimpl
+    def register_networks(register):
+        register("pairs", engine="torch", factory=PairNet, config=NeuralFieldConfig)
+
+    module = types.ModuleType("old_networks")
+    module.register_networks = register_networks
+    with pytest.warns(DeprecationWarning, match=r"engine=\.\.\.\) is deprecated.*backend="):
+        host = load_plugins(env={}, extra=[("old-dist", "old", module)])
+    assert host.registry.get("model", "pairs_torch").factory.backend == NetworkBackend.torch
 
 
 @pytest.mark.parametrize(("options", "problem"), [
-    ({"engine": "torch", "factory": "x:y", "config": NeuralFieldConfig, "colour": "red"},
+    ({"backend": "torch", "factory": "x:y", "config": NeuralFieldConfig, "colour": "red"},
      "unknown option 'colour'"),
-    ({"engine": "torch", "config": NeuralFieldConfig}, "no 'factory' (required: engine, "
-                                                       "factory, config)"),
+    ({"backend": "torch", "config": NeuralFieldConfig}, "no 'factory' (required: factory, "
+                                                        "config)"),
+    ({"factory": "x:y", "config": NeuralFieldConfig}, "no 'backend'; valid: torch, jax"),
+    ({"backend": "torch", "engine": "torch", "factory": "x:y", "config": NeuralFieldConfig},
+     "both backend and engine"),
 ])
 def test_a_wrong_registration_option_is_a_one_line_error(options, problem):
     @hookimpl

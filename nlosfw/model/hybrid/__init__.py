@@ -1,0 +1,48 @@
+"""The hybrids of a neural field and the physics-constrained fit, and the API their backend
+plugins build on.
+
+* ``rsd_residual_<backend>`` (:class:`RSDResidualFieldModel`): ``rsd_prior``'s field plus a
+  small penalised residual network;
+* ``neural_volume_<backend>`` (:class:`NeuralVolumeFieldModel`): a network's non-negative
+  albedo on ``rsd_prior``'s lattice, propagated to the wall by the scene operator, which
+  each backend writes from the numpy constants of :func:`plane_stack`.
+
+Both hold ``rsd_prior``'s options as one group, ``prior``
+(:class:`~nlosfw.model.physics.PriorOptions`)."""
+
+from typing import TYPE_CHECKING
+
+from nlosfw.common.lazy import lazy_exports
+
+if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.model.hybrid.folding import FoldedSpectra, fold_spectra
+    from nlosfw.model.hybrid.residual import RSDResidualConfig, RSDResidualFieldModel
+    from nlosfw.model.hybrid.stack import PlaneStack, aligned_empty, plane_stack, stack_bytes
+    from nlosfw.model.hybrid.training import BestStep, history_entry
+    from nlosfw.model.hybrid.volume import (
+        NeuralVolumeFieldModel,
+        TrainedVolume,
+        VolumeProblem,
+        volume_coordinates,
+    )
+    from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig, VolumePriorOptions
+
+__all__ = [
+    "aligned_empty",
+    "BestStep",
+    "fold_spectra",
+    "FoldedSpectra",
+    "history_entry",
+    "NeuralVolumeConfig",
+    "NeuralVolumeFieldModel",
+    "plane_stack",
+    "PlaneStack",
+    "RSDResidualConfig",
+    "RSDResidualFieldModel",
+    "stack_bytes",
+    "TrainedVolume",
+    "volume_coordinates",
+    "VolumePriorOptions",
+    "VolumeProblem",
+]
+__getattr__, __dir__ = lazy_exports(__name__, __file__)

@@ -1,0 +1,43 @@
+"""What the neural hidden volume's backend training loops keep: the history entries and
+the step with the lowest validation error (:meth:`NeuralVolumeFieldModel.train`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+def history_entry(step: int, loss: float, validation: float | None) -> dict[str, float]:
+    """A fit-history entry of the backends' loops: the step, the training loss and, with
+    validation points, their error (``val_loss``)."""
+    entry: dict[str, float] = {"step": step, "loss": loss}
+    if validation is not None:
+        entry["val_loss"] = validation
+    return entry
+
+
+@dataclass
+class BestStep:
+    """The step with the lowest validation error so far (no validation: the latest) and its
+    albedo (a backend array), for :meth:`NeuralVolumeFieldModel.train`'s loops."""
+
+    patience: int
+    step: int = 0
+    error: float = float("inf")
+    albedo: object = None
+
+    def offer(self, step: int, error: float | None, albedo: object) -> None:
+        """Keep ``albedo`` (the state before step ``step``'s update) if it is the best."""
+        if error is None or error < self.error:
+            self.step, self.error, self.albedo = step, math.inf if error is None else error, \
+                albedo
+
+    @property
+    def validation(self) -> float | None:
+        """The kept step's validation error (None: no validation)."""
+        return self.error if math.isfinite(self.error) else None
+
+    def stop(self, step: int) -> bool:
+        """Whether ``patience`` steps passed without a better validation error."""
+        return self.patience > 0 and math.isfinite(self.error) and \
+            step - self.step >= self.patience
