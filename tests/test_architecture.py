@@ -242,9 +242,15 @@ def test_no_private_hydra_or_omegaconf_api():
 #: The most uses of the word ``Any`` (outside import lines) nlosfw/ may hold: 349 before
 #: issue 19's typed boundary; lower it when you remove more, never raise it.
 MAX_ANY = 134
-#: Modules allowed past MAX_MODULE_LINES until the work named beside them lands.
-OVERSIZED_FOR_NOW: set[str] = set()
+#: A module past MAX_MODULE_LINES is reviewed: split it where it holds two responsibilities,
+#: or list it here with the one responsibility it holds (a line count alone is no reason
+#: to split). Past MAX_LISTED_LINES a module is split whatever it holds.
+ONE_RESPONSIBILITY: dict[str, str] = {
+    "nlosfw/image/fft.py": "the fft imager: a volume's planes imaged by FFT convolution, "
+                           "in frequency blocks or time slices",
+}
 MAX_MODULE_LINES = 450
+MAX_LISTED_LINES = 700
 #: The largest share of nlosfw/'s lines one leaf package may hold (a package's modules,
 #: not its subpackages': ``nlosfw.model`` and ``nlosfw.model.physics`` are measured apart).
 MAX_PACKAGE_SHARE = 0.20
@@ -273,9 +279,14 @@ def test_any_stays_rare():
 def test_no_module_is_over_the_size_limit():
     over = {str(path.relative_to(ROOT)): _lines(path) for path in _core_sources()
             if _lines(path) > MAX_MODULE_LINES}
-    unexpected = {p: n for p, n in over.items() if p not in OVERSIZED_FOR_NOW}
-    assert not unexpected, (f"modules over {MAX_MODULE_LINES} lines (split them by "
-                            f"responsibility): {unexpected}")
+    unlisted = {p: n for p, n in over.items() if p not in ONE_RESPONSIBILITY}
+    assert not unlisted, (f"modules over {MAX_MODULE_LINES} lines: split each where it holds "
+                          f"two responsibilities, or list it in ONE_RESPONSIBILITY with the "
+                          f"one it holds: {unlisted}")
+    too_long = {p: n for p, n in over.items() if n > MAX_LISTED_LINES}
+    assert not too_long, f"modules over {MAX_LISTED_LINES} lines: {too_long}"
+    stale = sorted(set(ONE_RESPONSIBILITY) - set(over))
+    assert not stale, f"ONE_RESPONSIBILITY lists modules no longer over the limit: {stale}"
 
 
 def _leaf_package(path: Path) -> str:
