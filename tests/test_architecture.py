@@ -23,6 +23,7 @@ LAYERS = {
     "nlosfw.transform": 2,
     "nlosfw.model": 3,
     "nlosfw.image": 3,
+    "nlosfw.evaluation": 4,
     "nlosfw.plugins": 4,
     "nlosfw.testing": 5,
     "nlosfw.pipeline": 5,

@@ -118,10 +118,11 @@ def run_plan(picked: Mapping[str, str], settings: RunSettings) -> list[str]:
     if not sources:  # model=none: the capture imaged alone
         parts.append(f"1 reconstruction ({picked['imager']})")
         return [" → ".join(parts), "= the capture's field [no field model: model=none]"]
-    thinning = settings.split.thinning
-    fields = {"true": "half B's full scan (count splitting)" if thinning else "the reference",
+    count_splitting = settings.split.count_splitting
+    fields = {"true": ("half B's full scan (count splitting)" if count_splitting
+                       else "the reference"),
               "raw": "the training samples"}
-    if thinning:
+    if count_splitting:
         fields["ceiling"] = "half A's full scan"
     for label, plugin in sources.items():
         fields[label] = "the baseline" if label == "interp" else plugin

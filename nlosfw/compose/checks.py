@@ -18,13 +18,16 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.photon_counts import photon_counts
 from nlosfw.capture.source import file_transient_shape, load_file_capture
-from nlosfw.capture.thinning import check_split, photon_counts
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import is_schema_node, problem
 from nlosfw.compose.capture_checks import check_capture_kind, check_scene_preprocessing
 from nlosfw.compose.output_dirs import check_output_dirs
 from nlosfw.compose.store import hydra_session
+from nlosfw.evaluation.count_splitting import OPTION as SPLIT_OPTION
+from nlosfw.evaluation.count_splitting import check_count_split
+from nlosfw.evaluation.noise_floor import DFT_TRANSFORMS, kernel_power
 from nlosfw.pipeline.budget import check_memory
 from nlosfw.pipeline.model_budget import plugin_requires
 from nlosfw.pipeline.plan import check_model_choice, check_reference_choice
@@ -39,7 +42,6 @@ from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
 from nlosfw.simulate.geometry import validate_scene
 from nlosfw.simulate.scene import NoiseModel, scene_from_config
 from nlosfw.transform.counts import check_counts_times
-from nlosfw.transform.noise_floor import DFT_TRANSFORMS, kernel_power
 
 if TYPE_CHECKING:
     from hydra.core.config_loader import ConfigLoader
@@ -212,8 +214,8 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     if settings.capture.path is None:
         scene = validate_scene(scene_from_config(cfg.get("scene"))).scene
         if scene.noise.model != NoiseModel.poisson:   # what needs counts is refused here
-            if settings.split.thinning:
-                raise ConfigError("split.thinning", "count splitting needs photon counts, but "
+            if settings.split.count_splitting:
+                raise ConfigError(SPLIT_OPTION, "count splitting needs photon counts, but "
                                   "the simulated capture has no photon noise; set "
                                   "scene.noise.model=poisson")
             if settings.capture.pileup_pulses is not None:
@@ -239,8 +241,9 @@ def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
     # here, before any output exists
     loaded = load_file_capture(settings.capture, formats)
     check_capture_kind(loaded.prepared.capture, cfg, host, str(loaded.path))
-    if settings.split.thinning:  # count splitting needs photon counts: refused here, not later
-        check_split(loaded.prepared.capture, settings.split.thinning_seed, str(loaded.path))
+    if settings.split.count_splitting:  # it needs photon counts: refused here, not later
+        check_count_split(loaded.prepared.capture, settings.split.count_splitting_seed,
+                          str(loaded.path))
         _check_noise_floor(cfg, host, loaded.prepared.capture)
     if counts_needed:
         likelihood = ("model.likelihood", "the Poisson likelihood")
@@ -271,7 +274,7 @@ def _needs_counts(config: object, settings: RunSettings, option: str) -> bool:
 
 
 def _check_noise_floor(cfg: Mapping[str, object], host: PluginHost, capture: Capture,
-                       option: str = "split.thinning", purpose: str = "count splitting"
+                       option: str = SPLIT_OPTION, purpose: str = "count splitting"
                        ) -> None:
     """Count splitting's noise floor (and a Poisson likelihood) needs a DFT-like transform:
     the built-in ones are; another is probed on the capture (a ConfigError for ``option``

@@ -1,4 +1,5 @@
-"""The reference picture of a run: the capture's histograms imaged at their native bin width.
+"""The reference picture of a run: whether the capture's histograms are imaged at their
+native bin width, and what it costs.
 
 Every source a run scores is imaged from the same band (for a capture file and a
 time-domain imager, the measured-capture band of :mod:`nlosfw.image.measured`), so scores
@@ -6,30 +7,22 @@ stay fair. Beside them the reconstruct stage images the whole capture's histogra
 measured (every DFT bin, :func:`~nlosfw.image.measured.histogram_field`), with the run's
 imager on the run's planes: the picture the authors' code makes. It is never scored
 (:class:`~nlosfw.pipeline.results.Reconstructions` keeps it apart from the sources);
-``reconstruction.histogram_reference`` chooses when it is made (:func:`reference_reason`).
+``reconstruction.histogram_reference`` chooses when it is made (:func:`reference_reason`),
+and the memory it needs (:func:`reference_bytes`, :func:`memory_reason`) whether it can be.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 
 import numpy as np
 import scipy.fft
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.files import format_bytes
-from nlosfw.common.logs import FILE_ONLY
-from nlosfw.image.measured import histogram_field
+from nlosfw.common.memory import available_memory
+from nlosfw.evaluation.count_splitting import CountSplit
 from nlosfw.image.transient import full_band_frequencies
-from nlosfw.pipeline.budget import available_memory
-from nlosfw.pipeline.context import StageContext
-from nlosfw.pipeline.results import CaptureResult
-from nlosfw.transform.fft import FFTTransform
-from nlosfw.transform.field import PhasorField
-
-log = logging.getLogger(__name__)
 
 #: The reference picture's name in the run's files: ``figures/<view>_native-bins.png`` and
 #: ``reconstructions/native-bins.hdf5`` (not an identifier, so no ``compare`` label is it).
@@ -45,31 +38,41 @@ REFERENCE_TITLE = "reference: the measured histograms (native bins)"
 _VOLUMES_AT_ONCE = 8
 
 
-def reference_capture(result: CaptureResult) -> Capture:
-    """The histograms as measured: the run's capture, or with count splitting half A's and
-    half B's counts added back together."""
-    if result.thinning is None:
-        return result.capture
-    a, b = result.thinning.a, result.thinning.b
-    return a.replace(H=np.asarray(a.H) + np.asarray(b.H))
+def reference_capture(capture: Capture, count_split: CountSplit | None = None) -> Capture:
+    """The histograms as measured: the run's ``capture``, or with count splitting half A's
+    and half B's counts added back together."""
+    return capture if count_split is None else count_split.whole
 
 
-def reference_reason(run: StageContext, result: CaptureResult) -> str | None:
-    """Why the run makes no reference picture (None: it makes one), in a few words."""
-    choice = run.plan.settings.reconstruction.histogram_reference
-    imager = run.plan.imager
+def reference_reason(choice: bool | None, imager: str, time_domain: bool, from_file: bool,
+                     capture: Capture) -> str | None:
+    """Why the run makes no reference picture (None: it makes one), in a few words.
+
+    ``choice``: ``reconstruction.histogram_reference``; ``imager``: the imager's name,
+    ``time_domain``: whether it images the whole time grid (lct, fk, fbp) rather than a
+    band; ``from_file``: whether ``capture`` (the run's) was read from a file.
+    """
     if choice is False:
         return "reconstruction.histogram_reference=false"
-    if not imager.plugin.full_grid_only:
-        return f"imager {imager.name} images a band, not the histograms"
-    if choice is None and result.source != "file":
+    if not time_domain:
+        return f"imager {imager} images a band, not the histograms"
+    if choice is None and not from_file:
         return "a simulated capture (reconstruction.histogram_reference=true makes one)"
-    capture = result.capture
     if not capture.is_time_domain:
         return "the capture is stored in frequency, with no histograms"
     if not capture.is_confocal:
-        return f"imager {imager.name} images confocal captures only"
+        return f"imager {imager} images confocal captures only"
     return None
+
+
+def memory_reason(needed: float, allow_large: bool) -> str | None:
+    """Why the reference picture, needing ``needed`` bytes, is not made (None: it fits the
+    available memory, or ``limits.allow_large`` makes it anyway)."""
+    room = available_memory()
+    if room is None or needed <= room or allow_large:
+        return None
+    return (f"imaging the histograms at native bins needs about {format_bytes(needed)}, but "
+            f"{format_bytes(room)} are available (limits.allow_large=true makes it anyway)")
 
 
 def reference_bytes(capture: Capture, depths: np.ndarray, options: object) -> float:
@@ -93,44 +96,3 @@ def reference_bytes(capture: Capture, depths: np.ndarray, options: object) -> fl
     padded = 8.0 * scipy.fft.next_fast_len(2 * steps) * 4 * walls        # complex64
     return (_VOLUMES_AT_ONCE * padded + 8.0 * n * walls + 16.0 * n * freqs.size
             + 16.0 * freqs.size * walls)
-
-
-def reference_field(run: StageContext, result: CaptureResult,
-                    voxels: np.ndarray) -> PhasorField | None:
-    """The field of the capture's histograms at their native bin width (every positive DFT
-    bin, the run's ``fft`` transform options kept), carrying the capture's imaging hints;
-    None, with the reason in the log, when the run makes no reference picture (run.log
-    only where it does not apply, a warning when ``reconstruction.histogram_reference``
-    asked for one)."""
-    settings = run.plan.settings
-    asked = settings.reconstruction.histogram_reference is True
-    reason = reference_reason(run, result)
-    if reason is not None:
-        _no_reference(asked, "%s", reason)
-        return None
-    capture = reference_capture(result)
-    depths = np.unique(np.asarray(voxels, dtype=float)[..., 2])
-    needed = reference_bytes(capture, depths, run.plan.imager.plugin.config)
-    room = available_memory()
-    if room is not None and needed > room and not settings.limits.allow_large:
-        _no_reference(asked, "imaging the histograms at native bins needs about %s, but %s "
-                      "are available (limits.allow_large=true makes it anyway)",
-                      format_bytes(needed), format_bytes(room))
-        return None
-    transform = run.plan.transform.plugin
-    field = histogram_field(capture, transform.config
-                            if isinstance(transform, FFTTransform) else None)
-    hints = result.capture.scene_info.get(HINTS_KEY)
-    if hints is not None and HINTS_KEY not in field.metadata:
-        field = field.replace(metadata={**field.metadata, HINTS_KEY: hints})
-    log.info("reference picture: the histograms at native bins, %d frequencies to %.4g "
-             "cycles/m (estimated memory %s; not scored)", field.n_frequencies,
-             float(field.frequencies.max()), format_bytes(needed))
-    return field
-
-
-def _no_reference(asked: bool, reason: str, *args: object) -> None:
-    """Log why no reference picture is made: a console warning when
-    ``reconstruction.histogram_reference=true`` asked for one, else run.log only."""
-    log.log(logging.WARNING if asked else logging.INFO, "no reference picture: " + reason,
-            *args, extra=None if asked else FILE_ONLY)

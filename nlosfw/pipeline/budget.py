@@ -177,7 +177,8 @@ def _array_parts(config: Any, shape: tuple[int, int, int, str]) -> list[MemoryPa
                else int(_get(config, "reconstruction.single_frequency_images", 2)))
     history = _history(_get(config, "model")) + sum(_history(o) for o in compare.values())
     per_field = 16.0 * freqs * sensors * lasers
-    thinned = bool(_get(config, "split.thinning", False))  # halves A and B, B's field, ceiling
+    # count splitting: halves A and B, B's field, the ceiling
+    thinned = bool(_get(config, "split.count_splitting", False))
     imaged = fields + int(thinned)
     return [
         MemoryPart("the transient H", why,

@@ -12,7 +12,7 @@ Names (relative to the run directory; see the README):
 ``field_model.npz``       the trained field model (its plugin's format)
 ``fields/<source>.hdf5``  the fields imaged: true, raw, model, interp
 ``reconstructions/<source>.hdf5``  their reconstructions (``native-bins.hdf5``: the
-                          reference picture, :mod:`nlosfw.pipeline.reference`)
+                          reference picture, :mod:`nlosfw.evaluation.reference`)
 ``figures/*.png``         figures
 ``report.html``           all of it in one self-contained page
 ========================  ================================================

@@ -46,7 +46,7 @@ def not_finite(value: float) -> str:
 
 def error_values(values: Mapping[str, Number]) -> tuple[dict[str, float | None],
                                                         dict[str, str]]:
-    """The errors of one set (:func:`nlosfw.model.protocol.error_metrics`'s values but
+    """The errors of one set (:func:`nlosfw.evaluation.error_metrics`'s values but
     ``n_samples``) with every one that is not a finite number None, and why each None is."""
     out: dict[str, float | None] = {}
     reasons: dict[str, str] = {}

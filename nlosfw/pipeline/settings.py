@@ -8,15 +8,16 @@ every other config.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from omegaconf import MISSING
 
 from nlosfw.capture.source import CaptureSource
 from nlosfw.common.config import Choice, config_from_mapping, require, require_seed
 from nlosfw.common.schema import is_schema_node
-from nlosfw.model.protocol import SpatialPattern, SpatialSampling, SpectralSplit
+from nlosfw.evaluation.splits import SpatialPattern, SpatialSampling, SpectralSplit
 from nlosfw.simulate.scene import Scene
 
 #: The config groups that select a scene or a plugin (plus presets and acquisitions).
@@ -49,6 +50,9 @@ class StopAfter(Choice):
 class SplitSettings:
     """Which samples the field model trains on (thesis: 32x32 of 64x64, 90% of frequencies)."""
 
+    renamed_options: ClassVar[Mapping[str, str]] = {
+        "thinning": "count_splitting", "thinning_seed": "count_splitting_seed"}
+
     spatial_step: int = 2
     """Keep every k-th wall sample in x and y for training (pattern grid)."""
     pattern: SpatialPattern = SpatialPattern.grid
@@ -63,19 +67,19 @@ class SplitSettings:
     """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
     spectral_fraction: float = 0.1
     """The fraction of the frequencies held out (``interleaved``: every 1/fraction-th)."""
-    thinning: bool = False
+    count_splitting: bool = False
     """Count splitting: split every bin's photon count n into Binomial(n, 1/2) (capture A)
     and the rest (B), two independent Poisson captures of half the exposure; the models
     train on A's kept wall points, every score uses B (the held-out measurement error and
     its noise floor; reconstructions against B's full scan, with A's full scan as the
     ceiling). Needs raw integer counts (no capture.background); approximate under dead
     time and pile-up; assumes equal dwell per scan point."""
-    thinning_seed: int = 0
+    count_splitting_seed: int = 0
     """The seed of the binomial split (count splitting)."""
 
     def __post_init__(self) -> None:
         require_seed(self.seed, "seed")
-        require_seed(self.thinning_seed, "thinning_seed")
+        require_seed(self.count_splitting_seed, "count_splitting_seed")
         require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
         require(self.spatial_fraction is None or 0 < self.spatial_fraction <= 1,
                 "spatial_fraction", f"must be in (0, 1] or null, got {self.spatial_fraction}")
@@ -234,10 +238,11 @@ class RunSettings:
     """Reference numbers of a thesis experiment preset, reported next to ours."""
 
     def __post_init__(self) -> None:
-        require(not (self.split.thinning and self.capture.background), "split.thinning",
-                "count splitting needs raw photon counts; a background subtraction "
-                "(capture.background) makes them non-integer: drop one of the two")
-        require(not (self.split.thinning and self.capture.pileup_pulses), "split.thinning",
+        require(not (self.split.count_splitting and self.capture.background),
+                "split.count_splitting", "count splitting needs raw photon counts; a background "
+                "subtraction (capture.background) makes them non-integer: drop one of the two")
+        require(not (self.split.count_splitting and self.capture.pileup_pulses),
+                "split.count_splitting",
                 "count splitting needs raw photon counts; the pile-up correction "
                 "(capture.pileup_pulses) turns them into estimates: drop one of the two")
         reserved = {"true", "raw", "model", "interp", "ceiling"}
