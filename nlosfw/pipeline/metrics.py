@@ -16,9 +16,10 @@ other artefact of a run is byte-identical (``tests/hostile/test_determinism.py``
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Final, Literal
+from typing import Annotated, Any, Final, Literal, cast
 
 import msgspec
+from msgspec import inspect as mi
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import DataError
@@ -430,3 +431,20 @@ def metrics_outline() -> str:
     """The compact outline of metrics.json shown in the README."""
     return outline(RunMetrics)
 
+
+def _numbers(struct: type[msgspec.Struct], prefix: str = "") -> tuple[str, ...]:
+    """The dotted paths of the numbers in ``struct`` and the structs it holds."""
+    out: list[str] = []
+    for entry in cast(mi.StructType, mi.type_info(struct)).fields:
+        kind = entry.type.type if isinstance(entry.type, mi.Metadata) else entry.type
+        kinds = kind.types if isinstance(kind, mi.UnionType) else (kind,)
+        nested = [k for k in kinds if isinstance(k, mi.StructType)]
+        if nested:
+            out += _numbers(nested[0].cls, f"{prefix}{entry.name}.")
+        elif any(isinstance(k, (mi.IntType, mi.FloatType)) for k in kinds):
+            out.append(f"{prefix}{entry.name}")
+    return tuple(out)
+
+
+#: The numbers of ``field.<source>`` by dotted path (what published numbers compare with).
+FIELD_NUMBERS: Final = _numbers(FieldMetrics)

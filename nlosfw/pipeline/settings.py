@@ -18,6 +18,7 @@ from nlosfw.capture.source import CaptureSource
 from nlosfw.common.config import Choice, config_from_mapping, require, require_seed
 from nlosfw.common.schema import is_schema_node
 from nlosfw.evaluation.splits import SpatialPattern, SpatialSampling, SpectralSplit
+from nlosfw.pipeline.metrics import FIELD_NUMBERS
 from nlosfw.simulate.scene import Scene
 
 #: The config groups that select a scene or a plugin (plus presets and acquisitions).
@@ -212,8 +213,51 @@ class LimitSettings:
 
 
 @dataclass(frozen=True)
+class ReferenceTable:
+    """Published numbers a run is compared with: one table of one source (a paper's, a
+    thesis's), reported next to the run's own in ``reference_numbers.md`` and in a sweep's
+    ``report.md``."""
+
+    title: str = ""
+    """Where the numbers were published and what they show (the table's heading)."""
+    note: str = ""
+    """What a reader comparing them should know (printed under the table)."""
+    rows: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """By field-model source (``model``, ``interp`` or a ``compare`` label): the row's
+    ``label``, and each published number where metrics.json's ``field.<source>`` holds
+    the run's own, in its units (``n_parameters``, ``training_values``,
+    ``parameters_per_value``, ``fit: {final_loss, seconds, steps}``, ...)."""
+
+    def __post_init__(self) -> None:
+        for source, row in self.rows.items():
+            for path, value in published_numbers(row):
+                require(path in FIELD_NUMBERS, f"rows.{source}.{path}",
+                        "names no number of metrics.json's field.<source>; valid: "
+                        + ", ".join(FIELD_NUMBERS))
+                require(isinstance(value, (int, float)) and not isinstance(value, bool),
+                        f"rows.{source}.{path}", f"must be a number, got {value!r}")
+
+
+def published_numbers(row: Mapping[str, object], prefix: str = "") -> list[tuple[str, object]]:
+    """(dotted path, value) of every published number of a :class:`ReferenceTable` row, in
+    their order (its ``label`` left out)."""
+    out: list[tuple[str, object]] = []
+    for key, value in row.items():
+        path = f"{prefix}{key}"
+        if path == "label":
+            continue
+        if isinstance(value, Mapping):
+            out += published_numbers(value, f"{path}.")
+        else:
+            out.append((path, value))
+    return out
+
+
+@dataclass(frozen=True)
 class RunSettings:
     """Everything in a run's config except the selected scene and plugins."""
+
+    renamed_options: ClassVar[Mapping[str, str]] = {"thesis": "reference"}
 
     stop_after: StopAfter | None = None
     """The last stage to run (null: every stage)."""
@@ -234,8 +278,9 @@ class RunSettings:
     compare: dict[str, dict[str, Any]] = field(default_factory=dict)
     """More field models fitted and imaged beside ``model`` and interp: label -> options with
     the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""
-    thesis: dict[str, Any] = field(default_factory=dict)
-    """Reference numbers of a thesis experiment preset, reported next to ours."""
+    reference: dict[str, ReferenceTable] = field(default_factory=dict)
+    """Published numbers to compare the run with, by table name (e.g. ``thesis_table_5_1``):
+    each a :class:`ReferenceTable`."""
 
     def __post_init__(self) -> None:
         require(not (self.split.count_splitting and self.capture.background),
@@ -251,6 +296,11 @@ class RunSettings:
                     f"labels must be identifiers other than {', '.join(sorted(reserved))}")
             require(isinstance(options, dict) and bool(options.get("name")),
                     f"compare.{label}", "needs the plugin name: {name: <model plugin>, ...}")
+        fitted = {"model", "interp", *self.compare}
+        for name, table in self.reference.items():
+            for source in table.rows:
+                require(source in fitted, f"reference.{name}.rows.{source}",
+                        f"names no field model of the run; valid: {', '.join(sorted(fitted))}")
 
     @property
     def last_stage(self) -> str:

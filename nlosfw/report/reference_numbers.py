@@ -1,73 +1,72 @@
-"""Our numbers next to the thesis's (Tables 4.1 and 5.1), for runs of the thesis presets.
+"""The run's numbers next to published ones: the tables of a run's ``reference``.
 
-A preset puts the reference values in its config under ``thesis.rows``, keyed by the
-field-model source they compare with (``model`` or an entry of ``compare``)::
+A preset puts the numbers a source published into ``reference.<table>``
+(:class:`~nlosfw.pipeline.settings.ReferenceTable`): a title, a note, and rows keyed by
+the field-model source they compare with (``model`` or a ``compare`` label), each number
+at the place metrics.json's ``field.<source>`` holds the run's own::
 
-    thesis:
-      figure: "5.4"
-      rows:
-        model: {table: "5.1", experiment: "Figure 5.4", loss: 0.0032978356,
-                training_seconds: 673.98}
+    reference:
+      thesis_table_5_1:
+        title: "Thesis, Table 5.1: losses and training times"
+        rows:
+          model: {label: "Figure 5.4", fit: {final_loss: 0.0032978356, seconds: 673.98}}
+
+:func:`reference_comparison` makes one markdown table per reference table the records
+name, each published number beside the run's.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from nlosfw.common.config import Scalar
+from nlosfw.pipeline.metrics import FieldMetrics
+from nlosfw.pipeline.settings import ReferenceTable, published_numbers
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import markdown_table
 
-_TABLE_41 = ("experiment", "parameters (ours)", "parameters (thesis)", "data size (ours)",
-             "data size (thesis)", "parameters/data % (ours)", "parameters/data % (thesis)",
-             "run")
-_TABLE_51 = ("hidden scene", "loss L2 (ours)", "loss L2 (thesis)", "training s (ours)",
-             "training s (thesis)", "steps (ours)", "steps (thesis)", "run")
+#: The file a run's comparison is written to (by the report plugin).
+FILE_NAME = "reference_numbers.md"
 
 
-def _fmt(value: Scalar, spec: str = ".4g") -> str:
+def _cell(value: object) -> str:
     if value is None:
         return "-"
-    if isinstance(value, (int, float)):
-        return format(value, spec)
-    return str(value)
+    return format(value, ".4g") if isinstance(value, float) else str(value)
 
 
-def thesis_comparison(records: Sequence[RunRecord]) -> str:
-    """Markdown tables in the thesis's format, ours next to the published values."""
-    table41: list[tuple[str, ...]] = []
-    table51: list[tuple[str, ...]] = []
+def ours(entry: FieldMetrics | None, path: str) -> Scalar:
+    """The run's number at ``path`` (dotted) of its field-model entry, None where it has none."""
+    node: object = entry
+    for key in path.split("."):
+        node = getattr(node, key, None)
+    return node if isinstance(node, (int, float)) else None
+
+
+def reference_comparison(records: Sequence[RunRecord]) -> str:
+    """Markdown: for each reference table the records name (in the order they name them),
+    one row per run and source, each published number beside the run's own."""
+    tables: dict[str, tuple[ReferenceTable, list[tuple[RunRecord, str, Mapping[str, object]]]]]
+    tables = {}
     for record in records:
-        rows = record.thesis.get("rows") or {}
-        for source, ref in rows.items():
-            ours = record.metrics.field_entry(source)
-            if str(ref.get("table")) == "4.1":
-                params = None if ours is None else ours.n_parameters
-                data = None if ours is None else ours.training_values
-                ratio = 100.0 * params / data if params and data else None
-                table41.append((ref.get("experiment", ""), _fmt(params, "d"),
-                                _fmt(ref.get("parameters"), "d"), _fmt(data, "d"),
-                                _fmt(ref.get("data_size"), "d"), _fmt(ratio, ".2f"),
-                                _fmt(ref.get("ratio_percent"), ".2f"), record.name))
-            elif str(ref.get("table")) == "5.1":
-                fit = None if ours is None else ours.fit
-                table51.append((ref.get("experiment", ""),
-                                _fmt(None if fit is None else fit.final_loss),
-                                _fmt(ref.get("loss")),
-                                _fmt(None if fit is None else fit.seconds, ".1f"),
-                                _fmt(ref.get("training_seconds"), ".1f"),
-                                _fmt(None if fit is None else fit.steps, "d"), "100000",
-                                record.name))
+        for name, table in record.reference.items():
+            rows = tables.setdefault(name, (table, []))[1]
+            rows += [(record, source, row) for source, row in table.rows.items()]
     out = []
-    if table41:
-        out.append("### Table 4.1: parameters and compression\n\n"
-                   + markdown_table(_TABLE_41, table41)
-                   + "\nThe thesis's percentages do not follow from its own parameter and data "
-                   "counts (942/2048 = 46.0 %, 914/2048 = 44.6 %); ours are computed.\n")
-    if table51:
-        out.append("### Table 5.1: losses and training times\n\n"
-                   + markdown_table(_TABLE_51, table51)
-                   + "\nLosses are mean squared errors on data normalised into (-1, 1). The "
-                   "thesis trained 100,000 full-batch epochs (about 675 s per scene on its "
-                   "hardware); our defaults train far fewer minibatch steps on 2 CPU cores.\n")
+    for name, (table, rows) in tables.items():
+        paths = list(dict.fromkeys(path for _, _, row in rows
+                                   for path, _ in published_numbers(row)))
+        header = ["row", *(f"{p} ({which})" for p in paths for which in ("ours",
+                                                                          "published")),
+                  "run"]
+        cells = []
+        for record, source, row in rows:
+            published = dict(published_numbers(row))
+            entry = record.metrics.field_entry(source)
+            cells.append([str(row.get("label", source)),
+                          *(_cell(v) for p in paths
+                            for v in (ours(entry, p), published.get(p))),
+                          record.name])
+        text = f"### {table.title or name}\n\n" + markdown_table(header, cells)
+        out.append(text + (f"\n{' '.join(table.note.split())}\n" if table.note else ""))
     return "\n".join(out)
