@@ -84,7 +84,7 @@ def test_every_config_group_has_one_entry_with_its_choices(page):
     from dataclasses import fields
 
     for f in fields(RunSettings):
-        if f.name != "reference":
+        if f.name != "published":
             assert f" {f.name}" in groups, f.name
 
 

@@ -38,7 +38,7 @@ def preset(name):
 
 def published_rows(cfg: dict) -> dict:
     """The rows of every reference table of a preset's config, by source."""
-    return {source: row for table in cfg["reference"].values()
+    return {source: row for table in cfg["published"].values()
             for source, row in table["rows"].items()}
 
 
@@ -75,7 +75,7 @@ def test_every_preset_runs_at_reduced_size(tmp_path, name):
     cfg = preset(name)
     for source in published_rows(cfg):
         assert metrics["field"][source]["splits"]["all"]["nmse_db"] is not None
-    table = (run / "reference_numbers.md").read_text()
+    table = (run / "published_numbers.md").read_text()
     assert "### Thesis, Table" in table and "(published)" in table
     assert "| " + run.name in table
 

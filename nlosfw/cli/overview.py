@@ -44,7 +44,7 @@ def changed_options(config: Mapping[str, Any], host: PluginHost) -> list[str]:
         name = str(node.pop("name", ""))
         out += _diff(group, node, _plugin_defaults(host, group, name))
     settings = {k: v for k, v in config.items()
-                if k not in SELECTOR_GROUPS and k not in ("reference", "compare")}
+                if k not in SELECTOR_GROUPS and k not in ("published", "compare")}
     out += _diff("", settings, config_to_dict(RunSettings()))
     for label, options in (config.get("compare") or {}).items():
         rest = dict(options)
@@ -73,8 +73,8 @@ def overview_lines(config: Mapping[str, Any], host: PluginHost,
         lines.append("  changed from the defaults: " + escape(", ".join(shown) + more))
     else:
         lines.append("  every option at its default")
-    if settings.reference:
-        titles = [table.title or name for name, table in settings.reference.items()]
+    if settings.published:
+        titles = [table.title or name for name, table in settings.published.items()]
         lines.append("  compared with published numbers: " + escape("; ".join(titles)))
     plan = run_plan(picked, settings)
     lines.append("  plan: " + escape(plan[0]))

@@ -14,7 +14,7 @@ Names (relative to the run directory; see the README):
 ``reconstructions/<source>.hdf5``  their reconstructions (``native-bins.hdf5``: the
                           reference picture, :mod:`nlosfw.evaluation.reference`)
 ``figures/*.png``         figures
-``reference_numbers.md``  published numbers next to the run's (its ``reference`` tables)
+``published_numbers.md``  published numbers next to the run's (its ``published`` tables)
 ``report.html``           all of it in one self-contained page
 ========================  ================================================
 
@@ -50,7 +50,7 @@ ARTEFACTS = {
 }
 #: Top-level names a run may create in its directory (Hydra adds .hydra and run.log).
 PLANNED_NAMES = (*ARTEFACTS.values(), "fields", "reconstructions", "figures",
-                 "reference_numbers.md", "report.html")
+                 "published_numbers.md", "report.html")
 
 #: Writes one file at the temporary path it is given.
 FileWriter = Callable[[Path], object]

@@ -213,9 +213,9 @@ class LimitSettings:
 
 
 @dataclass(frozen=True)
-class ReferenceTable:
+class PublishedTable:
     """Published numbers a run is compared with: one table of one source (a paper's, a
-    thesis's), reported next to the run's own in ``reference_numbers.md`` and in a sweep's
+    thesis's), reported next to the run's own in ``published_numbers.md`` and in a sweep's
     ``report.md``."""
 
     title: str = ""
@@ -230,7 +230,7 @@ class ReferenceTable:
 
     def __post_init__(self) -> None:
         for source, row in self.rows.items():
-            for path, value in published_numbers(row):
+            for path, value in row_numbers(row):
                 require(path in FIELD_NUMBERS, f"rows.{source}.{path}",
                         "names no number of metrics.json's field.<source>; valid: "
                         + ", ".join(FIELD_NUMBERS))
@@ -238,8 +238,8 @@ class ReferenceTable:
                         f"rows.{source}.{path}", f"must be a number, got {value!r}")
 
 
-def published_numbers(row: Mapping[str, object], prefix: str = "") -> list[tuple[str, object]]:
-    """(dotted path, value) of every published number of a :class:`ReferenceTable` row, in
+def row_numbers(row: Mapping[str, object], prefix: str = "") -> list[tuple[str, object]]:
+    """(dotted path, value) of every published number of a :class:`PublishedTable` row, in
     their order (its ``label`` left out)."""
     out: list[tuple[str, object]] = []
     for key, value in row.items():
@@ -247,7 +247,7 @@ def published_numbers(row: Mapping[str, object], prefix: str = "") -> list[tuple
         if path == "label":
             continue
         if isinstance(value, Mapping):
-            out += published_numbers(value, f"{path}.")
+            out += row_numbers(value, f"{path}.")
         else:
             out.append((path, value))
     return out
@@ -257,7 +257,7 @@ def published_numbers(row: Mapping[str, object], prefix: str = "") -> list[tuple
 class RunSettings:
     """Everything in a run's config except the selected scene and plugins."""
 
-    renamed_options: ClassVar[Mapping[str, str]] = {"thesis": "reference"}
+    renamed_options: ClassVar[Mapping[str, str]] = {"thesis": "published"}
 
     stop_after: StopAfter | None = None
     """The last stage to run (null: every stage)."""
@@ -278,9 +278,9 @@ class RunSettings:
     compare: dict[str, dict[str, Any]] = field(default_factory=dict)
     """More field models fitted and imaged beside ``model`` and interp: label -> options with
     the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""
-    reference: dict[str, ReferenceTable] = field(default_factory=dict)
+    published: dict[str, PublishedTable] = field(default_factory=dict)
     """Published numbers to compare the run with, by table name (e.g. ``thesis_table_5_1``):
-    each a :class:`ReferenceTable`."""
+    each a :class:`PublishedTable`."""
 
     def __post_init__(self) -> None:
         require(not (self.split.count_splitting and self.capture.background),
@@ -297,9 +297,9 @@ class RunSettings:
             require(isinstance(options, dict) and bool(options.get("name")),
                     f"compare.{label}", "needs the plugin name: {name: <model plugin>, ...}")
         fitted = {"model", "interp", *self.compare}
-        for name, table in self.reference.items():
+        for name, table in self.published.items():
             for source in table.rows:
-                require(source in fitted, f"reference.{name}.rows.{source}",
+                require(source in fitted, f"published.{name}.rows.{source}",
                         f"names no field model of the run; valid: {', '.join(sorted(fitted))}")
 
     @property

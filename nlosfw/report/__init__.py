@@ -16,8 +16,8 @@ from nlosfw.common.deprecation import moved_names
 from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.report.published_numbers import published_comparison
     from nlosfw.report.records import RunRecord, find_runs, read_run
-    from nlosfw.report.reference_numbers import reference_comparison
     from nlosfw.report.study import Stat, StudyRow, study_figure, study_rows
     from nlosfw.report.sweep import write_report
     from nlosfw.report.tables import format_cell, markdown_table
@@ -32,12 +32,12 @@ __all__ = [
     "read_run",
     "study_figure",
     "study_rows",
-    "reference_comparison",
+    "published_comparison",
     "write_report",
 ]
 
 #: The names this package exported before the thesis became one source of published numbers.
-MOVED = {"thesis_comparison": "nlosfw.report:reference_comparison"}
+MOVED = {"thesis_comparison": "nlosfw.report:published_comparison"}
 
 _lazy_getattr, __dir__ = lazy_exports(__name__, __file__)
 __getattr__ = moved_names(__name__, MOVED, _lazy_getattr)

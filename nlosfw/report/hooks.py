@@ -2,7 +2,7 @@
 
 Registered through nlosfw's own entry point (``report`` in the ``nlosfw`` group), like any
 third-party plugin: at the report stage of a complete run, the comparison with published
-numbers (for a run with ``reference`` tables, such as the thesis presets) and the figures
+numbers (for a run with ``published`` tables, such as the thesis presets) and the figures
 (of a run stopped before it imaged: the capture's time profile); after ``metrics.json``,
 the run's ``report.html``.
 matplotlib is imported only when a figure is drawn.
@@ -24,15 +24,15 @@ log = logging.getLogger(__name__)
 @hookimpl
 def write_run_report(files: RunFiles, results: RunResults, metrics: RunMetrics,
                      settings: RunSettings) -> None:
-    """The comparison with published numbers (a run with ``reference`` tables) and the
+    """The comparison with published numbers (a run with ``published`` tables) and the
     figures."""
-    if settings.reference:
+    if settings.published:
+        from nlosfw.report.published_numbers import FILE_NAME, published_comparison
         from nlosfw.report.records import RunRecord
-        from nlosfw.report.reference_numbers import FILE_NAME, reference_comparison
 
         record = RunRecord(name=files.run_dir.name, metrics=metrics,
-                           reference=settings.reference)
-        text = reference_comparison([record])
+                           published=settings.published)
+        text = published_comparison([record])
         if text:
             files.write_text(FILE_NAME, text, kind="report")
     if settings.figures.enabled and metrics.reconstruction is not None:

@@ -23,7 +23,7 @@ from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.common.files import is_regular_file
 from nlosfw.common.text import shortened_data
 from nlosfw.pipeline.metrics import RunMetrics
-from nlosfw.pipeline.settings import ReferenceTable
+from nlosfw.pipeline.settings import PublishedTable
 from nlosfw.report.inputs import read_inside
 
 
@@ -35,8 +35,8 @@ class RunRecord:
     name: str
     metrics: RunMetrics
     overrides: tuple[str, ...] = ()
-    reference: Mapping[str, ReferenceTable] = field(default_factory=dict)
-    """The run's ``reference`` tables (published numbers), by name, if any."""
+    published: Mapping[str, PublishedTable] = field(default_factory=dict)
+    """The run's ``published`` tables (published numbers), by name, if any."""
     config: Mapping[str, object] = field(default_factory=dict)
     """The run's resolved configuration (its config.yaml), if it has one."""
 
@@ -64,18 +64,18 @@ def read_run(run_dir: Path, root: Path) -> RunRecord:
                         "a mapping")
     return RunRecord(name=str(run_dir.relative_to(root)) or ".", metrics=metrics,
                      overrides=tuple(str(o) for o in overrides),
-                     reference=_reference(config, run_dir / "config.yaml"), config=config)
+                     published=_published(config, run_dir / "config.yaml"), config=config)
 
 
-def _reference(config: Mapping[str, object], where: Path) -> dict[str, ReferenceTable]:
-    """The ``reference`` tables of a run's config; a one-line DataError naming ``where``
+def _published(config: Mapping[str, object], where: Path) -> dict[str, PublishedTable]:
+    """The ``published`` tables of a run's config; a one-line DataError naming ``where``
     when they are malformed. (The ``thesis`` numbers of runs made before there were
-    reference tables are not read.)"""
-    node = config.get("reference") or {}
+    published tables are not read.)"""
+    node = config.get("published") or {}
     try:
         if not isinstance(node, Mapping):
-            raise ConfigError("reference", f"must be a mapping of tables, got {node!r}")
-        return {str(name): config_from_mapping(ReferenceTable, table, f"reference.{name}")
+            raise ConfigError("published", f"must be a mapping of tables, got {node!r}")
+        return {str(name): config_from_mapping(PublishedTable, table, f"published.{name}")
                 for name, table in node.items()}
     except ConfigError as err:
         raise DataError(f"{where}: {err}") from None

@@ -15,7 +15,7 @@ are never overwritten; a report that fails leaves no folder behind):
   :mod:`nlosfw.report.quality` (SSIM, PSNR and the held-out field error against the swept
   key);
 * ``report.md``: the figure's numbers and every run as markdown tables, plus the runs'
-  numbers next to published ones when their configs carry ``reference`` tables;
+  numbers next to published ones when their configs carry ``published`` tables;
 * ``report.html``: all of it in one self-contained page, linking each run's own
   ``report.html``.
 """
@@ -45,6 +45,7 @@ from nlosfw.pipeline.metrics import (
     SplitMetrics,
 )
 from nlosfw.report.html_report import sweep_report
+from nlosfw.report.published_numbers import published_comparison
 from nlosfw.report.quality import (
     QualityTable,
     quality_figure,
@@ -54,7 +55,6 @@ from nlosfw.report.quality import (
     sweep_layout,
 )
 from nlosfw.report.records import RunRecord, find_runs, read_run
-from nlosfw.report.reference_numbers import reference_comparison
 from nlosfw.report.study import SCORES, study_csv_rows, study_figure, study_rows, study_table
 from nlosfw.report.tables import format_cell, markdown_table
 
@@ -267,7 +267,7 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
             markdown += (f"## Quality against {label}\n\n![quality against "
                          f"{label}](report.png)\n\n{quality_table(points, layout)}\n")
         markdown += f"## Every run\n\n{to_markdown(rows)}"
-        published = reference_comparison(records)
+        published = published_comparison(records)
         if published:
             markdown += "\n## Next to published numbers\n\n" + published
         write_text(out / "report.md", markdown)
