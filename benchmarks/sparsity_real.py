@@ -50,7 +50,7 @@ FIGURE = ROOT / "docs" / "images" / "sparsity_real.png"
 MARKERS = ("<!-- sparsity-real-results -->", "<!-- /sparsity-real-results -->")
 REDUCED = ("model=rsd_prior", "split.spatial_step=4", "sampling=grid",
            "split.count_splitting_seed=0")
-#: Issue 22's targets: the best model against interp, averaged over count-splitting seeds.
+#: The study's targets: the best model against interp, averaged over count-splitting seeds.
 TARGETS = {"excess_db": 3.0, "psnr_db": 1.0, "ssim": 0.02, "network_over_rsd_db": 0.5}
 NETWORK_PLUGINS = ("siren_torch", "hashgrid_torch", "rsd_residual_torch", "neural_volume_torch")
 
