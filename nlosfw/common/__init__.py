@@ -27,6 +27,7 @@ from nlosfw.common.errors import (
 )
 from nlosfw.common.files import atomic_path, write_text
 from nlosfw.common.progress import ProgressCallback, accepts_progress
+from nlosfw.common.text import override_value
 from nlosfw.common.version import __version__
 
 __all__ = [
@@ -44,6 +45,7 @@ __all__ = [
     "moved_names",
     "NlosfwError",
     "one_line",
+    "override_value",
     "PluginError",
     "ProgressCallback",
     "require",
