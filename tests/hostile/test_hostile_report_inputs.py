@@ -126,7 +126,7 @@ def test_links_that_stay_inside_the_folder_are_read(workdir, tools, runs):
     (runs / "0" / "config.yaml").symlink_to("../shared.yaml")
     result = tools.run("report", str(runs))
     assert result.returncode == 0, result.stderr
-    assert "thesis: {}" in (runs / "report" / "report.html").read_text()
+    assert "published: {}" in (runs / "report" / "report.html").read_text()
 
 
 def test_a_run_page_embeds_no_figure_linking_outside(workdir, runs):
