@@ -10,7 +10,7 @@ import pytest
 
 from nlosfw import load_capture
 from nlosfw.capture.signal import signal_bins, signal_depth_range
-from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span, field_depth_range
+from nlosfw.image.depths import depth_span
 from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.model.protocol import split_field
 from nlosfw.simulate.analytic import AnalyticSimulator
@@ -65,11 +65,11 @@ def test_signal_bins_of_a_flat_background_and_of_nothing():
 def test_the_run_range_bounds_rsd_priors_depth_search(caplog):
     wall = fixtures.rect_wall_grid((12, 12), 1 / 12)
     freqs = np.linspace(3.0, 6.0, 21)
-    meta = {"t_start": 0.0, "n_bins": 300, "delta_t": 0.01, DEPTH_RANGE_KEY: [0.5, 0.7]}
+    meta = {"t_start": 0.0, "n_bins": 300, "delta_t": 0.01}
     full = _field(_point_field((0.1, -0.05, 0.6), wall, freqs, False), wall, freqs, False,
-                  meta)
+                  meta).replace(depth_range=(0.5, 0.7))
     train = split_field(full, spatial_step=2).train_field
-    assert field_depth_range(train) == (0.5, 0.7)
+    assert train.depth_range == (0.5, 0.7)
     model = RSDPriorFieldModel({"iterations": 5, "depth": {"iterations": 10}, "workers": 1})
     with caplog.at_level(logging.INFO, logger="nlosfw.model.physics.lattice"):
         model.fit(train)
@@ -88,3 +88,4 @@ def test_shared_captures_range_holds_the_object_and_not_the_late_background(name
     # the object: 40 cm (charts), about 0.5 m (the S: the authors' brightest plane)
     depth = 0.5 if name == "data_diffuse_s" else 0.4
     assert near < depth - 0.05 and depth + 0.1 < far < 0.85
+

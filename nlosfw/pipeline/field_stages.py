@@ -10,7 +10,7 @@ import dataclasses
 import logging
 import re
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from functools import partial
 
@@ -21,7 +21,7 @@ from nlosfw.capture.thinning import count_scale, photon_counts
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.common.hashing import cache_key
-from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
+from nlosfw.image.depths import depth_span
 from nlosfw.image.transient import measured_band_frequencies
 from nlosfw.model.interface import TrainingStep
 from nlosfw.model.protocol import split_field
@@ -43,7 +43,7 @@ from nlosfw.transform.counts import check_counts_times
 from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField, PhotonCounts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
-from nlosfw.transform.frequencies import warn_aliasing
+from nlosfw.transform.frequencies import band_warning
 from nlosfw.transform.interface import PhasorTransform
 from nlosfw.transform.noise_floor import field_variance, kernel_power
 
@@ -141,8 +141,7 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
     # the run's depth range bounds a model's own depth search (rsd_prior's)
     span = run.plan.settings.reconstruction.depth_range or depth_span(
         required(done.capture, "capture").capture)
-    field = field.replace(metadata={**field.metadata,
-                                    DEPTH_RANGE_KEY: [float(v) for v in span]})
+    field = field.replace(depth_range=(float(span[0]), float(span[1])))
     s = run.plan.settings.split
     split = split_field(field, s.sampling, spectral=s.spectral,
                         spectral_fraction=s.spectral_fraction)
@@ -218,10 +217,9 @@ def _report_step(run: StageContext, planned: PlannedModel, step: TrainingStep) -
 
 def _warn_aliasing(field: PhasorField) -> None:
     """The band's aliasing warning, also for a field from the cache (once per run)."""
-    band = field.metadata.get("band")
-    if isinstance(band, Mapping) and band.get("aliases") and band.get("grid_spacing") is not None:
-        warn_aliasing(float(field.frequencies.max()), float(band["grid_spacing"]),
-                      field.geometry.kind, str(band.get("option", "transform")))
+    message = band_warning(field)
+    if message is not None:
+        log.warning("%s", message)
 
 
 def _transform_for(run: StageContext, capture: CaptureResult) -> PhasorTransform:

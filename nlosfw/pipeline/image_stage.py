@@ -11,7 +11,6 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.progress import accepts_progress
 from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.interface import Imager
@@ -121,10 +120,9 @@ def run_voxels(settings: ReconstructionSettings, capture: Capture,
 def with_capture_hints(field: PhasorField, capture: Capture) -> PhasorField:
     """``field`` carrying the capture's imaging hints (a field model's prediction does not
     inherit the transform's metadata)."""
-    hints = capture.scene_info.get(HINTS_KEY)
-    if hints is None or HINTS_KEY in field.metadata:
+    if capture.imaging_hints is None or field.imaging_hints is not None:
         return field
-    return field.replace(metadata={**field.metadata, HINTS_KEY: hints})
+    return field.replace(imaging_hints=capture.imaging_hints)
 
 
 def zero_filled(split: FieldSplit, field: PhasorField) -> PhasorField:
@@ -132,7 +130,7 @@ def zero_filled(split: FieldSplit, field: PhasorField) -> PhasorField:
     source for imagers that image only the full wall grid (a zero adds nothing to a
     back-projection or to the light-cone convolution)."""
     values = np.where(split.spatial_mask[None], field.values, 0).astype(field.values.dtype)
-    return field.replace(values=values, metadata={**field.metadata, "zero_filled": True})
+    return field.replace(values=values, zero_filled=True)
 
 
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:

@@ -18,7 +18,6 @@ import numpy as np
 import scipy.fft
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.files import format_bytes
 from nlosfw.common.logs import FILE_ONLY
 from nlosfw.image.measured import histogram_field
@@ -120,9 +119,8 @@ def reference_field(run: StageContext, result: CaptureResult,
     transform = run.plan.transform.plugin
     field = histogram_field(capture, transform.config
                             if isinstance(transform, FFTTransform) else None)
-    hints = result.capture.scene_info.get(HINTS_KEY)
-    if hints is not None and HINTS_KEY not in field.metadata:
-        field = field.replace(metadata={**field.metadata, HINTS_KEY: hints})
+    if field.imaging_hints is None and result.capture.imaging_hints is not None:
+        field = field.replace(imaging_hints=result.capture.imaging_hints)
     log.info("reference picture: the histograms at native bins, %d frequencies to %.4g "
              "cycles/m (estimated memory %s; not scored)", field.n_frequencies,
              float(field.frequencies.max()), format_bytes(needed))

@@ -35,7 +35,7 @@ from nlosfw.capture.data import Capture
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError
 from nlosfw.transform.common import FieldOptions, check_capture, transform_capture
-from nlosfw.transform.field import PhasorField
+from nlosfw.transform.field import Band, PhasorField
 from nlosfw.transform.frequencies import (
     band_info,
     path_multiplier,
@@ -155,7 +155,7 @@ class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
                               f"no bin k*df (df = {df:.6g}) lies in the band {fc:.6g} ± "
                               f"{half:.6g} cycles/m; use a smaller frequency_step")
         option = "transform.wavelength"
-        f = validate_frequencies(f, capture.delta_t, spacing, option, capture.kind)
+        f = validate_frequencies(f, capture.delta_t, spacing, option, capture.kind, warn=False)
         weights = df * wavelet.spectrum(f)
         info = {
             "wavelength": float(wavelet.wavelength),
@@ -180,4 +180,4 @@ class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
         return transform_capture(capture, freqs, FieldOptions(
             transform="wavelet", method=self.config.method,
             remove_device_legs=self.config.remove_device_legs, weights=weights,
-            metadata={"wavelet": info, "band": band}))
+            metadata={"wavelet": info}, band=band if isinstance(band, Band) else None))
