@@ -38,7 +38,7 @@ from nlosfw.common import ConfigError
 from nlosfw.common.config import config_from_mapping
 from nlosfw.image import Reconstruction, wall_voxels
 from nlosfw.model import FieldModel
-from nlosfw.plugins import PluginHost, PluginKind, load_plugins
+from nlosfw.plugins import PluginHost, PluginKind, current_host
 from nlosfw.simulate import Scene, builtin_scene, scene_from_config
 from nlosfw.transform import PhasorField
 
@@ -276,4 +276,5 @@ def _plugin(kind: PluginKind, name: object, option: str) -> str:
 
 
 def _host() -> PluginHost:
-    return load_plugins()
+    """The plugin host of the run in progress (:func:`nlosfw.plugins.hosting`), else a new one."""
+    return current_host()

@@ -89,3 +89,44 @@ def test_shared_captures_range_holds_the_object_and_not_the_late_background(name
     depth = 0.5 if name == "data_diffuse_s" else 0.4
     assert near < depth - 0.05 and depth + 0.1 < far < 0.85
 
+
+# ------------------------------------------------------------------ one rule, decided once
+@pytest.mark.parametrize(("overrides", "expected"), [
+    (["reconstruction.depths=[0.5,0.7,0.55]", "reconstruction.depth_range=[0.2,1.0]"],
+     (0.5, 0.7)),
+    (["reconstruction.depth_range=[0.2,1.0]"], (0.2, 1.0)),
+    ([], None),
+])
+def test_a_model_searches_the_depths_the_run_images(overrides, expected, tmp_path, monkeypatch):
+    """The range a field model's own depth search is bounded by is the run's one range:
+    the near and far of reconstruction.depths when planes are given (they used to be
+    ignored there), else reconstruction.depth_range, else the capture's automatic range;
+    the reconstructions' planes follow the same rule."""
+    from nlosfw.model.interp import InterpFieldModel
+    from nlosfw.plugins import load_plugins
+    from tests.test_pipeline import compose, pipeline
+
+    seen = []
+    fit = InterpFieldModel.fit
+
+    def recording(self, field, *args, **kwargs):
+        seen.append(field.depth_range)
+        return fit(self, field, *args, **kwargs)
+
+    monkeypatch.setattr(InterpFieldModel, "fit", recording)
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    host = load_plugins()
+    config = compose(["scene=tiny", "model=interp", "figures.enabled=false",
+                      "transform.n_frequencies=11", "reconstruction.n_depths=3",
+                      "reconstruction.single_frequency_images=0", *overrides], host)
+    run = pipeline(tmp_path / "run", config, host)
+    run.run()
+    results = run.stage_results
+    automatic = depth_span(results.capture.capture)
+    assert seen == [expected or automatic]
+    planes = np.unique(results.reconstructions.voxels[..., 2])
+    near, far = expected or automatic
+    if overrides and "depths" in overrides[0]:
+        np.testing.assert_allclose(planes, [0.5, 0.55, 0.7])
+    else:
+        np.testing.assert_allclose([planes.min(), planes.max()], [near, far])

@@ -12,9 +12,8 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.common.progress import accepts_progress
-from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.interface import Imager
-from nlosfw.image.reconstruction import Reconstruction, wall_voxels
+from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.reconstruction_io import write_reconstruction
 from nlosfw.model.protocol import FieldSplit
 from nlosfw.pipeline.context import StageContext
@@ -27,7 +26,7 @@ from nlosfw.pipeline.results import (
     StageResults,
     required,
 )
-from nlosfw.pipeline.settings import Artefact, ReconstructionSettings
+from nlosfw.pipeline.settings import Artefact
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
@@ -46,14 +45,14 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
         split = required(done.fit, "fit").split
         sources = {name: with_capture_hints(f, capture)
                    for name, f in done.fields.by_source().items()}
-        if imager.plugin.full_grid_only and sources["raw"].grid_shape != \
+        if run.plan.imager_needs.time_domain and sources["raw"].grid_shape != \
                 done.fields.true.grid_shape:
             sources["raw"] = with_capture_hints(zero_filled(split, done.fields.true), capture)
         # as in the thesis figures: images from one frequency at a time, too
         chosen = chosen_frequencies(split,
                                     run.plan.settings.reconstruction.single_frequency_images)
     true = sources["true"]
-    voxels = run_voxels(run.plan.settings.reconstruction, capture, true)
+    voxels = run.plan.depths.voxels(capture, true)
     log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
              len(sources) * (1 + len(chosen)), imager.name, len(sources), ", ".join(sources),
              true.n_frequencies,
@@ -85,36 +84,11 @@ def report_stage(run: StageContext, done: StageResults) -> None:
     if results is not None:
         run.events.write_report(run.files, results, run.recorder.metrics, settings)
     elif done.capture is not None and done.reconstructions is None:
-        span = run_depth_range(settings.reconstruction, done.capture.capture)
+        span = run.plan.depths.span(done.capture.capture)
         run.events.write_capture_report(run.files, done.capture, span, run.recorder.metrics,
                                         settings)
     else:  # the report stage runs only after all the others, or after a stop
         raise ValueError("the report stage needs every stage's results")
-
-
-def run_depth_range(settings: ReconstructionSettings, capture: Capture) -> tuple[float, float]:
-    """[m] The nearest and farthest plane a run images: of ``depths``, else
-    ``depth_range``, else the depths that hold signal (:func:`depth_span`)."""
-    if settings.depths:
-        return min(settings.depths), max(settings.depths)
-    near, far = settings.depth_range or depth_span(capture)
-    return float(near), float(far)
-
-
-def run_voxels(settings: ReconstructionSettings, capture: Capture,
-               field: PhasorField) -> np.ndarray:
-    """Planes on the wall's grid at the configured depths, or at ``n_depths`` planes, or
-    (the default) at the band's depth resolution (:mod:`nlosfw.image.depths`), over
-    ``depth_range`` or the depths that hold signal."""
-    if settings.depths:
-        depths = np.asarray(settings.depths, dtype=float)
-    else:
-        span = run_depth_range(settings, capture)
-        depths = (np.linspace(span[0], span[1], settings.n_depths)
-                  if settings.n_depths is not None
-                  else automatic_depths(span, float(field.frequencies.max()),
-                                        field.geometry.kind))
-    return wall_voxels(field, depths)
 
 
 def with_capture_hints(field: PhasorField, capture: Capture) -> PhasorField:

@@ -59,7 +59,7 @@ def reference_reason(run: StageContext, result: CaptureResult) -> str | None:
     imager = run.plan.imager
     if choice is False:
         return "reconstruction.histogram_reference=false"
-    if not imager.plugin.full_grid_only:
+    if not run.plan.imager_needs.time_domain:
         return f"imager {imager.name} images a band, not the histograms"
     if choice is None and result.source != "file":
         return "a simulated capture (reconstruction.histogram_reference=true makes one)"

@@ -88,6 +88,14 @@ class FFTTransform(PhasorTransform[FFTTransformConfig]):
 
     config_class = FFTTransformConfig
 
+    def frequency_count(self, n_bins: int) -> int:
+        """The explicit frequencies' count, else ``n_frequencies``."""
+        return len(self.config.frequencies) or self.config.n_frequencies
+
+    def planned_frequencies(self, capture: Capture) -> np.ndarray | None:
+        """:meth:`frequencies_for`."""
+        return self.frequencies_for(capture)
+
     def frequencies_for(self, capture: Capture) -> np.ndarray:
         """The frequencies this transform uses for ``capture`` (validated; whether they
         alias on the wall grid is the field's ``band``)."""

@@ -131,6 +131,10 @@ class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
             wavelength = cfg.wavelength_factor * spacing * path_multiplier(capture.kind)
         return GaussianWavelet(wavelength, cfg.n_cycles * wavelength / 6.0), spacing
 
+    def planned_frequencies(self, capture: Capture) -> np.ndarray | None:
+        """The kept bins (:meth:`frequencies_for`)."""
+        return self.frequencies_for(capture)[0]
+
     def frequencies_for(self, capture: Capture) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
         """(frequencies, weights, description) of the kept bins for ``capture``."""
         cfg = self.config
