@@ -17,13 +17,14 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
+from nlosfw.capture.source import CaptureSource
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
 from nlosfw.common.schema import problem
 from nlosfw.compose.output_dirs import check_output_dirs
 from nlosfw.compose.store import hydra_session
 from nlosfw.pipeline.plan import PlainConfig, RunPlan, make_plan
 from nlosfw.pipeline.plan_plugins import check_imports
-from nlosfw.pipeline.settings import OPTIONAL_GROUPS, SELECTOR_GROUPS
+from nlosfw.pipeline.settings import OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
 from nlosfw.plugins import RUN_KINDS, PluginHost
 
 if TYPE_CHECKING:
@@ -107,7 +108,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
         for combo in itertools.islice(combos, _MAX_PREFLIGHT_COMPOSITIONS):
             cfg = composed(fixed + list(combo))
             if chdir:
-                _refuse_relative_inputs(cfg)
+                _refuse_relative_inputs(run_settings(task_config(cfg)).capture)
             plan = validate_config(cfg, host)
         if total > _MAX_PREFLIGHT_COMPOSITIONS:
             log.warning("checked the first %d of %d sweep combinations before starting; "
@@ -157,14 +158,11 @@ def composition_error(err: Exception, host: PluginHost | None = None) -> NlosfwE
     return ConfigError("", one_line(err, whole=True))
 
 
-def _refuse_relative_inputs(cfg: Mapping[str, object]) -> None:
+def _refuse_relative_inputs(capture: CaptureSource) -> None:
     """With ``hydra.job.chdir=true`` the run starts in its run directory, where a relative
     input path would name another file: refuse it naming the option."""
-    capture = cfg.get("capture")
-    if not isinstance(capture, Mapping):
-        return
-    for name in ("path", "background", "tofgrid"):
-        value = capture.get(name)
+    for name, value in (("path", capture.path), ("background", capture.background),
+                        ("tofgrid", capture.tofgrid)):
         if isinstance(value, str) and value and not value.startswith(("/", "~")):
             raise ConfigError(f"capture.{name}", f"'{value}' is a relative path, but "
                               "hydra.job.chdir=true runs in the run directory, where it names "
