@@ -130,3 +130,22 @@ def test_a_model_searches_the_depths_the_run_images(overrides, expected, tmp_pat
         np.testing.assert_allclose(planes, [0.5, 0.55, 0.7])
     else:
         np.testing.assert_allclose([planes.min(), planes.max()], [near, far])
+
+
+def test_the_plan_counts_the_planes_it_will_image_without_making_them(measured_like):
+    """The memory estimate sizes the voxels by the planes the run will image, known once a
+    capture file is read: as many as the rule makes, whichever option decides them."""
+    from nlosfw.capture.enums import CaptureKind
+    from nlosfw.pipeline.depth_plan import DepthPlan
+    from nlosfw.pipeline.settings import ReconstructionSettings
+    from nlosfw.transform.fft import FFTTransform
+
+    capture = measured_like[0]
+    field = FFTTransform({"n_frequencies": 5}).transform(capture)
+    for settings in (ReconstructionSettings(), ReconstructionSettings(n_depths=7),
+                     ReconstructionSettings(depths=(0.4, 0.5)),
+                     ReconstructionSettings(depth_range=(0.1, 1.1))):
+        rule = DepthPlan.of(settings)
+        planes = rule.planes(capture, field)
+        assert rule.count(rule.span(capture), float(field.frequencies.max()),
+                          CaptureKind.CONFOCAL) == planes.size

@@ -47,13 +47,18 @@ def automatic_depths(span: tuple[float, float], f_max: float, kind: CaptureKind,
     """Planes from ``span[0]`` to ``span[1]`` at most :func:`depth_step` apart (both ends
     included; at most ``max_planes``)."""
     near, far = float(span[0]), float(span[1])
-    step = depth_step(f_max, kind)
-    n = max(2, math.ceil((far - near) / step - 1e-9) + 1)
+    n = automatic_count(span, f_max, kind)
     if n > max_planes:
         log.info("automatic depths: %d planes %.4g m apart would span %.4g-%.4g m; using %d",
-                 n, step, near, far, max_planes)
+                 n, depth_step(f_max, kind), near, far, max_planes)
         n = max_planes
     return np.linspace(near, far, n)
+
+
+def automatic_count(span: tuple[float, float], f_max: float, kind: CaptureKind) -> int:
+    """How many planes :func:`automatic_depths` puts over ``span`` before its cap."""
+    step = depth_step(f_max, kind)
+    return max(2, math.ceil((float(span[1]) - float(span[0])) / step - 1e-9) + 1)
 
 
 def depth_span(capture: Capture) -> tuple[float, float]:

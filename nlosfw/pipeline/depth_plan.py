@@ -18,7 +18,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.image.depths import automatic_depths, depth_span
+from nlosfw.capture.enums import CaptureKind
+from nlosfw.image.depths import (
+    MAX_AUTOMATIC_PLANES,
+    automatic_count,
+    automatic_depths,
+    depth_span,
+)
 from nlosfw.image.reconstruction import wall_voxels
 from nlosfw.pipeline.settings import ReconstructionSettings
 from nlosfw.transform.field import PhasorField
@@ -64,6 +70,17 @@ class DepthPlan:
         if self.n_depths is not None:
             return np.linspace(span[0], span[1], self.n_depths)
         return automatic_depths(span, float(field.frequencies.max()), field.geometry.kind)
+
+    def count(self, span: tuple[float, float], f_max: float | None, kind: CaptureKind) -> int:
+        """How many planes :meth:`planes` gives over ``span`` for a band up to ``f_max``
+        (None: unknown, the automatic rule's most), without making them."""
+        if self.depths:
+            return len(self.depths)
+        if self.n_depths is not None:
+            return self.n_depths
+        if f_max is None:
+            return MAX_AUTOMATIC_PLANES
+        return min(MAX_AUTOMATIC_PLANES, automatic_count(span, f_max, kind))
 
     def voxels(self, capture: Capture, field: PhasorField) -> np.ndarray:
         """The voxels: :meth:`planes` on the wall's grid."""

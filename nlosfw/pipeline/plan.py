@@ -275,10 +275,12 @@ def _file_plan(base: _Base) -> RunPlan:
     check_file_counts(loaded, settings.split.thinning, settings.split.thinning_seed,
                       base.model_needs, (base.transform.name, base.transform.plugin))
     transform, note = _measured_band(base, capture)
-    depth_range = DepthPlan.of(settings.reconstruction).span(capture)
+    depths = DepthPlan.of(settings.reconstruction)
+    depth_range = depths.span(capture)
     shape = capture_shape(capture, transform.plugin, base.training, depth_range)
     why = (f"capture.path's transient of {shape.bins} time bins × "
            f"{shape.sensors * shape.lasers} samples")
+    planes = depths.count(depth_range, shape.f_max, capture.kind)   # known once it is read
     memory = base.estimate(shape, base.counts(planes, why))
     return dataclasses.replace(base.plan(shape, memory, capture=loaded), transform=transform,
                                transform_note=note, read_log=tuple(said))
