@@ -5,8 +5,9 @@ lattice, and its network's training.
 The lattice's depth planes are known only after the quick coarse fit that finds the scene
 (:func:`nlosfw.model.physics.lattice.depth_planes`), unless ``prior.depth.range`` gives them;
 the estimate bounds them from above: every plane ``depth.step`` apart over the range the
-coarse fit searches (the run's depth range, else the wall to half the capture's time span),
-widened by ``depth.margin`` and half a coarse step on each side, as the fine planes may be.
+coarse fit searches (the run's depth range, else the wall to half the capture's time span;
+its last plane may lie half a coarse step beyond), widened by ``depth.margin`` and half a
+coarse step on each side, as the fine planes may be.
 The lateral lattice and the frequencies fitted are those the fit chooses
 (:func:`~nlosfw.model.physics.lattice.voxel_lattice`,
 :func:`~nlosfw.model.physics.frequencies.enough_frequencies`). Without the field's band
@@ -52,10 +53,10 @@ def volume_planes(prior: RSDPriorConfig, shape: PlanShape) -> int | None:
         lower, prior.fit_frequencies, deepest))]
     coarse = 1.0 / (4.0 * float(chosen.max()))
     lo, hi = shape.depth_range or (coarse, deepest)
-    near, far = max(coarse, lo), max(min(deepest, hi), lo)
+    near, far = max(coarse, lo), max(min(deepest, hi), lo) + coarse / 2   # the last coarse plane
     reach = prior.depth.margin + coarse / 2
     first = max(step, near - reach)
-    return max(1, int(np.arange(first, far + reach + step / 2, step).size))
+    return max(1, math.ceil((far + reach - first) / step) + 1)
 
 
 def operator_bytes(prior: RSDPriorConfig, shape: PlanShape) -> tuple[float, str] | None:
