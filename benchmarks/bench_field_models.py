@@ -5,7 +5,7 @@ sensors on a 2 m wall, 2048 bins of 3 mm) rendered by the ``analytic``
 simulator, clean and with Poisson noise (``--photons`` expected signal photons),
 turned into 151 frequencies by the ``fft`` transform with its default band
 (f_max = 1/(2 x spacing), f_min = f_max / 4; a numpy DFT when that transform is
-not installed). Protocol: :func:`nlosfw.model.split_field` (every other wall
+not installed). Protocol: :func:`nlosfw.evaluation.split_field` (every other wall
 sample, 10% of the frequencies interleaved), i.e. 32 x 32 x 135 training samples.
 
 For every model (default configs; ``--models`` to choose): training wall-clock
@@ -31,8 +31,14 @@ from typing import Any
 import numpy as np
 from timing import machine
 
+from nlosfw.evaluation import (
+    FieldSplit,
+    error_metrics,
+    field_metrics,
+    parameter_data_ratio,
+    split_field,
+)
 from nlosfw.model.interface import TrainingStep
-from nlosfw.model.protocol import FieldSplit, field_metrics, parameter_data_ratio, split_field
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import Scene, scene_from_config
@@ -181,7 +187,7 @@ def main() -> None:
         truth = clean_field if clean_field is not None else to_field(
             AnalyticSimulator({"patch_size": 0.02}).simulate(bench_scene(resolution, None)),
             n_freq)
-        noise = float(np.linalg.norm(field.values - truth.values) / np.linalg.norm(truth.values))
+        noise = error_metrics(truth.values, field.values)["relative_l2"]
         split = split_field(field, spatial_step=2, spectral="interleaved")
         rows = []
         for label in names:

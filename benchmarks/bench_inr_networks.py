@@ -18,8 +18,8 @@ tuning scenes and scores each prediction:
   ``fft`` imager on the pipeline's voxels (24 depths spanning the scene, the wall's
   whole width) and compared with the full capture's reconstruction: PSNR and SSIM of
   the front-view maximum projection of amplitudes (square root of intensity), each
-  normalised to its maximum, with scikit-image's defaults (issue 12's scores,
-  computed here), and the intensity-MIP PSNR/SSIM the pipeline reports today.
+  normalised to its maximum, with scikit-image's defaults, and the intensity-MIP
+  PSNR/SSIM, all computed by :mod:`nlosfw.evaluation` as a run computes them.
 
 ``raw`` (the 16 x 16 samples imaged directly) and ``interp`` are scored alike.
 Results go to ``benchmarks/results/bench_inr_networks.json`` (``--update`` keeps the
@@ -43,8 +43,14 @@ from typing import Any
 import numpy as np
 from timing import machine
 
+from nlosfw.evaluation import (
+    FieldSplit,
+    field_metrics,
+    image_metrics,
+    reconstruction_scores,
+    split_field,
+)
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
-from nlosfw.model.protocol import FieldSplit, field_metrics, split_field
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate.builtin_scenes import builtin_scene
 from nlosfw.transform.field import PhasorField
@@ -109,31 +115,15 @@ def imager() -> Any:
     return load_plugins().registry.create("imager", "fft", {})
 
 
-def amplitude_scores(reference: Reconstruction, test: Reconstruction) -> dict[str, float]:
-    """Issue 12's scores: PSNR/SSIM of amplitude MIPs and volumes (each / its max),
-    scikit-image defaults with data_range 1."""
-    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
-
-    def amp(a: np.ndarray) -> np.ndarray:
-        a = np.sqrt(np.maximum(a, 0.0))
-        return a / a.max() if a.max() > 0 else a
-
-    out = {}
-    for key, a, b in (("mip", reference.max_intensity_image(), test.max_intensity_image()),
-                      ("volume", reference.intensity, test.intensity)):
-        ra, ta = amp(a), amp(b)
-        out[f"{key}_psnr"] = float(peak_signal_noise_ratio(ra, ta, data_range=1))
-        out[f"{key}_ssim"] = float(structural_similarity(ra, ta, data_range=1))
-    return out
-
-
 def scores(data: TuningData, predicted: PhasorField) -> dict[str, Any]:
-    """Reconstruction scores of ``predicted`` (any wall grid) against the full capture's."""
-    from nlosfw.image.scores import image_metrics
-
+    """Reconstruction scores of ``predicted`` (any wall grid) against the full capture's, the
+    run's own (:mod:`nlosfw.evaluation`): amplitudes' front view and volume, and the
+    intensity MIP's."""
     recon = imager().reconstruct(predicted, data.voxels)
+    amplitude = reconstruction_scores(data.reference, recon)
     intensity = image_metrics(data.reference.max_intensity_image(), recon.max_intensity_image())
-    return {**amplitude_scores(data.reference, recon),
+    return {"mip_psnr": amplitude["psnr"], "mip_ssim": amplitude["ssim"],
+            "volume_psnr": amplitude["volume_psnr"], "volume_ssim": amplitude["volume_ssim"],
             "intensity_mip_psnr": intensity["psnr"], "intensity_mip_ssim": intensity["ssim"]}
 
 

@@ -42,8 +42,8 @@ SIREN = ("model=siren_torch", "model.steps=300", "imager=fft", "figures.enabled=
 #: The physics model on the real-data study's 16x grid (its kernel spectra cached).
 RSD_PRIOR = ("model=rsd_prior", "split.spatial_step=4", "imager=fft", "figures.enabled=false")
 #: The neural hidden volume on the same grid with count splitting: its operator dominates.
-NEURAL_VOLUME = ("model=neural_volume_torch", "split.spatial_step=4", "split.thinning=true",
-                 "imager=fft", "figures.enabled=false")
+NEURAL_VOLUME = ("model=neural_volume_torch", "split.spatial_step=4",
+                 "split.count_splitting=true", "imager=fft", "figures.enabled=false")
 
 #: name -> (overrides, needs the real capture)
 CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {

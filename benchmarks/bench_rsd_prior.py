@@ -10,13 +10,14 @@ spanning the true depths with a margin, the whole wall's width at the wall spaci
 the full capture (the reference), the sparse samples imaged directly (``raw``),
 ``interp`` and ``rsd_prior`` (its default config) upsampled to the full grid.
 
-Scores of each source against the reference, as issue 12 defines them: amplitudes =
-sqrt(intensity), each normalised to its maximum; ``psnr`` and ``ssim`` of the front-view
-maximum projections and ``volume_psnr`` / ``volume_ssim`` of the whole volumes
-(scikit-image ``peak_signal_noise_ratio(a, b, data_range=1)`` and
-``structural_similarity(a, b, data_range=1)`` at their defaults); ``depth_rmse_m``: the
-depth of the brightest voxel of each (y, x) column against the scene's true depth map,
-over the pixels where it has a surface (the reference's own value is listed too).
+Scores of each source against the reference, the run's own
+(:func:`nlosfw.evaluation.reconstruction_scores`): amplitudes = sqrt(intensity), each
+normalised to its maximum; ``psnr`` and ``ssim`` of the front-view maximum projections
+and ``volume_psnr`` / ``volume_ssim`` of the whole volumes (scikit-image
+``peak_signal_noise_ratio(a, b, data_range=1)`` and ``structural_similarity(a, b,
+data_range=1)`` at their defaults); ``depth_rmse_m``: the depth of the brightest voxel of
+each (y, x) column against the scene's true depth map, over the pixels where it has a
+surface (the reference's own value is listed too; None where such a column is dark).
 
 Case groups (``--cases``, comma-separated):
 
@@ -50,8 +51,9 @@ import numpy as np
 from timing import machine
 
 from nlosfw.capture import Capture, read_capture, write_capture
-from nlosfw.image import FFTImager, volume_voxels
-from nlosfw.model import InterpFieldModel, split_field
+from nlosfw.evaluation import depth_rmse, error_metrics, reconstruction_scores, split_field
+from nlosfw.image import FFTImager, Reconstruction, volume_voxels
+from nlosfw.model import InterpFieldModel
 from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate import builtin_scene
@@ -163,33 +165,16 @@ def true_depth(capture: Capture) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ scores
-def amplitudes(intensity: np.ndarray) -> np.ndarray:
-    a = np.sqrt(np.maximum(np.asarray(intensity, dtype=float), 0.0))
-    peak = float(a.max())
-    return a / peak if peak > 0 else a
+def scores(reference: Reconstruction, test: Reconstruction,
+           truth: np.ndarray) -> dict[str, float | None]:
+    """The run's reconstruction scores of ``test`` against ``reference``
+    (:func:`nlosfw.evaluation.reconstruction_scores`, ``rmse`` left out)."""
+    values = reconstruction_scores(reference, test, truth)
+    return {name: values[name] for name in SCORES}
 
 
-def scores(reference: np.ndarray, test: np.ndarray, depths: np.ndarray,
-           truth: np.ndarray) -> dict[str, float]:
-    """Issue 12's scores of intensity volume ``test`` (Z, Y, X) against ``reference``."""
-    from skimage.metrics import peak_signal_noise_ratio, structural_similarity
-
-    a, b = amplitudes(reference), amplitudes(test)
-    mip_a, mip_b = a.max(axis=0), b.max(axis=0)
-    return {
-        "psnr": float(peak_signal_noise_ratio(mip_a, mip_b, data_range=1)),
-        "ssim": float(structural_similarity(mip_a, mip_b, data_range=1)),
-        "volume_psnr": float(peak_signal_noise_ratio(a, b, data_range=1)),
-        "volume_ssim": float(structural_similarity(a, b, data_range=1)),
-        "depth_rmse_m": depth_rmse(test, depths, truth),
-    }
-
-
-def depth_rmse(intensity: np.ndarray, depths: np.ndarray, truth: np.ndarray) -> float:
-    """RMSE of the brightest voxel's depth per column against the true map, over surfaces."""
-    found = depths[np.argmax(intensity, axis=0)]
-    surface = truth > 0
-    return float(np.sqrt(np.mean((found[surface] - truth[surface]) ** 2)))
+def _shown(value: float | None, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
 
 
 # ------------------------------------------------------------------ runs
@@ -198,12 +183,11 @@ def run_case(case: Case, cache: Path | None, quick: bool, options: dict[str, Any
     capture, render_s = capture_for(case, cache, quick)
     field = FFTTransform({"n_frequencies": 61 if quick else 151}).transform(capture)
     voxels = default_voxels(capture, field)
-    depths = voxels[:, 0, 0, 2]
     truth = true_depth(capture)
     imager = FFTImager({"workers": -1})
-    reference = imager.reconstruct(field, voxels).intensity
+    reference = imager.reconstruct(field, voxels)
     out: dict[str, Any] = {"case": case.label, "render_s": render_s,
-                           "reference_depth_rmse_m": depth_rmse(reference, depths, truth),
+                           "reference_depth_rmse_m": depth_rmse(reference, truth),
                            "steps": {}}
     for step in case.steps:
         split = split_field(field, spatial_step=step)
@@ -227,18 +211,18 @@ def run_case(case: Case, cache: Path | None, quick: bool, options: dict[str, Any
                         "residual": float(report.final_loss)}
         row: dict[str, Any] = {"fit_s": fit_s, "rsd_prior": info, "scores": {}}
         for name in SOURCES:
-            recon = imager.reconstruct(fields[name], voxels).intensity
-            row["scores"][name] = scores(reference, recon, depths, truth)
-        field_err = {name: float(np.linalg.norm(
-            fields[name].values - field.values) / np.linalg.norm(field.values))
-            for name in ("interp", "rsd_prior")}
+            recon = imager.reconstruct(fields[name], voxels)
+            row["scores"][name] = scores(reference, recon, truth)
+        field_err = {name: error_metrics(field.values, fields[name].values)["relative_l2"]
+                     for name in ("interp", "rsd_prior")}
         row["field_relative_l2"] = field_err
         out["steps"][str(step)] = row
         s = row["scores"]
         print(f"{case.label:45s} step {step}: " + "  ".join(
-            f"{n} {s[n]['psnr']:5.1f} dB {s[n]['ssim']:.3f} {s[n]['depth_rmse_m']:.3f} m"
+            f"{n} {_shown(s[n]['psnr'], '5.1f')} dB {_shown(s[n]['ssim'], '.3f')} "
+            f"{_shown(s[n]['depth_rmse_m'], '.3f')} m"
             for n in SOURCES) + f"  (fit {fit_s['rsd_prior']:.0f} s, ref depth "
-            f"{out['reference_depth_rmse_m']:.3f} m)", flush=True)
+            f"{_shown(out['reference_depth_rmse_m'], '.3f')} m)", flush=True)
         del xy
     return out
 

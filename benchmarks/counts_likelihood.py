@@ -4,7 +4,7 @@
 
 Each capture (a file, or every ``.mat`` of a folder) at each spatial step (``--steps``: 4
 is 16x, 8 is 64x; grid, count splitting, ``split.spectral=none`` for both, since the
-counts hold every frequency) and thinning seed runs ``nlosfw.run`` once per variant
+counts hold every frequency) and count-splitting seed runs ``nlosfw.run`` once per variant
 (``--variants``: least squares and the counts' likelihood, default options), one run at a
 time, and records the held-out excess error, the reconstruction's PSNR and
 SSIM against half B's full scan, ``interp``'s, the fit's seconds and what it fitted.
@@ -35,8 +35,8 @@ def one(capture: Path, variant: str, step: int, seed: int) -> dict[str, object]:
     likelihood, *options = variant.split(":")
     out = nlosfw.run([f"capture.path={capture}", "model=rsd_prior",
                       f"model.likelihood={likelihood}", *(f"model.{o}" for o in options),
-                      "split.thinning=true",
-                      f"split.thinning_seed={seed}", f"split.spatial_step={step}",
+                      "split.count_splitting=true",
+                      f"split.count_splitting_seed={seed}", f"split.spatial_step={step}",
                       "sampling=grid", "split.spectral=none", "figures.enabled=false",
                       "reconstruction.single_frequency_images=0"],
                      output_dir=Path(tempfile.mkdtemp()) / "run")

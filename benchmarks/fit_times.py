@@ -3,7 +3,7 @@ models within 120 s at 16x and 64x on 2 cores, and GPU times).
 
 Each MODEL:DEVICE pair runs ``nlosfw.run`` on each capture (a file, or every ``.mat`` of
 a folder) at each spatial step (``--steps``: 4 is 16x, 8 is 64x; grid, count splitting,
-thinning seed 0, ``stop_after=predict``) with ``model.device=DEVICE`` for the torch
+count-splitting seed 0, ``stop_after=predict``) with ``model.device=DEVICE`` for the torch
 models, one run at a time, and records ``timings.fit`` and the held-out excess error of
 metrics.json. Prints a table and writes ``benchmarks/results/fit_times_<label>.json``.
 
@@ -32,8 +32,8 @@ def one(capture: Path, model: str, device: str, step: int) -> dict[str, object]:
 
     extra = [f"model.device={device}"] if model.endswith("_torch") else []
     start = time.perf_counter()
-    out = nlosfw.run([f"capture.path={capture}", f"model={model}", "split.thinning=true",
-                      "split.thinning_seed=0", f"split.spatial_step={step}", "sampling=grid",
+    out = nlosfw.run([f"capture.path={capture}", f"model={model}", "split.count_splitting=true",
+                      "split.count_splitting_seed=0", f"split.spatial_step={step}", "sampling=grid",
                       "stop_after=predict", "figures.enabled=false", *extra],
                      output_dir=Path(tempfile.mkdtemp()) / "run")
     metrics = json.loads((out.dir / "metrics.json").read_text())

@@ -13,11 +13,11 @@ rewrites it between its markers and writes its figure, ``docs/images/sparsity_re
 ``run`` sweeps every capture of ``--captures`` (default ``../shared/data/real``; ``--only``
 picks some by file stem) into ``DIR/<stem>``, then collects them. With no override it runs
 the whole study (4x, 16x, 64x; grid and random; rsd_prior, siren_torch, hashgrid_torch,
-rsd_residual_torch, neural_volume_torch; three thinning seeds; interp in every run).
-``--reduced`` runs the smallest useful part
-(``model=rsd_prior split.spatial_step=4 sampling=grid split.thinning_seed=0``: interp and
-rsd_prior at 16x, one seed) and labels the README section as reduced; overrides narrow or
-extend either. The scores (:mod:`nlosfw.model.heldout`):
+rsd_residual_torch, neural_volume_torch; three count-splitting seeds; interp in every run).
+``--reduced`` runs the smallest useful part (``model=rsd_prior split.spatial_step=4
+sampling=grid split.count_splitting_seed=0``: interp and rsd_prior at 16x, one seed) and
+labels the README section as reduced; overrides narrow or extend either. The scores
+(:mod:`nlosfw.evaluation.heldout`):
 
 - held-out excess: the error at the wall points not kept against half B's measured field,
   minus the noise floor (the error of a perfect predictor), dB of B's power: lower wins;
@@ -48,8 +48,9 @@ CAPTURES = ROOT.parent / "shared" / "data" / "real"
 RESULTS = Path(__file__).parent / "results" / "sparsity_real.json"
 FIGURE = ROOT / "docs" / "images" / "sparsity_real.png"
 MARKERS = ("<!-- sparsity-real-results -->", "<!-- /sparsity-real-results -->")
-REDUCED = ("model=rsd_prior", "split.spatial_step=4", "sampling=grid", "split.thinning_seed=0")
-#: Issue 22's targets: the best model against interp, averaged over thinning seeds.
+REDUCED = ("model=rsd_prior", "split.spatial_step=4", "sampling=grid",
+           "split.count_splitting_seed=0")
+#: The study's targets: the best model against interp, averaged over count-splitting seeds.
 TARGETS = {"excess_db": 3.0, "psnr_db": 1.0, "ssim": 0.02, "network_over_rsd_db": 0.5}
 NETWORK_PLUGINS = ("siren_torch", "hashgrid_torch", "rsd_residual_torch", "neural_volume_torch")
 

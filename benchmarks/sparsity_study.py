@@ -17,7 +17,7 @@ extend it, e.g. ``model=siren_torch,fourier_torch,rsd_prior`` for other models o
 runs the same study on a capture file: the scene and acquisition axes are dropped.
 
 Every score compares a source's reconstruction with the full capture's (see
-:func:`nlosfw.image.reconstruction_scores`); a field model wins where its mean
+:func:`nlosfw.evaluation.reconstruction_scores`); a field model wins where its mean
 over seeds beats both ``raw`` (the samples imaged directly) and ``interp``.
 Defaults are never tuned on the judged scenes: the tuning scenes are
 ``thesis_planes`` and ``thesis_concave``.

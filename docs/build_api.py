@@ -25,6 +25,7 @@ MODULES = (
     "nlosfw.model.physics",
     "nlosfw.model.hybrid",
     "nlosfw.image",
+    "nlosfw.evaluation",
     "nlosfw.plugins",
     "nlosfw.testing",
     "nlosfw.pipeline.results",

@@ -6,8 +6,9 @@ its public API:
 * :mod:`nlosfw.capture`: the transient capture, its geometry and file formats;
 * :mod:`nlosfw.simulate`: scenes and the simulators that render them;
 * :mod:`nlosfw.transform`: phasor fields and the transforms that make them;
-* :mod:`nlosfw.model`: field models fitted to sparse fields, and their protocol;
+* :mod:`nlosfw.model`: field models fitted to sparse fields;
 * :mod:`nlosfw.image`: imagers and reconstructions;
+* :mod:`nlosfw.evaluation`: the protocol: splits, count splitting, field and image scores;
 * :mod:`nlosfw.plugins`: plugin discovery and hooks; :mod:`nlosfw.testing`: the kit;
 * :mod:`nlosfw.pipeline`: the run engine (plans, stages, cache, run directory, metrics);
 * :mod:`nlosfw.compose`: a run's configuration composed with Hydra and checked;
@@ -60,14 +61,13 @@ if TYPE_CHECKING:  # the names, for type checkers; at run time they load on firs
         __version__,
         require,
     )
+    from nlosfw.evaluation import field_metrics, split_field
     from nlosfw.image import Imager, ImagerConfig, Reconstruction, depth_span
     from nlosfw.model import (
         FieldModel,
         FieldModelConfig,
         FitReport,
         TrainingStep,
-        field_metrics,
-        split_field,
     )
     from nlosfw.plugins import Capability, PluginKind, hookimpl
     from nlosfw.simulate import Scene, Simulator, SimulatorConfig

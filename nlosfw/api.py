@@ -162,8 +162,8 @@ def transform_capture(capture: Capture, transform: str = "fft", **options: objec
 def fit_model(field: PhasorField, model: str = "interp", **options: object) -> FieldModel:
     """Field model plugin ``model`` with ``options`` (``steps=500``), fitted to ``field``.
 
-    Fit it to the training part of a split (:func:`nlosfw.model.split_field`) to score it
-    on the held-out samples afterwards (:func:`nlosfw.model.field_metrics`). For the fit's
+    Fit it to the training part of a split (:func:`nlosfw.evaluation.split_field`) to score it
+    on the held-out samples afterwards (:func:`nlosfw.evaluation.field_metrics`). For the fit's
     report (steps, seconds, losses), create the plugin and call its ``fit`` yourself.
     """
     _of_type(field, PhasorField, "field", "a PhasorField")

@@ -23,6 +23,7 @@ LAYERS = {
     "nlosfw.transform": 2,
     "nlosfw.model": 3,
     "nlosfw.image": 3,
+    "nlosfw.evaluation": 4,
     "nlosfw.plugins": 4,
     "nlosfw.testing": 5,
     "nlosfw.pipeline": 5,
@@ -222,6 +223,36 @@ def test_every_public_name_exists():
         module = importlib.import_module(package)
         missing = [n for n in getattr(module, "__all__", ()) if not hasattr(module, n)]
         assert not missing, f"{package}.__all__ names what it does not define: {missing}"
+
+
+def _imported_names(path: Path) -> list[str]:
+    """Every module name ``path`` imports (any library, function-level imports included)."""
+    names: list[str] = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names += [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names += [node.module, *(f"{node.module}.{a.name}" for a in node.names)]
+    return names
+
+
+def test_only_the_evaluation_package_imports_skimage_metrics():
+    """Reconstruction scores have one implementation, :mod:`nlosfw.evaluation.image_scores`:
+    no other module, plugin, example or benchmark imports scikit-image's metrics."""
+    sources = sorted([*CORE.rglob("*.py"), *_third_party_sources(),
+                      *ROOT.glob("benchmarks/*.py")])
+    importers = sorted({str(path.relative_to(ROOT)) for path in sources
+                        if any(n.split(".")[0] == "skimage" for n in _imported_names(path))})
+    assert importers == ["nlosfw/evaluation/image_scores.py"]
+
+
+def test_the_metrics_recorder_computes_nothing():
+    """The recorder copies the sections the stages' results carry: it imports neither the
+    protocol, nor the section builders, nor anything that computes."""
+    names = _imported_names(CORE / "pipeline" / "recorder.py")
+    computing = [n for n in names if n.split(".")[0] in ("numpy", "scipy", "skimage")
+                 or n.startswith(("nlosfw.evaluation", "nlosfw.pipeline.measure"))]
+    assert not computing, f"the metrics recorder imports {computing}"
 
 
 def test_no_private_hydra_or_omegaconf_api():

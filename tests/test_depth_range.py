@@ -10,9 +10,9 @@ import pytest
 
 from nlosfw import load_capture
 from nlosfw.capture.signal import signal_bins, signal_depth_range
+from nlosfw.evaluation.splits import split_field
 from nlosfw.image.depths import depth_span
 from nlosfw.model.physics.prior import RSDPriorFieldModel
-from nlosfw.model.protocol import split_field
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
 from nlosfw.testing import fixtures, layouts

@@ -6,9 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nlosfw.model import split_field
+from nlosfw.evaluation import error_metrics, split_field
 from nlosfw.model.neural.smoothness import FrequencySmoothness, second_difference_matrix
-from nlosfw.model.protocol import error_metrics
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures
 

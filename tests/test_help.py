@@ -76,7 +76,7 @@ def test_every_config_group_has_one_entry_with_its_choices(page):
     # the settings groups: their one line comes from RunSettings' own docstrings
     assert "split.* which wall samples and frequencies the field models train on " \
            "(spatial_step, pattern, spatial_fraction, seed, spectral, spectral_fraction, " \
-           "thinning, thinning_seed)" in groups
+           "count_splitting, count_splitting_seed)" in groups
     assert "output.* which large files the run writes, and whether it may replace an " \
            "earlier run's (keep, compression, overwrite)" in groups
     for acquisition in ("clean", "noisy"):
@@ -84,7 +84,7 @@ def test_every_config_group_has_one_entry_with_its_choices(page):
     from dataclasses import fields
 
     for f in fields(RunSettings):
-        if f.name != "thesis":
+        if f.name != "published":
             assert f" {f.name}" in groups, f.name
 
 

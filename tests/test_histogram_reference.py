@@ -10,7 +10,6 @@ differ, and the point's depth is known: the reference picture must put it there.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import logging
 import tracemalloc
@@ -21,15 +20,14 @@ import pytest
 
 import nlosfw
 from nlosfw.capture.hdf5 import write_capture
-from nlosfw.capture.thinning import ThinnedCapture
 from nlosfw.cli import main
+from nlosfw.evaluation.count_splitting import CountSplit
+from nlosfw.evaluation.reference import REFERENCE, reference_bytes, reference_capture
 from nlosfw.image.depths import depth_span
 from nlosfw.image.measured import histogram_field
 from nlosfw.image.reconstruction_io import read_reconstruction
 from nlosfw.image.transient import MEASURED_BAND
 from nlosfw.pipeline.depth_plan import DepthPlan
-from nlosfw.pipeline.reference import REFERENCE, reference_bytes, reference_capture
-from nlosfw.pipeline.results import CaptureResult
 from nlosfw.pipeline.settings import ReconstructionSettings
 from nlosfw.plugins import load_plugins
 from tests.real_data import real_capture
@@ -149,7 +147,7 @@ def test_a_simulated_capture_has_one_only_when_asked(workdir):
 def test_too_large_for_memory_is_skipped_in_one_line_unless_allowed(workdir, point_capture,
                                                                    monkeypatch):
     path, _ = point_capture
-    monkeypatch.setattr("nlosfw.pipeline.reference.available_memory", lambda: 1000)
+    monkeypatch.setattr("nlosfw.evaluation.reference.available_memory", lambda: 1000)
     given = [f"capture.path='{path}'", "imager=lct", *QUICK]
     out = nlosfw.run(given, output_dir=workdir / "small")
     assert out.results.reconstructions.reference is None
@@ -173,12 +171,9 @@ def test_asking_for_it_with_a_band_imager_is_one_line_exit_2(workdir, point_capt
 def test_with_count_splitting_the_histograms_are_both_halves_added(point_capture):
     _, capture = point_capture
     a, b = capture.replace(H=capture.H * 0.25), capture.replace(H=capture.H * 0.75)
-    result = CaptureResult(capture=a, key="a", source="file", label="x", path=Path("x"),
-                           format="nlosfw", thinning=ThinnedCapture(a, b, 0, 1.0, 1, 3),
-                           score_key="b")
-    np.testing.assert_allclose(reference_capture(result).H, capture.H, rtol=1e-6)
-    assert reference_capture(dataclasses.replace(result, thinning=None,
-                                                 score_key=None)) is a
+    halves = CountSplit(a, b, 0, 1.0, 1, 3)
+    np.testing.assert_allclose(reference_capture(a, halves).H, capture.H, rtol=1e-6)
+    assert reference_capture(a, None) is a
 
 
 @pytest.mark.parametrize("imager", ["lct", "fk"])

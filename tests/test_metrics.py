@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import DataError
-from nlosfw.image.scores import image_metrics, psnr, rmse, ssim
+from nlosfw.evaluation.image_scores import image_metrics, psnr, rmse, ssim
 
 
 @pytest.mark.parametrize("shape", [(64, 64), (24, 40), (12, 16, 20), (11, 11)])

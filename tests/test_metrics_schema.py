@@ -36,7 +36,8 @@ LAYOUTS = {1: "df68d9802d66f6c788ccb3f73598862a1b3e03e0195b95c4a5dababd971930e2"
            5: "8a557b10430447143b70ff16e69beb7561b11132ef0c0774eb4a960439886eb4",
            6: "f97056c1ab226f7f0bdb9c183d927b8d7234b7e023c544ca3d9a5f9fb44efeb9",
            7: "9b31013e44eecda3daa1c8abe3ad5ac9e92452f4fa28745a3d8ff3c88efd5e82",
-           8: "11c2bda7f7f6e7592b477ed398c22ec04d36fd56c2fa5f773331ccf8bce0e9e0"}
+           8: "11c2bda7f7f6e7592b477ed398c22ec04d36fd56c2fa5f773331ccf8bce0e9e0",
+           9: "262aa4a837b1040bcd211c67fdfb498df7f1579830c72fc399f89a0b79dd1553"}
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +61,7 @@ def _validator(run: Path) -> jsonschema.Draft202012Validator:
 def test_a_run_writes_a_schema_its_metrics_match(finished_run):
     data = json.loads((finished_run / "metrics.json").read_text())
     _validator(finished_run).validate(data)
-    assert data["schema_version"] == SCHEMA_VERSION == 8
+    assert data["schema_version"] == SCHEMA_VERSION == 9
     metrics = RunMetrics.read(finished_run / "metrics.json")
     assert metrics.to_json() == data
     assert set(metrics.field or {}) == {"interp"}
@@ -131,7 +132,7 @@ def _sweep_with(tmp_path, finished_run, text):
 @pytest.mark.malformed_metrics
 @pytest.mark.parametrize(("edit", "message"), [
     (lambda d: d.update(schema_version=0),
-     "schema_version is 0; this nlosfw reads versions 5, 6, 7, 8 (written by another nlosfw "
+     "schema_version is 0; this nlosfw reads versions 5, 6, 7, 8, 9 (written by another nlosfw "
      "version"),
     (lambda d: d["field"]["interp"]["splits"].pop("all"), "field.interp.splits.all: is missing"),
     (lambda d: d["timings"].update(total="slow"), "timings.total: must be a number, got 'slow'"),
@@ -156,7 +157,7 @@ def test_a_version_5_file_still_reads(tmp_path, finished_run):
     """Version 6 only added optional keys (count splitting): a version-5 metrics.json (one
     without them) reads, as this version, with the same values."""
     data = json.loads((finished_run / "metrics.json").read_text())
-    assert "thinning" not in data["capture"]
+    assert "count_splitting" not in data["capture"]
     assert "heldout_measurement" not in data["field"]["interp"]["splits"]
     old = tmp_path / "metrics_v5.json"
     old.write_text(json.dumps({**data, "schema_version": 5}))
@@ -164,6 +165,26 @@ def test_a_version_5_file_still_reads(tmp_path, finished_run):
     assert metrics.schema_version == SCHEMA_VERSION
     assert metrics.to_json() == data
     assert metrics.field_entry("interp").splits.heldout_measurement is None
+
+
+def test_a_version_8_file_reads_its_count_splitting_under_the_new_key(tmp_path, finished_run):
+    """Version 9 renamed ``capture.thinning`` to ``capture.count_splitting``: a version-8
+    file with the old key reads as this version, the section under its new name."""
+    data = json.loads((finished_run / "metrics.json").read_text())
+    halves = {"seed": 3, "count_scale": 1.0, "counts_a": 10, "counts_b": 12}
+    old = tmp_path / "metrics_v8.json"
+    old.write_text(json.dumps({**data, "schema_version": 8,
+                               "capture": {**data["capture"], "thinning": halves}}))
+    metrics = RunMetrics.read(old)
+    assert metrics.schema_version == SCHEMA_VERSION
+    assert metrics.capture is not None and metrics.capture.count_splitting is not None
+    assert metrics.capture.count_splitting.seed == 3
+    assert metrics.to_json() == {**data, "capture": {**data["capture"],
+                                                     "count_splitting": halves}}
+    current = tmp_path / "metrics_v9.json"    # the old name in a current file is refused
+    current.write_text(json.dumps({**data, "capture": {**data["capture"], "thinning": halves}}))
+    with pytest.raises(DataError, match="thinning"):
+        RunMetrics.read(current)
 
 
 def test_report_reads_runs_through_the_typed_metrics(tmp_path, finished_run):

@@ -148,8 +148,9 @@ def test_the_options_refuse_no_pulses_and_count_splitting():
         Preprocessing(pileup_pulses=0)
     assert err.value.option == "pileup_pulses"
     with pytest.raises(ConfigError, match="capture.pileup_pulses") as err:
-        run_settings({"split": {"thinning": True}, "capture": {"pileup_pulses": 1000}})
-    assert err.value.option == "split.thinning"
+        run_settings({"split": {"count_splitting": True},
+                      "capture": {"pileup_pulses": 1000}})
+    assert err.value.option == "split.count_splitting"
 
 
 def test_a_simulated_detector_with_pileup_is_corrected_in_the_capture_stage(tmp_path,

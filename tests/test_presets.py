@@ -36,11 +36,17 @@ def preset(name):
     return yaml_safe.load((CONF / "experiment" / f"{name}.yaml").read_text())
 
 
+def published_rows(cfg: dict) -> dict:
+    """The rows of every reference table of a preset's config, by source."""
+    return {source: row for table in cfg["published"].values()
+            for source, row in table["rows"].items()}
+
+
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_preset_architectures_match_the_thesis_parameter_counts(name):
     """Each preset's networks have exactly the parameters the thesis lists for them."""
     cfg = preset(name)
-    rows = cfg["thesis"]["rows"]
+    rows = published_rows(cfg)
     models = {"model": cfg["model"], **cfg.get("compare", {})}
     families = {"tanh_torch": "tanh", "pe_torch": "pe", "siren_torch": "siren"}
     model_name = cfg["defaults"][-1]["override /model"]
@@ -55,7 +61,7 @@ def test_preset_architectures_match_the_thesis_parameter_counts(name):
         n_freq = 1 if config.mode == "single" else 135
         arch = resolve_architecture(family, config, (32, 32), n_freq)
         per_network = count_parameters(arch)
-        expected = rows[source].get("parameters") or PRESETS["thesis_siren"].parameters
+        expected = rows[source].get("n_parameters") or PRESETS["thesis_siren"].parameters
         assert per_network == expected, (name, source, per_network, expected)
 
 
@@ -67,10 +73,11 @@ def test_every_preset_runs_at_reduced_size(tmp_path, name):
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["status"] == "completed"
     cfg = preset(name)
-    for source in cfg["thesis"]["rows"]:
+    for source in published_rows(cfg):
         assert metrics["field"][source]["splits"]["all"]["nmse_db"] is not None
-    table = (run / "thesis_comparison.md").read_text()
-    assert "(thesis)" in table and "| " + run.name in table
+    table = (run / "published_numbers.md").read_text()
+    assert "### Thesis, Table" in table and "(published)" in table
+    assert "| " + run.name in table
 
 
 @pytest.mark.slow
@@ -103,7 +110,7 @@ def test_table_4_1_sweep_and_report_next_to_the_thesis(tmp_path):
     assert len(list(sweep.rglob("metrics.json"))) == 3
     nlosfw("report", str(sweep), cwd=tmp_path)
     report = (sweep / "report" / "report.md").read_text()
-    assert "### Table 4.1: parameters and compression" in report
+    assert "### Thesis, Table 4.1: parameters and compression" in report
     for row in ("Mono frequency + upsampling (MLP)", "Multi frequency (MLP + PE)",
                 "Multi frequency + upsampling (MLP + Sin)"):
         assert row in report

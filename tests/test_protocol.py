@@ -1,4 +1,4 @@
-"""The thesis protocol: splits, metrics and Table 4.1's parameters/data ratio."""
+"""The protocol's splits and field scores, and Table 4.1's parameters/data ratio."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import pytest
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.model.protocol import (
+from nlosfw.evaluation import (
     SpatialSampling,
     error_metrics,
     field_metrics,

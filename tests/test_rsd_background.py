@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import ConfigError
+from nlosfw.evaluation.splits import split_field
 from nlosfw.model.physics.background import BackgroundProjection, WallBackground
 from nlosfw.model.physics.prior import RSDPriorFieldModel
-from nlosfw.model.protocol import split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
 from tests.test_rsd_prior import _geometry, _point_field

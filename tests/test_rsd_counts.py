@@ -9,6 +9,7 @@ import pytest
 
 from nlosfw.cli import main
 from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.evaluation.splits import scattered_field, split_field
 from nlosfw.model.physics.config import RSDPriorConfig
 from nlosfw.model.physics.counts import (
     CountsScene,
@@ -20,7 +21,6 @@ from nlosfw.model.physics.counts import (
 from nlosfw.model.physics.operator import OperatorOptions, VoxelLattice
 from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.model.physics.response import SystemResponse
-from nlosfw.model.protocol import scattered_field, split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.counts import bin_counts
 from nlosfw.transform.field import PhasorField, PhotonCounts
@@ -204,10 +204,11 @@ def _run(tmp_path, monkeypatch, *overrides: str, model: str = "rsd_prior"
     return status, (reports[0].fitted if reports else {})
 
 
-@pytest.mark.parametrize("thinning, model", [([], "rsd_prior"),
-                                             (["split.thinning=true"], "rsd_prior"),
+@pytest.mark.parametrize("count_splitting, model", [([], "rsd_prior"),
+                                             (["split.count_splitting=true"], "rsd_prior"),
                                              ([], "rsd_residual_torch")])
-def test_a_run_recovers_the_simulators_dark_counts(tmp_path, monkeypatch, thinning, model):
+def test_a_run_recovers_the_simulators_dark_counts(tmp_path, monkeypatch, count_splitting,
+                                                   model):
     """The background per bin the counts' EM finds is the simulator's dark-count floor
     (0.5 photons a bin; half of it in half A with count splitting); the neural residual's
     physics stage takes the counts too. Measured: 0.510 and 0.250."""
@@ -215,9 +216,9 @@ def test_a_run_recovers_the_simulators_dark_counts(tmp_path, monkeypatch, thinni
     if extra:
         pytest.importorskip("torch")
     status, fitted = _run(tmp_path, monkeypatch, "split.spectral=none",
-                          "prior.counts.stop=likelihood", *thinning, *extra, model=model)
+                          "prior.counts.stop=likelihood", *count_splitting, *extra, model=model)
     assert status == 0
-    floor = 0.25 if thinning else 0.5
+    floor = 0.25 if count_splitting else 0.5
     assert fitted["counts_background"] == pytest.approx(floor, rel=0.1)
     assert fitted["counts_loglik_gain"] > 0 and fitted["counts_support_voxels"] > 0
     if model != "rsd_prior":

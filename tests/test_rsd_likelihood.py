@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from nlosfw.capture.hdf5 import read_capture, write_capture
-from nlosfw.capture.thinning import count_scale
+from nlosfw.capture.photon_counts import count_scale
 from nlosfw.cli import main
 from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.evaluation.splits import scattered_field, split_field
 from nlosfw.model.physics.likelihood import sample_weights
 from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.model.physics.wall import wall_samples
-from nlosfw.model.protocol import scattered_field, split_field
 from nlosfw.testing import fixtures, heldout_error_db
 from nlosfw.testing.fixtures import tiny_capture
 from nlosfw.transform.common import histogram_2d, to_field_layout
@@ -127,8 +127,9 @@ def test_a_float_capture_file_is_refused_before_the_run(tmp_path, monkeypatch, c
     assert not (tmp_path / "outputs").exists()
 
 
-@pytest.mark.parametrize("thinning", [[], ["split.thinning=true"]])
-def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch, thinning):
+@pytest.mark.parametrize("count_splitting", [[], ["split.count_splitting=true"]])
+def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch,
+                                                          count_splitting):
     """The training field's variance is the bin width squared times each kept point's
     photon count (the capture's counts, over the count scale squared), at every frequency;
     with count splitting, half A's counts (the transform probed once, on half B)."""
@@ -146,7 +147,7 @@ def test_a_run_gives_the_model_its_fields_poisson_variance(tmp_path, monkeypatch
     assert main(["scene=tiny", "scene.noise.model=poisson", "scene.noise.photons=2e5",
                  "model=rsd_prior", "model.likelihood=poisson", "model.iterations=20",
                  "split.spatial_step=2", "transform.n_frequencies=21",
-                 "reconstruction.n_depths=4", "figures.enabled=false", *thinning,
+                 "reconstruction.n_depths=4", "figures.enabled=false", *count_splitting,
                  f"hydra.run.dir={run}"]) == 0
     capture = read_capture(run / "capture.hdf5")
     per_point = to_field_layout(histogram_2d(capture).sum(axis=0)[None], capture)[0]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import ConfigError, FitError
+from nlosfw.evaluation.splits import split_field
 from nlosfw.image.plane_convolution import grid_layout
 from nlosfw.model.physics.operator import (
     OperatorOptions,
@@ -16,7 +17,6 @@ from nlosfw.model.physics.operator import (
     direct_fields,
 )
 from nlosfw.model.physics.prior import RSDPriorFieldModel
-from nlosfw.model.protocol import split_field
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.physics import three_bounce
 from nlosfw.simulate.scene import GeometryItem, scene_from_config

@@ -10,6 +10,7 @@ import pytest
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.errors import ConfigError, DataError, FitError
+from nlosfw.evaluation.splits import split_field
 from nlosfw.image.plane_convolution import grid_layout
 from nlosfw.model.physics.frequencies import fit_frequency_indices
 from nlosfw.model.physics.lattice import voxel_lattice
@@ -21,7 +22,6 @@ from nlosfw.model.physics.operator import (
 )
 from nlosfw.model.physics.prior import RSDPriorConfig, RSDPriorFieldModel
 from nlosfw.model.physics.solver import FistaProblem, lipschitz, smoothed_tv, solve
-from nlosfw.model.protocol import split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
 

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import DataError
+from nlosfw.evaluation.splits import SpatialSampling, scattered_field, split_field
 from nlosfw.model.physics.background import BackgroundProjection
 from nlosfw.model.physics.operator import SceneOperator, VoxelLattice
 from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.model.physics.wall import validation_split, wall_samples
-from nlosfw.model.protocol import SpatialSampling, scattered_field, split_field
 from nlosfw.testing import fixtures
 from nlosfw.transform.field import PhasorField
 from tests.test_rsd_prior import _geometry, _point_field

@@ -11,9 +11,9 @@ import pytest
 
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.common.errors import ConfigError
+from nlosfw.evaluation.splits import split_field
 from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.model.physics.response import SystemResponse, estimate_response
-from nlosfw.model.protocol import split_field
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
 from nlosfw.testing import fixtures, heldout_error_db

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from nlosfw.common.errors import DataError
+from nlosfw.evaluation.image_scores import depth_rmse, reconstruction_scores, resample_nearest
 from nlosfw.image.reconstruction import Reconstruction, volume_voxels
-from nlosfw.image.scores import depth_rmse, reconstruction_scores, resample_nearest
 
 DEPTHS = np.array([0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2])
 

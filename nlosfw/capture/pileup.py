@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.thinning import count_scale, photon_counts
+from nlosfw.capture.photon_counts import count_scale, photon_counts
 from nlosfw.common.errors import ConfigError
 
 #: The option that turns the correction on (named in every refusal).

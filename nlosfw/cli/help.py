@@ -104,7 +104,7 @@ def help_text(host: PluginHost, conf: Path) -> str:
     docs = attribute_docstrings(RunSettings)
     hints = get_type_hints(RunSettings)
     for f in dataclasses.fields(RunSettings):
-        if f.name == "thesis":
+        if f.name == "published":     # published numbers: the presets set them
             continue
         summary = first_sentence(docs.get(f.name, "")).rstrip(".")
         summary = summary[:1].lower() + summary[1:]

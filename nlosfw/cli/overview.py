@@ -44,7 +44,7 @@ def changed_options(config: Mapping[str, Any], host: PluginHost) -> list[str]:
         name = str(node.pop("name", ""))
         out += _diff(group, node, _plugin_defaults(host, group, name))
     settings = {k: v for k, v in config.items()
-                if k not in SELECTOR_GROUPS and k not in ("thesis", "compare")}
+                if k not in SELECTOR_GROUPS and k not in ("published", "compare")}
     out += _diff("", settings, config_to_dict(RunSettings()))
     for label, options in (config.get("compare") or {}).items():
         rest = dict(options)
@@ -73,8 +73,9 @@ def overview_lines(config: Mapping[str, Any], host: PluginHost,
         lines.append("  changed from the defaults: " + escape(", ".join(shown) + more))
     else:
         lines.append("  every option at its default")
-    if settings.thesis:
-        lines.append(f"  thesis preset: figure {escape(str(settings.thesis.get('figure', '?')))}")
+    if settings.published:
+        titles = [table.title or name for name, table in settings.published.items()]
+        lines.append("  compared with published numbers: " + escape("; ".join(titles)))
     plan = run_plan(picked, settings)
     lines.append("  plan: " + escape(plan[0]))
     lines += ["        " + escape(line) for line in plan[1:]]
@@ -118,10 +119,11 @@ def run_plan(picked: Mapping[str, str], settings: RunSettings) -> list[str]:
     if not sources:  # model=none: the capture imaged alone
         parts.append(f"1 reconstruction ({picked['imager']})")
         return [" → ".join(parts), "= the capture's field [no field model: model=none]"]
-    thinning = settings.split.thinning
-    fields = {"true": "half B's full scan (count splitting)" if thinning else "the reference",
+    count_splitting = settings.split.count_splitting
+    fields = {"true": ("half B's full scan (count splitting)" if count_splitting
+                       else "the reference"),
               "raw": "the training samples"}
-    if thinning:
+    if count_splitting:
         fields["ceiling"] = "half A's full scan"
     for label, plugin in sources.items():
         fields[label] = "the baseline" if label == "interp" else plugin

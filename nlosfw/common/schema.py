@@ -296,6 +296,10 @@ def _python(value: Any, tp: Any, where: str) -> Any:
                                                                         else Any),
                          f"{where}[{i}]") for i in range(len(value))]
         return tuple(items) if origin is tuple else items
+    if origin is dict and len(args) == 2 and isinstance(args[1], type) \
+            and dataclasses.is_dataclass(args[1]):
+        return {str(k): build(args[1], _value(value, k, where), _join(where, str(k)))
+                for k in value}
     if isinstance(value, (DictConfig, ListConfig)):
         return OmegaConf.to_container(value, resolve=True)
     return value

@@ -1,12 +1,14 @@
-"""Stage 4, imaging: phasor fields propagated into the hidden volume (Rayleigh-Sommerfeld)
-and scored.
+"""Stage 4, imaging: phasor fields propagated into the hidden volume (Rayleigh-Sommerfeld).
 
 The names in ``__all__`` are the public API of this stage: plugins, examples and docs
-import only these."""
+import only these. The reconstruction scores this package exported before
+(``psnr``, ``ssim``, ...) are :mod:`nlosfw.evaluation`'s now; they still load from here
+for one minor version, with a :class:`DeprecationWarning` naming their new place."""
 
 
 from typing import TYPE_CHECKING
 
+from nlosfw.common.deprecation import moved_names
 from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
@@ -38,16 +40,6 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         phasor_steps,
         wall_field,
     )
-    from nlosfw.image.scores import (
-        amplitude,
-        depth_rmse,
-        image_metrics,
-        normalise,
-        psnr,
-        reconstruction_scores,
-        rmse,
-        ssim,
-    )
     from nlosfw.image.transient import (
         TransientImager,
         TransientImagerConfig,
@@ -56,16 +48,13 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
 __all__ = [
     "grid_layout",
     "GridLayout",
-    "amplitude",
     "automatic_depths",
-    "depth_rmse",
     "depth_span",
     "FBPImager",
     "FBPImagerConfig",
     "FFTImager",
     "FFTImagerConfig",
     "FKImager",
-    "image_metrics",
     "Imager",
     "ImagerNeeds",
     "ImagerConfig",
@@ -73,21 +62,16 @@ __all__ = [
     "LCTImagerConfig",
     "LightConeConfig",
     "laser_phase",
-    "normalise",
     "path_multiplier",
     "phasor_steps",
     "plane_voxels",
     "ProgressCallback",
     "PropagationConfig",
     "PropagationImager",
-    "psnr",
     "read_reconstruction",
-    "reconstruction_scores",
     "Reconstruction",
-    "rmse",
     "RSDImager",
     "RSDImagerConfig",
-    "ssim",
     "TransientImager",
     "TransientImagerConfig",
     "volume_voxels",
@@ -95,4 +79,11 @@ __all__ = [
     "wall_voxels",
     "write_reconstruction",
 ]
-__getattr__, __dir__ = lazy_exports(__name__, __file__)
+
+#: The scores this package exported before :mod:`nlosfw.evaluation` held them.
+MOVED = {n: f"nlosfw.evaluation:{n}" for n in (
+    "amplitude", "depth_rmse", "image_metrics", "normalise", "psnr", "reconstruction_scores",
+    "rmse", "ssim")}
+
+_lazy_getattr, __dir__ = lazy_exports(__name__, __file__)
+__getattr__ = moved_names(__name__, MOVED, _lazy_getattr)

@@ -1,5 +1,5 @@
-"""Stage 3, field models: continuous F(x, y, f) -> P fitted to sparse phasor fields,
-and the protocol that scores them.
+"""Stage 3, field models: continuous F(x, y, f) -> P fitted to sparse phasor fields (the
+protocol that splits and scores them is :mod:`nlosfw.evaluation`).
 
 The root holds the :class:`FieldModel` interface, the ``interp`` baseline, the model files
 and what users import (the models' configs); the model families are subpackages:
@@ -15,8 +15,9 @@ and what users import (the models' configs); the model families are subpackages:
 
 The names in ``__all__`` are the public API of this stage: plugins, examples and docs
 import only these and the subpackages' ``__all__``. The names the backends use that this
-package exported before (``Engine``, ``NetworkBuild``, ``PlaneStack``, ...) still load from
-here for one minor version, with a :class:`DeprecationWarning` naming their new place."""
+package exported before (``Engine``, ``NetworkBuild``, ``PlaneStack``, ...), and the
+protocol's (``split_field``, ``field_metrics``, ...), still load from here for one minor
+version, with a :class:`DeprecationWarning` naming their new place."""
 
 
 from typing import TYPE_CHECKING
@@ -42,35 +43,23 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.model.neural.config import NeuralFieldConfig
     from nlosfw.model.physics.config import RSDPriorConfig
     from nlosfw.model.physics.prior import RSDPriorFieldModel
-    from nlosfw.model.protocol import (
-        FieldSplit,
-        SpatialSampling,
-        field_metrics,
-        parameter_data_ratio,
-        split_field,
-    )
 
 __all__ = [
     "check_query",
     "check_training_field",
-    "field_metrics",
     "FieldModel",
     "FieldModelConfig",
-    "FieldSplit",
     "FitReport",
     "ModelNeeds",
     "InterpConfig",
     "InterpFieldModel",
     "NeuralFieldConfig",
     "NeuralVolumeConfig",
-    "parameter_data_ratio",
     "preset_config",
     "read_model_file",
     "RSDPriorConfig",
     "RSDPriorFieldModel",
     "RSDResidualConfig",
-    "SpatialSampling",
-    "split_field",
     "TrainingStep",
     "write_model_file",
 ]
@@ -87,8 +76,13 @@ _PHYSICS = ("OperatorOptions", "SceneOperator", "training_grid", "validation_spl
 _HYBRID = ("aligned_empty", "BestStep", "fold_spectra", "FoldedSpectra", "history_entry",
            "NeuralVolumeFieldModel", "plane_stack", "PlaneStack", "RSDResidualFieldModel",
            "stack_bytes", "TrainedVolume", "volume_coordinates", "VolumeProblem")
-#: The names this package exported before the families became subpackages -> their place.
+#: The protocol's names this package exported before :mod:`nlosfw.evaluation` held them.
+_EVALUATION = ("FieldSplit", "SpatialSampling", "field_metrics", "parameter_data_ratio",
+               "split_field")
+#: The names this package exported before the families became subpackages (and before the
+#: protocol became a package) -> their place.
 MOVED = {"Engine": "nlosfw.model.neural:Backend",
+         **{n: f"nlosfw.evaluation:{n}" for n in _EVALUATION},
          **{n: f"nlosfw.model.neural:{n}" for n in _NEURAL},
          **{n: f"nlosfw.model.physics:{n}" for n in _PHYSICS},
          **{n: f"nlosfw.model.hybrid:{n}" for n in _HYBRID}}

@@ -11,7 +11,7 @@ normalisation the neural models use, :func:`nlosfw.model.neural.normalisation.es
 so that the comparison isolates what the networks add.
 
 Scattered wall samples (a random scan: a field with one row of wall points, see
-:mod:`nlosfw.model.protocol`) are interpolated in frequency by the same spline and in
+:mod:`nlosfw.evaluation.splits`) are interpolated in frequency by the same spline and in
 space by Clough-Tocher's piecewise-cubic C1 interpolant on the samples' Delaunay
 triangulation (:class:`scipy.interpolate.CloughTocher2DInterpolator`, what
 ``griddata(method="cubic")`` uses), on the complex, demodulated field, every frequency

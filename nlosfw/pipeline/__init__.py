@@ -36,6 +36,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         FitResult,
         FittedModel,
         ImagedFields,
+        PredictionScores,
         Reconstructions,
         RunOutput,
         RunResults,
@@ -43,7 +44,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         StageResults,
         TransformResult,
     )
-    from nlosfw.pipeline.settings import Artefact, RunSettings, run_settings
+    from nlosfw.pipeline.settings import Artefact, PublishedTable, RunSettings, run_settings
 
 __all__ = [
     "Artefact",
@@ -58,6 +59,8 @@ __all__ = [
     "PlainConfig",
     "Planned",
     "PlannedModel",
+    "PredictionScores",
+    "PublishedTable",
     "ReconstructionMetrics",
     "Reconstructions",
     "RunEvents",

@@ -1,5 +1,6 @@
 """The capture stage: read ``capture.path`` or simulate the scene (cached), preprocess it,
-split its counts in two (``split.thinning``), write ``capture.hdf5`` (half A when split).
+split its counts in two (``split.count_splitting``), write ``capture.hdf5`` (half A when
+split).
 
 A noisy scene's transport is rendered once: the noise-free capture is cached under its
 own key, the noisy one is that capture with noise added (cached too), and the
@@ -17,10 +18,11 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.capture.source import prepare
-from nlosfw.capture.thinning import thin
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.hashing import cache_key, file_digest
+from nlosfw.evaluation.count_splitting import split_counts
 from nlosfw.pipeline.context import StageContext
+from nlosfw.pipeline.measure import capture_metrics
 from nlosfw.pipeline.results import CaptureResult, StageResults
 from nlosfw.pipeline.settings import Artefact
 from nlosfw.simulate.geometry import resolve_mesh_paths
@@ -34,12 +36,12 @@ def capture_stage(run: StageContext, done: StageResults) -> CaptureResult:
         result = _file_capture(run)
     else:
         result = _preprocessed(run, _simulated_capture(run))
-    if run.plan.settings.split.thinning:
-        result = thinned(result, run.plan.settings.split.thinning_seed)
+    if run.plan.settings.split.count_splitting:
+        result = count_split(result, run.plan.settings.split.count_splitting_seed)
     run.files.write("capture", lambda p: write_capture(
         p, result.capture, compression=run.plan.settings.output.compression),
         keep_as=Artefact.capture)
-    return result
+    return dataclasses.replace(result, metrics=capture_metrics(result))
 
 
 def _file_capture(run: StageContext) -> CaptureResult:
@@ -97,18 +99,19 @@ def _preprocessed(run: StageContext, raw: CaptureResult) -> CaptureResult:
                                clean=clean, clean_key=clean_key)
 
 
-def thinned(result: CaptureResult, seed: int) -> CaptureResult:
+def count_split(result: CaptureResult, seed: int) -> CaptureResult:
     """Count splitting of the run's capture: half A becomes the capture (the models train
     on it), half B the one every score uses; the noise-free capture, if any, is halved to
-    A's exposure. A ConfigError for ``split.thinning`` when the capture is not counts."""
-    halves = thin(result.capture, seed, where=result.label)
-    key = cache_key({"capture": result.key, "thinning": int(seed), "half": "A"})
-    score_key = cache_key({"capture": result.key, "thinning": int(seed), "half": "B"})
+    A's exposure. A ConfigError for ``split.count_splitting`` when the capture is not
+    counts."""
+    halves = split_counts(result.capture, seed, where=result.label)
+    key = cache_key({"capture": result.key, "count_splitting": int(seed), "half": "A"})
+    score_key = cache_key({"capture": result.key, "count_splitting": int(seed), "half": "B"})
     clean, clean_key = result.clean, result.clean_key
     if clean is not None and clean_key is not None:
         clean = clean.replace(H=np.asarray(clean.H) * np.asarray(0.5, dtype=clean.H.dtype))
         clean_key = cache_key({"capture": clean_key, "scaled": 0.5})
-    return dataclasses.replace(result, capture=halves.a, key=key, thinning=halves,
+    return dataclasses.replace(result, capture=halves.a, key=key, count_split=halves,
                                score_key=score_key, clean=clean, clean_key=clean_key)
 
 

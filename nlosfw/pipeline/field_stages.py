@@ -6,6 +6,7 @@ half A's full field as the ceiling (count splitting) and every model's predictio
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import re
 import time
@@ -15,13 +16,15 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.thinning import count_scale, photon_counts
+from nlosfw.capture.photon_counts import count_scale, photon_counts
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.common.hashing import cache_key
+from nlosfw.evaluation.noise_floor import field_variance, kernel_power
+from nlosfw.evaluation.splits import split_field
 from nlosfw.model.interface import TrainingStep
-from nlosfw.model.protocol import split_field
 from nlosfw.pipeline.context import StageContext
+from nlosfw.pipeline.measure import fit_metrics, prediction_scores, split_metrics, transform_metrics
 from nlosfw.pipeline.plan import PlannedModel
 from nlosfw.pipeline.results import (
     CaptureResult,
@@ -39,7 +42,6 @@ from nlosfw.transform.field import PhasorField, PhotonCounts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
 from nlosfw.transform.frequencies import band_warning
 from nlosfw.transform.interface import PhasorTransform
-from nlosfw.transform.noise_floor import field_variance, kernel_power
 
 log = logging.getLogger(__name__)
 
@@ -72,10 +74,10 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
     if not run.plan.imager_needs.time_domain:     # a time-domain imager images no wall band
         _warn_aliasing(field)
     score = variance = power = None
-    if capture.thinning is not None and capture.score_key is not None:
-        score = cached_field(capture.thinning.b, capture.score_key)[0]
-        power = kernel_power(transform, capture.thinning.b, planned.name)
-        variance = field_variance(transform, capture.thinning.b, planned.name, power=power)
+    if capture.count_split is not None and capture.score_key is not None:
+        score = cached_field(capture.count_split.b, capture.score_key)[0]
+        power = kernel_power(transform, capture.count_split.b, planned.name)
+        variance = field_variance(transform, capture.count_split.b, planned.name, power=power)
     if needs.noise_variance:
         field = field.replace(variance=_training_variance(transform, capture, planned.name,
                                                           power))
@@ -85,8 +87,9 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
                         + (" (cached)" if hit else ""))
     run.files.write("phasor_field", lambda p: write_phasor_field(p, field),
                     keep_as=Artefact.phasor_field)
-    return TransformResult(field=field, cache_hit=hit, clean=clean, plugin=planned.name,
-                           score=score, score_variance=variance)
+    result = TransformResult(field=field, cache_hit=hit, clean=clean, plugin=planned.name,
+                             score=score, score_variance=variance)
+    return dataclasses.replace(result, metrics=transform_metrics(planned.name, result))
 
 
 def _training_variance(transform: PhasorTransform, capture: CaptureResult, name: str,
@@ -144,7 +147,8 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
         if planned.source == "model":
             run.files.write("field_model", planned.model.save, kind="field_model",
                             keep_as=Artefact.model)
-    return FitResult(split=split, models=tuple(models))
+    return FitResult(split=split, models=tuple(models), split_metrics=split_metrics(split),
+                     field_metrics={m.source: fit_metrics(m, split) for m in models})
 
 
 #: ``model.<option>`` in an error's text (not a module path such as ``nlosfw.model.x``).
@@ -167,7 +171,8 @@ def named_for(err: ConfigError | FitError, source: str) -> ConfigError | FitErro
 
 def predict_stage(run: StageContext, done: StageResults) -> ImagedFields:
     """The fields to image: true, raw (training samples, all frequencies), every model's
-    prediction of the full field; written as ``fields/<source>.hdf5`` (``output.keep``)."""
+    prediction of the full field, each prediction scored (:mod:`nlosfw.evaluation`);
+    written as ``fields/<source>.hdf5`` (``output.keep``)."""
     transformed = required(done.transform, "transform")
     field = transformed.field
     fitted = required(done.fit, "fit")
@@ -183,7 +188,9 @@ def predict_stage(run: StageContext, done: StageResults) -> ImagedFields:
                         ", ".join(fm.plugin for fm in fitted.models))
     fields = ImagedFields(true=transformed.reference, raw=fitted.split.raw_field(field),
                           predicted=predicted, seconds=seconds,
-                          ceiling=None if transformed.score is None else field)
+                          ceiling=None if transformed.score is None else field,
+                          scores={source: prediction_scores(prediction, transformed, fitted.split)
+                                  for source, prediction in predicted.items()})
     for source, f in fields.items():
         run.files.write(f"fields/{source}.hdf5", partial(write_phasor_field, field=f),
                         kind="phasor_field", keep_as=Artefact.fields)

@@ -12,8 +12,9 @@ Names (relative to the run directory; see the README):
 ``field_model.npz``       the trained field model (its plugin's format)
 ``fields/<source>.hdf5``  the fields imaged: true, raw, model, interp
 ``reconstructions/<source>.hdf5``  their reconstructions (``native-bins.hdf5``: the
-                          reference picture, :mod:`nlosfw.pipeline.reference`)
+                          reference picture, :mod:`nlosfw.evaluation.reference`)
 ``figures/*.png``         figures
+``published_numbers.md``  published numbers next to the run's (its ``published`` tables)
 ``report.html``           all of it in one self-contained page
 ========================  ================================================
 
@@ -49,7 +50,7 @@ ARTEFACTS = {
 }
 #: Top-level names a run may create in its directory (Hydra adds .hydra and run.log).
 PLANNED_NAMES = (*ARTEFACTS.values(), "fields", "reconstructions", "figures",
-                 "thesis_comparison.md", "report.html")
+                 "published_numbers.md", "report.html")
 
 #: Writes one file at the temporary path it is given.
 FileWriter = Callable[[Path], object]

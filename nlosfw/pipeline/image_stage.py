@@ -3,6 +3,7 @@ report files of a complete run (``report``, written by the report hooks' subscri
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Mapping
@@ -11,13 +12,23 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.common.files import format_bytes
+from nlosfw.common.logs import FILE_ONLY
 from nlosfw.common.progress import accepts_progress
+from nlosfw.evaluation.reference import (
+    REFERENCE,
+    memory_reason,
+    reference_bytes,
+    reference_capture,
+    reference_reason,
+)
+from nlosfw.evaluation.splits import FieldSplit
 from nlosfw.image.interface import Imager
+from nlosfw.image.measured import histogram_field
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.reconstruction_io import write_reconstruction
-from nlosfw.model.protocol import FieldSplit
 from nlosfw.pipeline.context import StageContext
-from nlosfw.pipeline.reference import REFERENCE, reference_field
+from nlosfw.pipeline.measure import reconstruction_metrics, truth_depth_image
 from nlosfw.pipeline.results import (
     CaptureResult,
     FrequencySplit,
@@ -27,13 +38,15 @@ from nlosfw.pipeline.results import (
     required,
 )
 from nlosfw.pipeline.settings import Artefact
+from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
 
 def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
-    """Image every field on the same voxels, then each from single frequencies alone."""
+    """Image every field on the same voxels, then each from single frequencies alone; score
+    every reconstruction against the true field's (:mod:`nlosfw.evaluation`)."""
     capture = required(done.capture, "capture").capture
     imager = run.plan.imager
     sources: dict[str, PhasorField]
@@ -71,9 +84,11 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
         run.files.write(f"reconstructions/{source}.hdf5",
                         partial(write_reconstruction, recon=recon),
                         kind="reconstruction", keep_as=Artefact.reconstructions)
-    return Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds,
-                           single_frequency=tuple(singles), imager=imager.name,
-                           reference=reference)
+    recons = Reconstructions(voxels=voxels, by_source=by_source, seconds=seconds,
+                             single_frequency=tuple(singles), imager=imager.name,
+                             reference=reference)
+    return dataclasses.replace(recons, metrics=reconstruction_metrics(
+        imager.name, recons, truth_depth_image(capture)))
 
 
 def report_stage(run: StageContext, done: StageResults) -> None:
@@ -132,8 +147,9 @@ def _image(run: StageContext, imager: Imager, field: PhasorField, voxels: np.nda
 
 def _reference(run: StageContext, capture: CaptureResult,
                voxels: np.ndarray) -> Reconstruction | None:
-    """The reference picture (:mod:`nlosfw.pipeline.reference`), or None (the log says why)."""
-    field = reference_field(run, capture, voxels)
+    """The reference picture (:mod:`nlosfw.evaluation.reference`), or None (the log says
+    why)."""
+    field = _reference_field(run, capture, voxels)
     if field is None:
         return None
     start = time.perf_counter()
@@ -142,6 +158,46 @@ def _reference(run: StageContext, capture: CaptureResult,
     log.info("reference picture imaged by %s in %.3g s", run.plan.imager.name,
              time.perf_counter() - start)
     return recon
+
+
+def _reference_field(run: StageContext, result: CaptureResult,
+                     voxels: np.ndarray) -> PhasorField | None:
+    """The field of the capture's histograms at their native bin width (every positive DFT
+    bin, the run's ``fft`` transform options kept), carrying the capture's imaging hints;
+    None, with the reason in the log, when the run makes no reference picture (run.log
+    only where it does not apply, a warning when ``reconstruction.histogram_reference``
+    asked for one)."""
+    settings = run.plan.settings
+    choice = settings.reconstruction.histogram_reference
+    imager = run.plan.imager
+    reason = reference_reason(choice, imager.name, run.plan.imager_needs.time_domain,
+                              result.source == "file", result.capture)
+    if reason is not None:
+        _no_reference(choice is True, reason)
+        return None
+    capture = reference_capture(result.capture, result.count_split)
+    depths = np.unique(np.asarray(voxels, dtype=float)[..., 2])
+    needed = reference_bytes(capture, depths, imager.plugin.config)
+    reason = memory_reason(needed, settings.limits.allow_large)
+    if reason is not None:
+        _no_reference(choice is True, reason)
+        return None
+    transform = run.plan.transform.plugin
+    field = histogram_field(capture, transform.config
+                            if isinstance(transform, FFTTransform) else None)
+    if field.imaging_hints is None and result.capture.imaging_hints is not None:
+        field = field.replace(imaging_hints=result.capture.imaging_hints)
+    log.info("reference picture: the histograms at native bins, %d frequencies to %.4g "
+             "cycles/m (estimated memory %s; not scored)", field.n_frequencies,
+             float(field.frequencies.max()), format_bytes(needed))
+    return field
+
+
+def _no_reference(asked: bool, reason: str) -> None:
+    """Log why no reference picture is made: a console warning when
+    ``reconstruction.histogram_reference=true`` asked for one, else run.log only."""
+    log.log(logging.WARNING if asked else logging.INFO, "no reference picture: %s", reason,
+            extra=None if asked else FILE_ONLY)
 
 
 def _single_frequency_images(run: StageContext, imager: Imager,

@@ -1,5 +1,6 @@
-"""The metrics of each stage's results (the sections of
-:class:`~nlosfw.pipeline.metrics.RunMetrics`)."""
+"""The sections of :class:`~nlosfw.pipeline.metrics.RunMetrics` each stage hands on in its
+result: what it made, in numbers, and its scores, computed by :mod:`nlosfw.evaluation` and
+written here into the sections' types (the metrics recorder only records them)."""
 
 from __future__ import annotations
 
@@ -8,12 +9,14 @@ from collections.abc import Mapping
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.evaluation.field_scores import denoising_errors, field_metrics
+from nlosfw.evaluation.heldout import heldout_scores
+from nlosfw.evaluation.image_scores import scored
+from nlosfw.evaluation.splits import FieldSplit, SpatialPattern
 from nlosfw.image.reconstruction import Reconstruction
-from nlosfw.image.scores import scored
-from nlosfw.model.heldout import HeldoutMeasurement, heldout_measurement
-from nlosfw.model.protocol import FieldSplit, SpatialPattern
 from nlosfw.pipeline.metrics import (
     CaptureMetrics,
+    CountSplittingMetrics,
     DenoisingMetrics,
     FieldMetrics,
     FitMetrics,
@@ -22,12 +25,17 @@ from nlosfw.pipeline.metrics import (
     PreprocessingStep,
     ReconstructionMetrics,
     SingleFrequencyMetrics,
+    SplitErrors,
     SplitMetrics,
-    ThinningMetrics,
     TransformMetrics,
 )
-from nlosfw.pipeline.nulls import is_number, not_finite
-from nlosfw.pipeline.results import CaptureResult, FittedModel, Reconstructions, TransformResult
+from nlosfw.pipeline.results import (
+    CaptureResult,
+    FittedModel,
+    PredictionScores,
+    Reconstructions,
+    TransformResult,
+)
 from nlosfw.transform.field import PhasorField
 
 
@@ -35,8 +43,8 @@ def capture_metrics(result: CaptureResult) -> CaptureMetrics:
     """Where the capture came from, its preprocessing, its shape, timing and total signal
     (of half A with count splitting)."""
     capture = result.capture
-    halves = result.thinning
-    thinning = None if halves is None else ThinningMetrics(
+    halves = result.count_split
+    count_splitting = None if halves is None else CountSplittingMetrics(
         seed=halves.seed, count_scale=halves.count_scale, counts_a=halves.counts_a,
         counts_b=halves.counts_b)
     return CaptureMetrics(
@@ -49,7 +57,7 @@ def capture_metrics(result: CaptureResult) -> CaptureMetrics:
         shape=tuple(int(n) for n in capture.H.shape), kind=capture.kind,
         delta_t=float(capture.delta_t), t_start=float(capture.t_start),
         total=float(np.sum(capture.H, dtype=np.float64)),
-        noise=capture.scene_info.get("noise"), thinning=thinning)
+        noise=capture.scene_info.get("noise"), count_splitting=count_splitting)
 
 
 def truth_depth_image(capture: Capture) -> np.ndarray | None:
@@ -99,65 +107,44 @@ def fit_metrics(fitted: FittedModel, split: FieldSplit) -> FieldMetrics:
 def denoising_metrics(clean: PhasorField, noisy: PhasorField,
                       predicted: PhasorField) -> DenoisingMetrics:
     """Errors against the noise-free field: of the noisy full field and of a prediction
-    (null, with why, where undefined: a zero noise-free field, an error of zero)."""
-    norm = float(np.linalg.norm(clean.values))
-    if not norm > 0:
-        why = "the noise-free field is zero (the scene reflects nothing): no error relative to it"
-        return DenoisingMetrics(noisy_relative_l2=None, relative_l2=None, gain_db=None,
-                                null_reasons=dict.fromkeys(
-                                    ("noisy_relative_l2", "relative_l2", "gain_db"), why))
-
-    def rel(field: PhasorField) -> float:
-        return float(np.linalg.norm(field.values - clean.values)) / norm
-
-    noisy_error, model_error = rel(noisy), rel(predicted)
-    if noisy_error > 0 and model_error > 0:
-        return DenoisingMetrics(noisy_relative_l2=noisy_error, relative_l2=model_error,
-                                gain_db=float(20 * np.log10(noisy_error / model_error)))
-    why = ("the prediction equals the noise-free field: the gain is infinite"
-           if model_error == 0 else "the noisy field equals the noise-free field (no noise)")
-    return DenoisingMetrics(noisy_relative_l2=noisy_error, relative_l2=model_error,
-                            gain_db=None, null_reasons={"gain_db": why})
+    (:func:`nlosfw.evaluation.field_scores.denoising_errors`; null, with why, where
+    undefined)."""
+    values, reasons = denoising_errors(clean, noisy, predicted)
+    return DenoisingMetrics(**values, null_reasons=reasons or None)
 
 
 def heldout_measurement_metrics(predicted: PhasorField, measured: PhasorField,
                                 variance: np.ndarray, split: FieldSplit
                                 ) -> HeldoutMeasurementMetrics:
     """Count splitting: a prediction's error at the held-out wall points against half B's
-    field, its noise floor and the excess (:func:`nlosfw.model.heldout.heldout_measurement`)."""
-    held = ~np.asarray(split.spatial_mask, dtype=bool)
-    at_held = np.asarray(measured.values)[:, held]
-    if held.any() and not float(np.sum(np.abs(at_held) ** 2)) > 0:
-        why = "half B's field is zero at the held-out wall points: no error relative to it"
-        return HeldoutMeasurementMetrics(
-            nmse_db=None, floor_db=None, excess_db=None, excess=None, n_samples=at_held.size,
-            null_reasons=dict.fromkeys(("nmse_db", "floor_db", "excess_db", "excess"), why))
-    score = heldout_measurement(predicted.values, measured.values, variance, split.spatial_mask)
-    db = HeldoutMeasurement.db
-    reasons = {}
-    if db(score.error) is None:
-        reasons["nmse_db"] = ("the prediction equals half B's field at the held-out points: "
-                              "zero error" if score.error == 0 else not_finite(score.error))
-    if db(score.floor) is None:
-        reasons["floor_db"] = ("half B's field carries no noise variance at the held-out "
-                               "points" if score.floor == 0 else not_finite(score.floor))
-    if db(score.excess) is None:
-        reasons["excess_db"] = ("the error is within the noise floor (excess <= 0)"
-                                if is_number(score.excess) else not_finite(score.excess))
-    excess = score.excess if is_number(score.excess) else None
-    if excess is None:
-        reasons["excess"] = not_finite(score.excess)
-    return HeldoutMeasurementMetrics(nmse_db=db(score.error), floor_db=db(score.floor),
-                                     excess_db=db(score.excess), excess=excess,
-                                     n_samples=score.n_samples, null_reasons=reasons or None)
+    field, its noise floor and the excess
+    (:func:`nlosfw.evaluation.heldout.heldout_scores`)."""
+    score = heldout_scores(predicted.values, measured.values, variance, split.spatial_mask)
+    values, reasons = score.scores
+    return HeldoutMeasurementMetrics(**values, n_samples=score.n_samples,
+                                     null_reasons=reasons or None)
+
+
+def prediction_scores(prediction: PhasorField, transformed: TransformResult,
+                      split: FieldSplit) -> PredictionScores:
+    """A prediction of the full field scored against the transform's reference field (half
+    B's with count splitting): on the protocol's sets, the held-out measurement (count
+    splitting) and against the noise-free field (scenes with noise)."""
+    true, clean = transformed.reference, transformed.clean
+    variance = transformed.score_variance
+    heldout = (None if variance is None
+               else heldout_measurement_metrics(prediction, true, variance, split))
+    return PredictionScores(
+        splits=SplitErrors.of(field_metrics(true, prediction, split), heldout),
+        denoising=None if clean is None else denoising_metrics(clean, true, prediction))
 
 
 def image_scores(recons: Mapping[str, Reconstruction],
                  seconds: Mapping[str, float] | None = None,
                  truth_depth: np.ndarray | None = None) -> dict[str, ImageScores]:
     """Every reconstruction scored against the ``true`` one
-    (:func:`nlosfw.image.scores.scored`: a score that cannot be computed is None, with
-    why); ``truth_depth`` (Y, X) adds the depth RMSE."""
+    (:func:`nlosfw.evaluation.image_scores.scored`: a score that cannot be computed is
+    None, with why); ``truth_depth`` (Y, X) adds the depth RMSE."""
     reference = recons["true"]
     scores = {}
     for source, recon in recons.items():

@@ -1,7 +1,7 @@
 """The one definition of ``metrics.json``: typed sections, JSON in and out, its JSON Schema.
 
-The pipeline builds a :class:`RunMetrics`; the summary, the sweep report, the thesis
-comparison and the figures read one back with :meth:`RunMetrics.read`. The JSON Schema
+The pipeline builds a :class:`RunMetrics`; the summary, the sweep report, the comparison
+with reference numbers and the figures read one back with :meth:`RunMetrics.read`. The JSON Schema
 written beside every ``metrics.json`` (``metrics.schema.json``) and the outline in the
 README are generated from these classes (:mod:`nlosfw.common.typed_json`).
 
@@ -16,9 +16,10 @@ other artefact of a run is byte-identical (``tests/hostile/test_determinism.py``
 import json
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Annotated, Any, Final, Literal
+from typing import Annotated, Any, Final, Literal, cast
 
 import msgspec
+from msgspec import inspect as mi
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import DataError
@@ -33,19 +34,13 @@ from nlosfw.common.typed_json import (
     to_json,
 )
 from nlosfw.model.interface import FitReport
+from nlosfw.pipeline.metrics_versions import as_current
 from nlosfw.pipeline.nulls import Number, error_values, fit_values, with_explicit_nulls
 
-SchemaVersion = Literal[8]
-#: Version of the metrics.json layout; bump it (both lines) with every change to it.
-SCHEMA_VERSION: Final[SchemaVersion] = 8
-
-#: Older versions :meth:`RunMetrics.from_json` still reads: each later version only added
-#: optional keys or allowed null where a number was required (6: count splitting,
-#: ``capture.thinning`` and ``field.*.splits.heldout_measurement``; 7:
-#: ``field.*.fit.fitted``; 8: ``null_reasons`` in each section of scores, null for
-#: ``depth_rmse_m``, a ``fitted`` number and the held-out ``excess``), so such a file
-#: reads as this version.
-READABLE_VERSIONS: Final = (5, 6, 7, 8)
+SchemaVersion = Literal[9]
+#: Version of the metrics.json layout; bump it (both lines) with every change to it, and
+#: say in :mod:`nlosfw.pipeline.metrics_versions` how an older file reads as this one.
+SCHEMA_VERSION: Final[SchemaVersion] = 9
 
 #: A section's ``null_reasons``: why each of its null values is null (one line each), by
 #: its key (``fitted.<name>`` for a fitted number); absent when none is
@@ -102,11 +97,11 @@ class PreprocessingStep(Document, frozen=True, kw_only=True):
     effect: Annotated[str, doc("what it did, in words")]
 
 
-class ThinningMetrics(Document, frozen=True, kw_only=True):
+class CountSplittingMetrics(Document, frozen=True, kw_only=True):
     """Count splitting: every bin's count n split into Binomial(n, 1/2) (half A, which the
     models train on) and the rest (half B, which every score uses)."""
 
-    seed: Annotated[int, doc("split.thinning_seed")]
+    seed: Annotated[int, doc("split.count_splitting_seed")]
     count_scale: Annotated[float, doc("photon counts per unit of H (1: a file's raw counts)")]
     counts_a: Annotated[int, doc("photon counts in half A")]
     counts_b: Annotated[int, doc("photon counts in half B")]
@@ -131,8 +126,8 @@ class CaptureMetrics(Document, frozen=True, kw_only=True):
     total: Annotated[float, doc("sum of H")]
     noise: Annotated[Absent[Any], doc(
         "the noise the capture carries, as its scene_info records it")] = None
-    thinning: Annotated[Absent[ThinningMetrics], doc(
-        "count splitting (split.thinning): the capture above is half A")] = None
+    count_splitting: Annotated[Absent[CountSplittingMetrics], doc(
+        "count splitting (split.count_splitting): the capture above is half A")] = None
 
 
 class TransformMetrics(Document, frozen=True, kw_only=True):
@@ -203,7 +198,7 @@ class ErrorMetrics(Document, frozen=True, kw_only=True):
 
     @classmethod
     def of(cls, values: Mapping[str, Number]) -> "ErrorMetrics":
-        """From one set of :func:`nlosfw.model.field_metrics`'s result (each value that is
+        """From one set of :func:`nlosfw.evaluation.field_metrics`'s result (each value that is
         not a finite number null, with why)."""
         checked, reasons = error_values(values)
         return cls(**checked, n_samples=int(values.get("n_samples") or 0),
@@ -244,7 +239,7 @@ class SplitErrors(Document, frozen=True, kw_only=True):
     @classmethod
     def of(cls, errors: Mapping[str, Mapping[str, Any]],
            heldout: HeldoutMeasurementMetrics | None = None) -> "SplitErrors":
-        """From :func:`nlosfw.model.field_metrics`'s result (and count splitting's score)."""
+        """From :func:`nlosfw.evaluation.field_metrics`'s result (and count splitting's score)."""
         return cls(**{name: ErrorMetrics.of(values) for name, values in errors.items()},
                    heldout_measurement=heldout)
 
@@ -371,16 +366,10 @@ class RunMetrics(Document, frozen=True, kw_only=True):
 
     @classmethod
     def from_json(cls, data: object, where: str = "") -> "RunMetrics":
-        """Metrics from the JSON object of a metrics.json of this :data:`SCHEMA_VERSION`."""
-        version = data.get("schema_version") if isinstance(data, dict) else None
-        if isinstance(data, dict) and version not in READABLE_VERSIONS:
-            raise DataError(f"{where + ': ' if where else ''}schema_version is {version!r}; this "
-                            f"nlosfw reads versions {', '.join(map(str, READABLE_VERSIONS))} "
-                            "(written by another nlosfw version: rerun it, or read it with the "
-                            "version that wrote it)")
-        if isinstance(data, dict) and version != SCHEMA_VERSION:
-            data = {**data, "schema_version": SCHEMA_VERSION}  # later versions only add keys
-        return from_json(cls, data, where)
+        """Metrics from the JSON object of a metrics.json of this :data:`SCHEMA_VERSION`, or
+        of an older one that still reads as it
+        (:func:`~nlosfw.pipeline.metrics_versions.as_current`)."""
+        return from_json(cls, as_current(data, SCHEMA_VERSION, where), where)
 
     @classmethod
     def read(cls, path: Path) -> "RunMetrics":
@@ -441,3 +430,21 @@ def metrics_schema_text() -> str:
 def metrics_outline() -> str:
     """The compact outline of metrics.json shown in the README."""
     return outline(RunMetrics)
+
+
+def _numbers(struct: type[msgspec.Struct], prefix: str = "") -> tuple[str, ...]:
+    """The dotted paths of the numbers in ``struct`` and the structs it holds."""
+    out: list[str] = []
+    for entry in cast(mi.StructType, mi.type_info(struct)).fields:
+        kind = entry.type.type if isinstance(entry.type, mi.Metadata) else entry.type
+        kinds = kind.types if isinstance(kind, mi.UnionType) else (kind,)
+        nested = [k for k in kinds if isinstance(k, mi.StructType)]
+        if nested:
+            out += _numbers(nested[0].cls, f"{prefix}{entry.name}.")
+        elif any(isinstance(k, (mi.IntType, mi.FloatType)) for k in kinds):
+            out.append(f"{prefix}{entry.name}")
+    return tuple(out)
+
+
+#: The numbers of ``field.<source>`` by dotted path (what published numbers compare with).
+FIELD_NUMBERS: Final = _numbers(FieldMetrics)

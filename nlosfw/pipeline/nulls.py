@@ -5,10 +5,10 @@ zero capture, a scene that reflects nothing, an empty set of samples, a field wi
 noise) a score may have no value. Each section of scores in
 :class:`~nlosfw.pipeline.metrics.RunMetrics` then holds ``null`` for it and, in its
 ``null_reasons``, one line saying why, by the score's key (``fitted.<name>`` for a number
-in a fit's ``fitted``). The builders (:mod:`nlosfw.pipeline.measure`, the section
-classes' ``of``) give each reason in words; :func:`explained`, applied to the whole
-document when the run ends, turns any NaN or inf they did not foresee into ``null``
-with a reason of its own.
+in a fit's ``fitted``). The builders (:mod:`nlosfw.evaluation`'s scores,
+:mod:`nlosfw.pipeline.measure`, the section classes' ``of``) give each reason in words;
+:func:`explained`, applied to the whole document when the run ends, turns any NaN or inf
+they did not foresee into ``null`` with a reason of its own.
 """
 
 from __future__ import annotations
@@ -20,6 +20,8 @@ from typing import NamedTuple, TypeVar
 
 import msgspec
 from msgspec import inspect as mi
+
+from nlosfw.evaluation.undefined import is_number, not_finite
 
 S = TypeVar("S", bound=msgspec.Struct)
 Number = float | int | None
@@ -33,20 +35,9 @@ RELATIVE = ("relative_l2", "nmse_db", "relative_amplitude_rmse", "phase_error")
 ERRORS = ("relative_l2", "nmse_db", "amplitude_rmse", "relative_amplitude_rmse", "phase_error")
 
 
-def is_number(value: object) -> bool:
-    """Whether ``value`` is a finite int or float (not None, NaN or inf)."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(
-        value)
-
-
-def not_finite(value: float) -> str:
-    """The generic reason for a value computed as NaN or inf."""
-    return f"computed as {value!r} on this data: undefined"
-
-
 def error_values(values: Mapping[str, Number]) -> tuple[dict[str, float | None],
                                                         dict[str, str]]:
-    """The errors of one set (:func:`nlosfw.model.protocol.error_metrics`'s values but
+    """The errors of one set (:func:`nlosfw.evaluation.error_metrics`'s values but
     ``n_samples``) with every one that is not a finite number None, and why each None is."""
     out: dict[str, float | None] = {}
     reasons: dict[str, str] = {}

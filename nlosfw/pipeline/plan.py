@@ -196,7 +196,7 @@ class _Base:
 
     def counts(self, depth_planes: int, why: str, noisy: bool = False) -> RunCounts:
         return RunCounts(models=len(self.models), noisy=noisy,
-                         thinned=self.settings.split.thinning, depth_planes=depth_planes,
+                         thinned=self.settings.split.count_splitting, depth_planes=depth_planes,
                          single_frequency_images=(
                              self.settings.reconstruction.single_frequency_images),
                          why=why)
@@ -235,8 +235,8 @@ def _scene_plan(base: _Base, simulator: Planned[Simulator]) -> RunPlan:
                       depth_range=DepthPlan.of(settings.reconstruction).given)
     base.estimate(sized, counts)                   # before anything sized by it is allocated
     scene = validate_scene(scene).scene
-    check_scene_counts(scene, settings.split.thinning, settings.capture.pileup_pulses is not None,
-                       base.model_needs)
+    check_scene_counts(scene, settings.split.count_splitting,
+                       settings.capture.pileup_pulses is not None, base.model_needs)
     simulator.plugin.check(scene)
     layout = check_scene_preprocessing(scene, settings.capture.options, base.formats)
     check_capture_kind(layout, base.takers, f"scene {scene.name}'s capture "
@@ -272,7 +272,8 @@ def _file_plan(base: _Base) -> RunPlan:
     capture = loaded.prepared.capture
     check_capture_kind(capture, {k: v for k, v in base.takers.items()
                                  if k != PluginKind.SIMULATOR.value}, str(loaded.path))
-    check_file_counts(loaded, settings.split.thinning, settings.split.thinning_seed,
+    check_file_counts(loaded, settings.split.count_splitting,
+                      settings.split.count_splitting_seed,
                       base.model_needs, (base.transform.name, base.transform.plugin))
     transform, note = _measured_band(base, capture)
     depths = DepthPlan.of(settings.reconstruction)

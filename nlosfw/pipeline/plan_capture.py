@@ -21,15 +21,18 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
+from nlosfw.capture.photon_counts import photon_counts
 from nlosfw.capture.preprocess import Preprocessing
 from nlosfw.capture.source import FileCapture, FormatCatalogue, prepare, read_capture_file
-from nlosfw.capture.thinning import check_split, photon_counts
 from nlosfw.capture.time_axis import check_background
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.inputs import regular_file
 from nlosfw.common.memory import PlanShape
+from nlosfw.evaluation.count_splitting import OPTION as SPLIT_OPTION
+from nlosfw.evaluation.count_splitting import check_count_split
+from nlosfw.evaluation.noise_floor import DFT_TRANSFORMS, kernel_power
+from nlosfw.evaluation.splits import SpatialPattern, heldout_frequency_indices
 from nlosfw.model.interface import ModelNeeds
-from nlosfw.model.protocol import SpatialPattern, heldout_frequency_indices
 from nlosfw.pipeline.settings import SplitSettings
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.simulate.interface import scene_capture
@@ -37,7 +40,6 @@ from nlosfw.simulate.scene import NoiseModel, Scene
 from nlosfw.transform.counts import check_counts_times
 from nlosfw.transform.frequencies import grid_spacing
 from nlosfw.transform.interface import PhasorTransform
-from nlosfw.transform.noise_floor import DFT_TRANSFORMS, kernel_power
 
 #: The capability a plugin declares for each kind of capture it takes.
 _KIND_CAPABILITY = {CaptureKind.SINGLE_SPOT: Capability.SINGLE_SPOT,
@@ -86,12 +88,13 @@ def check_capture_kind(capture: Capture, takers: Takers, what: str) -> None:
                                  f"choose a {group} that takes {kind} captures")
 
 
-def check_scene_counts(scene: Scene, thinning: bool, pileup: bool, needs: ModelNeeds) -> None:
+def check_scene_counts(scene: Scene, count_splitting: bool, pileup: bool,
+                       needs: ModelNeeds) -> None:
     """What needs photon counts is refused for a simulated capture without photon noise."""
     if scene.noise.model == NoiseModel.poisson:
         return
-    if thinning:
-        raise ConfigError("split.thinning", "count splitting needs photon counts, but the "
+    if count_splitting:
+        raise ConfigError(SPLIT_OPTION, "count splitting needs photon counts, but the "
                           "simulated capture has no photon noise; set scene.noise.model=poisson")
     if pileup:
         raise ConfigError("capture.pileup_pulses", "the pile-up correction needs photon "
@@ -103,14 +106,14 @@ def check_scene_counts(scene: Scene, thinning: bool, pileup: bool, needs: ModelN
                           "use least_squares")
 
 
-def check_file_counts(loaded: FileCapture, thinning: bool, seed: int, needs: ModelNeeds,
+def check_file_counts(loaded: FileCapture, count_splitting: bool, seed: int, needs: ModelNeeds,
                       transform: tuple[str, PhasorTransform]) -> None:
     """Count splitting and a Poisson likelihood need photon counts in the file's capture
     (after its preprocessing), a likelihood of the counts themselves the transform's
     times, and either a DFT-like transform (:func:`check_noise_floor`)."""
     capture, where = loaded.prepared.capture, str(loaded.path)
-    if thinning:
-        check_split(capture, seed, where)
+    if count_splitting:
+        check_count_split(capture, seed, where)
         check_noise_floor(transform, capture)
     if needs.counts:
         likelihood = ("model.likelihood", "the Poisson likelihood")
@@ -121,7 +124,7 @@ def check_file_counts(loaded: FileCapture, thinning: bool, seed: int, needs: Mod
 
 
 def check_noise_floor(transform: tuple[str, PhasorTransform], capture: Capture,
-                      option: str = "split.thinning", purpose: str = "count splitting"
+                      option: str = SPLIT_OPTION, purpose: str = "count splitting"
                       ) -> None:
     """Count splitting's noise floor (and a Poisson likelihood) needs a DFT-like transform:
     the built-in ones are; another is probed on the capture (a ConfigError for ``option``

@@ -1,13 +1,15 @@
 """What the stages of a run hand each other: typed, frozen results.
 
 capture -> :class:`CaptureResult` -> transform -> :class:`TransformResult` -> split and
-fit -> :class:`FitResult` (the :class:`~nlosfw.model.FieldSplit` and one
+fit -> :class:`FitResult` (the :class:`~nlosfw.evaluation.FieldSplit` and one
 :class:`FittedModel` per source) -> predict -> :class:`ImagedFields` -> reconstruct ->
 :class:`Reconstructions`; :class:`RunResults` holds them all for the report stage. The
-run's numbers are :class:`nlosfw.pipeline.metrics.RunMetrics`.
+run's numbers are :class:`nlosfw.pipeline.metrics.RunMetrics`: each stage computes its
+section (its scores through :mod:`nlosfw.evaluation`) and hands it on in its result
+(``metrics``, ``scores``), which the metrics recorder records as it is.
 
 A *source* is a field's role in the run: ``true`` (the full field), ``raw`` (its
-training samples at every frequency, :meth:`~nlosfw.model.FieldSplit.raw_field`),
+training samples at every frequency, :meth:`~nlosfw.evaluation.FieldSplit.raw_field`),
 ``model``, ``interp`` and the ``compare`` labels. Mappings by source keep that order
 and are read-only.
 """
@@ -25,12 +27,21 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.preprocess import AppliedStep
-from nlosfw.capture.thinning import ThinnedCapture
 from nlosfw.common.errors import DataError
+from nlosfw.evaluation.count_splitting import CountSplit
+from nlosfw.evaluation.splits import FieldSplit
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.model.interface import FieldModel, FitReport
-from nlosfw.model.protocol import FieldSplit
-from nlosfw.pipeline.metrics import RunMetrics
+from nlosfw.pipeline.metrics import (
+    CaptureMetrics,
+    DenoisingMetrics,
+    FieldMetrics,
+    ReconstructionMetrics,
+    RunMetrics,
+    SplitErrors,
+    SplitMetrics,
+    TransformMetrics,
+)
 from nlosfw.transform.field import PhasorField
 
 FrequencySplit = Literal["training", "held-out"]
@@ -74,17 +85,19 @@ class CaptureResult:
     """Whether the simulated capture came from the cache."""
     clean: Capture | None = None
     clean_key: str | None = None
-    thinning: ThinnedCapture | None = None
-    """Count splitting (``split.thinning``): ``capture`` is half A (the models train on it),
-    ``thinning.b`` is half B (cached under ``score_key``: every score uses it), and ``clean``
-    is the noise-free capture at half the exposure."""
+    count_split: CountSplit | None = None
+    """Count splitting (``split.count_splitting``): ``capture`` is half A (the models train
+    on it), ``count_split.b`` is half B (cached under ``score_key``: every score uses it),
+    and ``clean`` is the noise-free capture at half the exposure."""
     score_key: str | None = None
+    metrics: CaptureMetrics | None = None
+    """The capture's section of the run's metrics (the capture stage's last step)."""
 
     def __post_init__(self) -> None:
         if (self.clean is None) != (self.clean_key is None):
             raise ValueError("CaptureResult: clean and clean_key come together")
-        if (self.thinning is None) != (self.score_key is None):
-            raise ValueError("CaptureResult: thinning and score_key come together")
+        if (self.count_split is None) != (self.score_key is None):
+            raise ValueError("CaptureResult: count_split and score_key come together")
         if (self.source == "file") != (self.path is not None and self.format is not None):
             raise ValueError("CaptureResult: a path and a format exactly when the source is a "
                              "file")
@@ -109,7 +122,9 @@ class TransformResult:
     """Count splitting: the field of half B (``field`` is half A's), which every score uses."""
     score_variance: np.ndarray | None = None
     """Count splitting: the variance B's Poisson noise adds to each sample of ``score``
-    (F, Y, X) (:func:`nlosfw.transform.noise_floor.field_variance`)."""
+    (F, Y, X) (:func:`nlosfw.evaluation.noise_floor.field_variance`)."""
+    metrics: TransformMetrics | None = None
+    """The transform's section of the run's metrics."""
 
     @property
     def reference(self) -> PhasorField:
@@ -134,11 +149,26 @@ class FitResult:
 
     split: FieldSplit
     models: tuple[FittedModel, ...]
+    split_metrics: SplitMetrics | None = None
+    """The split's section of the run's metrics."""
+    field_metrics: Mapping[str, FieldMetrics] = dataclasses.field(default_factory=dict)
+    """Each fitted model's size and fit, by source (its scores come with the predictions)."""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "field_metrics", _frozen_mapping(self.field_metrics))
         sources = [m.source for m in self.models]
         if len(set(sources)) != len(sources):
             raise ValueError(f"FitResult: sources must be unique, got {sources}")
+
+
+@dataclass(frozen=True, eq=False)
+class PredictionScores:
+    """A prediction's field scores (:mod:`nlosfw.evaluation`), as the run records them."""
+
+    splits: SplitErrors
+    """On the protocol's sets (and, with count splitting, the held-out measurement)."""
+    denoising: DenoisingMetrics | None = None
+    """Against the noise-free field (scenes with noise)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -154,10 +184,13 @@ class ImagedFields:
     ceiling: PhasorField | None = None
     """Count splitting: half A's full field (``true`` is half B's); scored against ``true``
     it is the ceiling of what a model trained on A can reach."""
+    scores: Mapping[str, PredictionScores] = dataclasses.field(default_factory=dict)
+    """Each prediction's field scores, by source."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "predicted", _frozen_mapping(self.predicted))
         object.__setattr__(self, "seconds", _frozen_mapping(self.seconds))
+        object.__setattr__(self, "scores", _frozen_mapping(self.scores))
         if {"true", "raw", "ceiling"} & set(self.predicted):
             raise ValueError("ImagedFields: 'true', 'raw' and 'ceiling' are not prediction "
                              "sources")
@@ -202,8 +235,11 @@ class Reconstructions:
     """The imager plugin that made them."""
     reference: Reconstruction | None = None
     """The capture's histograms at their native bin width, imaged by the same imager on the
-    same voxels (``reconstruction.histogram_reference``, :mod:`nlosfw.pipeline.reference`):
+    same voxels (``reconstruction.histogram_reference``, :mod:`nlosfw.evaluation.reference`):
     the reference picture shown beside the sources, never scored."""
+    metrics: ReconstructionMetrics | None = None
+    """Every reconstruction's scores against the true field's (and the planes): the
+    reconstruction section of the run's metrics."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "by_source", _frozen_mapping(self.by_source))

@@ -8,15 +8,17 @@ every other config.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 from omegaconf import MISSING
 
 from nlosfw.capture.source import CaptureSource
 from nlosfw.common.config import Choice, config_from_mapping, require, require_seed
 from nlosfw.common.schema import is_schema_node
-from nlosfw.model.protocol import SpatialPattern, SpatialSampling, SpectralSplit
+from nlosfw.evaluation.splits import SpatialPattern, SpatialSampling, SpectralSplit
+from nlosfw.pipeline.metrics import FIELD_NUMBERS
 from nlosfw.simulate.scene import Scene
 
 #: The config groups that select a scene or a plugin (plus presets and acquisitions).
@@ -49,6 +51,9 @@ class StopAfter(Choice):
 class SplitSettings:
     """Which samples the field model trains on (thesis: 32x32 of 64x64, 90% of frequencies)."""
 
+    renamed_options: ClassVar[Mapping[str, str]] = {
+        "thinning": "count_splitting", "thinning_seed": "count_splitting_seed"}
+
     spatial_step: int = 2
     """Keep every k-th wall sample in x and y for training (pattern grid)."""
     pattern: SpatialPattern = SpatialPattern.grid
@@ -63,19 +68,19 @@ class SplitSettings:
     """Hold out every n-th frequency (interpolation), the highest ones (extrapolation), or none."""
     spectral_fraction: float = 0.1
     """The fraction of the frequencies held out (``interleaved``: every 1/fraction-th)."""
-    thinning: bool = False
+    count_splitting: bool = False
     """Count splitting: split every bin's photon count n into Binomial(n, 1/2) (capture A)
     and the rest (B), two independent Poisson captures of half the exposure; the models
     train on A's kept wall points, every score uses B (the held-out measurement error and
     its noise floor; reconstructions against B's full scan, with A's full scan as the
     ceiling). Needs raw integer counts (no capture.background); approximate under dead
     time and pile-up; assumes equal dwell per scan point."""
-    thinning_seed: int = 0
+    count_splitting_seed: int = 0
     """The seed of the binomial split (count splitting)."""
 
     def __post_init__(self) -> None:
         require_seed(self.seed, "seed")
-        require_seed(self.thinning_seed, "thinning_seed")
+        require_seed(self.count_splitting_seed, "count_splitting_seed")
         require(self.spatial_step >= 1, "spatial_step", f"must be >= 1, got {self.spatial_step}")
         require(self.spatial_fraction is None or 0 < self.spatial_fraction <= 1,
                 "spatial_fraction", f"must be in (0, 1] or null, got {self.spatial_fraction}")
@@ -208,8 +213,51 @@ class LimitSettings:
 
 
 @dataclass(frozen=True)
+class PublishedTable:
+    """Published numbers a run is compared with: one table of one source (a paper's, a
+    thesis's), reported next to the run's own in ``published_numbers.md`` and in a sweep's
+    ``report.md``."""
+
+    title: str = ""
+    """Where the numbers were published and what they show (the table's heading)."""
+    note: str = ""
+    """What a reader comparing them should know (printed under the table)."""
+    rows: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """By field-model source (``model``, ``interp`` or a ``compare`` label): the row's
+    ``label``, and each published number where metrics.json's ``field.<source>`` holds
+    the run's own, in its units (``n_parameters``, ``training_values``,
+    ``parameters_per_value``, ``fit: {final_loss, seconds, steps}``, ...)."""
+
+    def __post_init__(self) -> None:
+        for source, row in self.rows.items():
+            for path, value in row_numbers(row):
+                require(path in FIELD_NUMBERS, f"rows.{source}.{path}",
+                        "names no number of metrics.json's field.<source>; valid: "
+                        + ", ".join(FIELD_NUMBERS))
+                require(isinstance(value, (int, float)) and not isinstance(value, bool),
+                        f"rows.{source}.{path}", f"must be a number, got {value!r}")
+
+
+def row_numbers(row: Mapping[str, object], prefix: str = "") -> list[tuple[str, object]]:
+    """(dotted path, value) of every published number of a :class:`PublishedTable` row, in
+    their order (its ``label`` left out)."""
+    out: list[tuple[str, object]] = []
+    for key, value in row.items():
+        path = f"{prefix}{key}"
+        if path == "label":
+            continue
+        if isinstance(value, Mapping):
+            out += row_numbers(value, f"{path}.")
+        else:
+            out.append((path, value))
+    return out
+
+
+@dataclass(frozen=True)
 class RunSettings:
     """Everything in a run's config except the selected scene and plugins."""
+
+    renamed_options: ClassVar[Mapping[str, str]] = {"thesis": "published"}
 
     stop_after: StopAfter | None = None
     """The last stage to run (null: every stage)."""
@@ -230,14 +278,16 @@ class RunSettings:
     compare: dict[str, dict[str, Any]] = field(default_factory=dict)
     """More field models fitted and imaged beside ``model`` and interp: label -> options with
     the plugin ``name`` (e.g. ``{pe: {name: pe_torch, steps: 500}}``)."""
-    thesis: dict[str, Any] = field(default_factory=dict)
-    """Reference numbers of a thesis experiment preset, reported next to ours."""
+    published: dict[str, PublishedTable] = field(default_factory=dict)
+    """Published numbers to compare the run with, by table name (e.g. ``thesis_table_5_1``):
+    each a :class:`PublishedTable`."""
 
     def __post_init__(self) -> None:
-        require(not (self.split.thinning and self.capture.background), "split.thinning",
-                "count splitting needs raw photon counts; a background subtraction "
-                "(capture.background) makes them non-integer: drop one of the two")
-        require(not (self.split.thinning and self.capture.pileup_pulses), "split.thinning",
+        require(not (self.split.count_splitting and self.capture.background),
+                "split.count_splitting", "count splitting needs raw photon counts; a background "
+                "subtraction (capture.background) makes them non-integer: drop one of the two")
+        require(not (self.split.count_splitting and self.capture.pileup_pulses),
+                "split.count_splitting",
                 "count splitting needs raw photon counts; the pile-up correction "
                 "(capture.pileup_pulses) turns them into estimates: drop one of the two")
         reserved = {"true", "raw", "model", "interp", "ceiling"}
@@ -246,6 +296,11 @@ class RunSettings:
                     f"labels must be identifiers other than {', '.join(sorted(reserved))}")
             require(isinstance(options, dict) and bool(options.get("name")),
                     f"compare.{label}", "needs the plugin name: {name: <model plugin>, ...}")
+        fitted = {"model", "interp", *self.compare}
+        for name, table in self.published.items():
+            for source in table.rows:
+                require(source in fitted, f"published.{name}.rows.{source}",
+                        f"names no field model of the run; valid: {', '.join(sorted(fitted))}")
 
     @property
     def last_stage(self) -> str:

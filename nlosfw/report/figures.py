@@ -25,11 +25,11 @@ from typing import TYPE_CHECKING, TypedDict
 import numpy as np
 from matplotlib.figure import Figure
 
+from nlosfw.evaluation.image_scores import amplitude, normalise
+from nlosfw.evaluation.reference import REFERENCE, REFERENCE_TITLE
 from nlosfw.image.reconstruction import Reconstruction
-from nlosfw.image.scores import amplitude, normalise
 from nlosfw.pipeline.files import RunFiles
 from nlosfw.pipeline.metrics import ImageScores, ReconstructionMetrics, RunInfo
-from nlosfw.pipeline.reference import REFERENCE, REFERENCE_TITLE
 from nlosfw.pipeline.results import RunResults
 from nlosfw.report.plain_text import literal_text
 from nlosfw.report.titles import run_title

@@ -1,9 +1,10 @@
 """The report plugin: the files of a run's report, written by subscribers to the run hooks.
 
 Registered through nlosfw's own entry point (``report`` in the ``nlosfw`` group), like any
-third-party plugin: at the report stage of a complete run, the thesis comparison (for
-thesis presets) and the figures (of a run stopped before it imaged: the capture's time
-profile); after ``metrics.json``, the run's ``report.html``.
+third-party plugin: at the report stage of a complete run, the comparison with published
+numbers (for a run with ``published`` tables, such as the thesis presets) and the figures
+(of a run stopped before it imaged: the capture's time profile); after ``metrics.json``,
+the run's ``report.html``.
 matplotlib is imported only when a figure is drawn.
 """
 
@@ -23,15 +24,17 @@ log = logging.getLogger(__name__)
 @hookimpl
 def write_run_report(files: RunFiles, results: RunResults, metrics: RunMetrics,
                      settings: RunSettings) -> None:
-    """The thesis comparison table (for thesis presets) and the figures."""
-    if settings.thesis:
+    """The comparison with published numbers (a run with ``published`` tables) and the
+    figures."""
+    if settings.published:
+        from nlosfw.report.published_numbers import FILE_NAME, published_comparison
         from nlosfw.report.records import RunRecord
-        from nlosfw.report.thesis import thesis_comparison
 
-        record = RunRecord(name=files.run_dir.name, metrics=metrics, thesis=settings.thesis)
-        text = thesis_comparison([record])
+        record = RunRecord(name=files.run_dir.name, metrics=metrics,
+                           published=settings.published)
+        text = published_comparison([record])
         if text:
-            files.write_text("thesis_comparison.md", text, kind="report")
+            files.write_text(FILE_NAME, text, kind="report")
     if settings.figures.enabled and metrics.reconstruction is not None:
         from nlosfw.report.figures import write_figures
 

@@ -20,8 +20,8 @@ import msgspec
 from nlosfw.common import yaml_safe
 from nlosfw.common.config import Scalar
 from nlosfw.common.text import MAX_SHOWN, href, html_block, html_text, shortened
+from nlosfw.evaluation.reference import REFERENCE, REFERENCE_TITLE
 from nlosfw.pipeline.metrics import RunMetrics
-from nlosfw.pipeline.reference import REFERENCE, REFERENCE_TITLE
 from nlosfw.report.inputs import figure_inside, inside
 from nlosfw.report.quality import QualityTable, parse_overrides
 from nlosfw.report.records import RunRecord

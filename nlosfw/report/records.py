@@ -1,4 +1,5 @@
-"""Finished runs as reports see them: a name, the typed metrics, overrides, thesis numbers.
+"""Finished runs as reports see them: a name, the typed metrics, overrides, the published
+numbers they are compared with.
 
 A run's files are read as :mod:`nlosfw.report.inputs` reads them (regular files inside the
 reported folder, bounded), and every text in them is cut to
@@ -17,23 +18,25 @@ import msgspec
 import yaml
 
 from nlosfw.common import yaml_safe
-from nlosfw.common.errors import DataError
+from nlosfw.common.config import config_from_mapping
+from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.common.files import is_regular_file
 from nlosfw.common.text import shortened_data
 from nlosfw.pipeline.metrics import RunMetrics
+from nlosfw.pipeline.settings import PublishedTable
 from nlosfw.report.inputs import read_inside
 
 
 @dataclass(frozen=True)
 class RunRecord:
     """One run: its name (the run directory relative to the report's root), its metrics,
-    the command-line overrides that made it and its ``thesis`` reference numbers."""
+    the command-line overrides that made it and the published numbers it is compared with."""
 
     name: str
     metrics: RunMetrics
     overrides: tuple[str, ...] = ()
-    thesis: Mapping[str, Any] = field(default_factory=dict)
-    """The run's ``thesis`` config (reference values of a thesis preset), if any."""
+    published: Mapping[str, PublishedTable] = field(default_factory=dict)
+    """The run's ``published`` tables (published numbers), by name, if any."""
     config: Mapping[str, object] = field(default_factory=dict)
     """The run's resolved configuration (its config.yaml), if it has one."""
 
@@ -61,7 +64,21 @@ def read_run(run_dir: Path, root: Path) -> RunRecord:
                         "a mapping")
     return RunRecord(name=str(run_dir.relative_to(root)) or ".", metrics=metrics,
                      overrides=tuple(str(o) for o in overrides),
-                     thesis=config.get("thesis") or {}, config=config)
+                     published=_published(config, run_dir / "config.yaml"), config=config)
+
+
+def _published(config: Mapping[str, object], where: Path) -> dict[str, PublishedTable]:
+    """The ``published`` tables of a run's config; a one-line DataError naming ``where``
+    when they are malformed. (The ``thesis`` numbers of runs made before there were
+    published tables are not read.)"""
+    node = config.get("published") or {}
+    try:
+        if not isinstance(node, Mapping):
+            raise ConfigError("published", f"must be a mapping of tables, got {node!r}")
+        return {str(name): config_from_mapping(PublishedTable, table, f"published.{name}")
+                for name, table in node.items()}
+    except ConfigError as err:
+        raise DataError(f"{where}: {err}") from None
 
 
 def _yaml(path: Path, root: Path) -> Any:

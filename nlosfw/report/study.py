@@ -10,10 +10,10 @@ seeds: mean, standard deviation (n - 1), minimum and maximum of each score.
 :func:`study_figure` plots them against the undersampling factor, one panel row per
 condition, one line per series.
 
-With count splitting (``split.thinning``, the real-data study ``experiment=sparsity_real``)
+With count splitting (``split.count_splitting``, the real-data study ``experiment=sparsity_real``)
 every field model also has its held-out measurement error, noise floor and excess
 (:data:`FIELD_SCORES`), the reconstructions are scored against half B's full scan, and
-``ceiling`` (half A's full scan) is a baseline; ``split.thinning_seed`` is then the seed of
+``ceiling`` (half A's full scan) is a baseline; ``split.count_splitting_seed`` is then the seed of
 every row, and the ``sampling`` group only sets the pattern.
 
 Overrides decide what separates runs: ``model.seed`` (and ``compare.<label>.seed``)
@@ -57,8 +57,10 @@ BASELINES = ("true", "ceiling", "raw", "interp")
 
 #: Override keys that the metrics already describe (scene, acquisition) or that run the
 #: sweep (experiment, hydra): never part of a condition's label.
+#: (``split.thinning`` and ``split.thinning_seed``: count splitting's options in sweeps run
+#: before they were renamed.)
 _DESCRIBED = re.compile(r"^(scene|acquisition|sampling|simulator|experiment|capture\.path|"
-                        r"stop_after|split\.thinning|split\.thinning_seed|"
+                        r"stop_after|split\.(count_splitting|thinning)(_seed)?|"
                         r"scene\.noise\.model|hydra\..*|figures\..*|cache\..*|output\..*)$")
 
 
@@ -168,9 +170,9 @@ def study_rows(records: Sequence[RunRecord]) -> list[StudyRow]:
     rows = []
     for (condition, pattern, under, samples, series, kind), members in groups.items():
         scores = [m.image_scores(source) for m, source in members]
-        thinning = [m.capture.thinning.seed for m, _ in members
-                    if m.capture is not None and m.capture.thinning is not None]
-        seeds = sorted(set(thinning)) if thinning else sorted(
+        split_seeds = [m.capture.count_splitting.seed for m, _ in members
+                       if m.capture is not None and m.capture.count_splitting is not None]
+        seeds = sorted(set(split_seeds)) if split_seeds else sorted(
             {entry.seed for m, source in members
              if (entry := m.field_entry(source)) is not None
              and entry.seed is not None}) if kind == "model" else []

@@ -14,8 +14,8 @@ are never overwritten; a report that fails leaves no folder behind):
   seeds, :func:`nlosfw.report.study.study_figure`); any other sweep the quality plot of
   :mod:`nlosfw.report.quality` (SSIM, PSNR and the held-out field error against the swept
   key);
-* ``report.md``: the figure's numbers and every run as markdown tables, plus thesis
-  comparison tables when presets carry reference numbers;
+* ``report.md``: the figure's numbers and every run as markdown tables, plus the runs'
+  numbers next to published ones when their configs carry ``published`` tables;
 * ``report.html``: all of it in one self-contained page, linking each run's own
   ``report.html``.
 """
@@ -45,6 +45,7 @@ from nlosfw.pipeline.metrics import (
     SplitMetrics,
 )
 from nlosfw.report.html_report import sweep_report
+from nlosfw.report.published_numbers import published_comparison
 from nlosfw.report.quality import (
     QualityTable,
     quality_figure,
@@ -56,7 +57,6 @@ from nlosfw.report.quality import (
 from nlosfw.report.records import RunRecord, find_runs, read_run
 from nlosfw.report.study import SCORES, study_csv_rows, study_figure, study_rows, study_table
 from nlosfw.report.tables import format_cell, markdown_table
-from nlosfw.report.thesis import thesis_comparison
 
 log = logging.getLogger(__name__)
 
@@ -217,7 +217,7 @@ def _report_dir(root: Path) -> Iterator[Path]:
 
 
 #: What the study table means with count splitting.
-_THINNING_NOTE = (
+_COUNT_SPLITTING_NOTE = (
     "Count splitting: every bin's photon count was split into two independent halves; the "
     "models trained on half A's kept wall points. Held-out excess = error at the wall points "
     "not kept against half B's measured field minus its noise floor (the error of a perfect "
@@ -258,8 +258,8 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
                          "normalised to its maximum; scikit-image PSNR and SSIM at their "
                          "defaults), mean ± standard deviation over the runs of each row "
                          "(seeds); `true` is the full capture itself.\n\n"
-                         + (_THINNING_NOTE if any(r.scores["heldout_excess_db"].n for r in study)
-                            else "")
+                         + (_COUNT_SPLITTING_NOTE
+                            if any(r.scores["heldout_excess_db"].n for r in study) else "")
                          + markdown_table(header, cells) + "\n")
         else:
             tables = quality_tables(points, layout)
@@ -267,9 +267,9 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
             markdown += (f"## Quality against {label}\n\n![quality against "
                          f"{label}](report.png)\n\n{quality_table(points, layout)}\n")
         markdown += f"## Every run\n\n{to_markdown(rows)}"
-        thesis_tables = thesis_comparison(records)
-        if thesis_tables:
-            markdown += "\n## Next to the thesis\n\n" + thesis_tables
+        published = published_comparison(records)
+        if published:
+            markdown += "\n## Next to published numbers\n\n" + published
         write_text(out / "report.md", markdown)
         with atomic_path(out / "report.png") as tmp:
             if by_sparsity:

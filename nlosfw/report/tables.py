@@ -1,4 +1,4 @@
-"""Tables for reports (runs, sweeps, thesis comparisons): markdown, and their cells."""
+"""Tables for reports (runs, sweeps, published numbers): markdown, and their cells."""
 
 from __future__ import annotations
 

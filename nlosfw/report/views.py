@@ -26,8 +26,8 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
 from nlosfw.capture.data import Capture
+from nlosfw.evaluation.image_scores import amplitude, normalise
 from nlosfw.image.reconstruction import Reconstruction
-from nlosfw.image.scores import amplitude, normalise
 from nlosfw.pipeline.files import RunFiles
 from nlosfw.report.plain_text import literal_text
 

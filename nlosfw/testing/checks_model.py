@@ -31,9 +31,9 @@ import numpy as np
 
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.evaluation import error_metrics, split_field
 from nlosfw.model.interface import FieldModel, FieldModelConfig
 from nlosfw.model.model_files import write_model_file
-from nlosfw.model.protocol import error_metrics, split_field
 from nlosfw.plugins.capabilities import Capability
 from nlosfw.plugins.registry import PluginSpec
 from nlosfw.testing import fixtures

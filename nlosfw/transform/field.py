@@ -126,7 +126,7 @@ class PhasorField:
     frequency; ``None`` means all ones) that an imager applies when it sums
     frequencies. ``geometry`` says how the field was captured. ``variance`` (the values'
     shape, >= 0; ``None``: unknown) is the noise variance of each value, the capture's
-    Poisson noise through the transform (:func:`nlosfw.transform.noise_floor.field_variance`);
+    Poisson noise through the transform (:func:`nlosfw.evaluation.noise_floor.field_variance`);
     a fit may weigh samples by it. ``counts`` (``None``: not carried) are the photon counts
     the field was transformed from, at every wall point of the field and every time bin
     (so every frequency, whatever frequencies the field keeps); a fit may take the exact

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 import scipy.io
 
+from nlosfw.capture import photon_counts as counts_module
 from nlosfw.capture.hdf5 import write_capture
-from nlosfw.capture.thinning import photon_counts, thin
 from nlosfw.common.errors import DataError
+from nlosfw.evaluation.count_splitting import capture_counts, split_counts
 from nlosfw.testing.fixtures import tiny_capture
 
 #: A run of a capture file that stops before anything slow: interp and the fast imager.
@@ -65,22 +66,22 @@ def test_int64_counts_near_2_to_the_60_are_refused_before_the_run(tools, workdir
     """Each bin fits int64, their sum does not: the run completed with a negative photon
     total in metrics.json."""
     path = lct_file(workdir, np.full((4, 4, 64), 2**60 + 12345, dtype=np.int64))
-    line = refused(tools, workdir, path, "split.thinning=true", "capture.gate.bins=0")
-    assert line.startswith(f"error: {path}: ") and "split.thinning" in line
+    line = refused(tools, workdir, path, "split.count_splitting=true", "capture.gate.bins=0")
+    assert line.startswith(f"error: {path}: ") and "split.count_splitting" in line
     assert f"{MAX_PHOTONS}" in line
 
 
 def test_uint64_counts_above_2_to_the_63_are_refused_before_the_run(tools, workdir):
     """They ended the capture stage in ``ValueError: n < 0`` (the cast to int64 wrapped)."""
     path = lct_file(workdir, np.full((4, 4, 64), 2**63 + 2**62, dtype=np.uint64))
-    line = refused(tools, workdir, path, "split.thinning=true", "capture.gate.bins=0")
+    line = refused(tools, workdir, path, "split.count_splitting=true", "capture.gate.bins=0")
     assert line.startswith(f"error: {path}: ")
 
 
 def test_counts_per_unit_of_1e300_is_refused_before_the_run(tools, workdir):
     H = np.random.default_rng(0).poisson(2.0, (256, 8, 8)).astype(np.float32)
     path = ytal_file(workdir, H, {"model": "poisson", "counts_per_unit": 1e300})
-    line = refused(tools, workdir, path, "split.thinning=true")
+    line = refused(tools, workdir, path, "split.count_splitting=true")
     assert line.startswith(f"error: {path}: ") and "counts per unit" in line
 
 
@@ -94,7 +95,7 @@ def test_pileup_correction_of_counts_beyond_int64_is_refused_before_the_run(tool
 def test_float_counts_whose_sum_is_beyond_int64_are_refused_before_the_run(tools, workdir):
     """2^50 photons a bin are exact float64 integers; 16,384 bins of them (2^64) wrapped."""
     path = ytal_file(workdir, np.full((256, 8, 8), 2.0**50))
-    refused(tools, workdir, path, "split.thinning=true")
+    refused(tools, workdir, path, "split.count_splitting=true")
 
 
 def test_the_poisson_likelihood_refuses_counts_beyond_int64_before_the_run(tools, workdir):
@@ -106,19 +107,17 @@ def test_the_poisson_likelihood_refuses_counts_beyond_int64_before_the_run(tools
 
 def test_counts_up_to_the_limit_split_exactly():
     """The limit itself is accepted, and the halves' totals are exact integers there."""
-    from nlosfw.capture import thinning
-
-    assert thinning.MAX_PHOTONS == MAX_PHOTONS
+    assert counts_module.MAX_PHOTONS == MAX_PHOTONS
     capture = tiny_capture(resolution=4, bins=256)
     H = np.zeros(capture.H.shape)
     H[0, 0, 0] = MAX_PHOTONS - 1
     H[1, 0, 0] = 1
-    halves = thin(capture.replace(H=H), seed=0)
+    halves = split_counts(capture.replace(H=H), seed=0)
     assert halves.counts_a + halves.counts_b == MAX_PHOTONS
     assert halves.counts_a > 0 and halves.counts_b > 0
     H[1, 0, 0] = 2
     with pytest.raises(DataError, match="photon counts in all"):
-        photon_counts(capture.replace(H=H), "scan.hdf5")
+        capture_counts(capture.replace(H=H), "scan.hdf5")
 
 
 # -------------------------------------------------------------- too few photons
@@ -133,8 +132,8 @@ def zeros_with(photons: dict[tuple[int, int, int], int]) -> np.ndarray:
 def test_a_capture_too_empty_to_split_is_refused_before_the_run(photons, tools, workdir):
     """Refused at the fit stage before, with the run directory written."""
     path = ytal_file(workdir, zeros_with(photons))
-    line = refused(tools, workdir, path, "split.thinning=true")
-    assert line.startswith(f"error: split.thinning: {path}: ")
+    line = refused(tools, workdir, path, "split.count_splitting=true")
+    assert line.startswith(f"error: split.count_splitting: {path}: ")
     assert f"{sum(photons.values())} photon" in line
 
 
@@ -143,7 +142,7 @@ def test_photons_only_in_the_gated_bins_are_refused_before_the_run(tools, workdi
     rect = np.zeros((4, 4, 640), dtype=np.uint16)
     rect[:, :, 10] = 50
     path = lct_file(workdir, rect)
-    line = refused(tools, workdir, path, "split.thinning=true")
+    line = refused(tools, workdir, path, "split.count_splitting=true")
     assert "0 photons" in line
 
 
@@ -153,9 +152,10 @@ def test_a_split_that_leaves_a_half_empty_is_refused_before_the_run(tools, workd
     capture = tiny_capture(resolution=8)
     H = zeros_with({(100, 3, 3): 1, (120, 4, 4): 1})
     seed = next(s for s in range(64)
-                if 0 in (thin(capture.replace(H=H), s).counts_a,
-                         thin(capture.replace(H=H), s).counts_b))
+                if 0 in (split_counts(capture.replace(H=H), s).counts_a,
+                         split_counts(capture.replace(H=H), s).counts_b))
     path = ytal_file(workdir, H)
-    line = refused(tools, workdir, path, "split.thinning=true", f"split.thinning_seed={seed}")
-    assert line.startswith(f"error: split.thinning_seed: {path}: ")
+    line = refused(tools, workdir, path, "split.count_splitting=true",
+                   f"split.count_splitting_seed={seed}")
+    assert line.startswith(f"error: split.count_splitting_seed: {path}: ")
 

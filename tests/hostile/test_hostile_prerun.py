@@ -51,18 +51,18 @@ def test_a_negative_split_seed_is_refused_before_the_run(tools, workdir):
     assert f"0 to {2**63 - 1}" in line and "-1" in line
 
 
-def test_a_negative_thinning_seed_is_refused_before_the_run(tools, workdir):
-    refused(tools, workdir, "split.thinning_seed", *tools.QUICK, "scene.noise.model=poisson",
-            "split.thinning=true", "split.thinning_seed=-1")
+def test_a_negative_count_splitting_seed_is_refused_before_the_run(tools, workdir):
+    refused(tools, workdir, "split.count_splitting_seed", *tools.QUICK, "scene.noise.model=poisson",
+            "split.count_splitting=true", "split.count_splitting_seed=-1")
 
 
-@pytest.mark.parametrize("option", ["split.seed", "split.thinning_seed"])
+@pytest.mark.parametrize("option", ["split.seed", "split.count_splitting_seed"])
 def test_a_negative_seed_is_refused_by_the_python_api(option, workdir):
     out = workdir / "api-run"
     with pytest.raises(ConfigError) as err:
         nlosfw.run([*("scene=tiny", "model=interp", "imager=fft", "figures.enabled=false",
                       "scene.noise.model=poisson", "split.pattern=random",
-                      "split.thinning=true"), f"{option}=-1"], output_dir=out)
+                      "split.count_splitting=true"), f"{option}=-1"], output_dir=out)
     assert err.value.option == option
     assert not out.exists()
 

@@ -106,7 +106,7 @@ def test_a_noisy_scene_with_zero_albedo_records_its_denoising_as_null(workdir, t
 def test_undefined_scores_of_degenerate_images_and_fields_say_why():
     """The functions behind the sections, on zero, constant and empty inputs: every value
     is a finite number or None with a reason, never NaN or inf."""
-    from nlosfw.image.scores import depth_error, scored
+    from nlosfw.evaluation.image_scores import depth_error, scored
     from nlosfw.pipeline.measure import denoising_metrics
     from nlosfw.pipeline.metrics import SplitErrors
 

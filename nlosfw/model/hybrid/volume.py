@@ -39,7 +39,7 @@ takes about 50 s on 2 CPU cores, torch or JAX (29-50 s over the three shared cap
 time). The network learns the scene first and the noise of the kept points
 later: ``validation_fraction`` of the kept wall points are left out of the loss and the step
 with the lowest error there is kept (``patience`` ends the training). Measured on the GPU
-over the three shared captures, thinning seeds 0-2, grid: held-out excess -12.2, -9.9 and
+over the three shared captures, count-splitting seeds 0-2, grid: held-out excess -12.2, -9.9 and
 -12.0 dB at 16x, -10.4, -6.5 and -7.7 dB at 64x (the diffuse S, the dot chart, the
 resolution chart), stopping after 69-144 steps; without validation, 300 steps gave
 -7.7, -8.0, -10.2 dB at 16x and +0.8, -1.3, -4.1 dB at 64x (interp: -1.8, -3.3, -5.8 and

@@ -5,7 +5,7 @@ Poisson likelihood of the counts in every time bin (``likelihood: poisson_counts
 
 A phasor sample is a DFT of a wall point's histogram, P(x, f) = sum_t K(f, t) n(x, t). With
 Poisson counts n its variance is Var P(x, f) = sum_t |K(f, t)|^2 n(x, t): for every nlosfw
-transform delta_t^2 times the point's count (:mod:`nlosfw.transform.noise_floor`), so
+transform delta_t^2 times the point's count (:mod:`nlosfw.evaluation.noise_floor`), so
 points that caught many photons (bright, near the laser, late ambient light) are noisier.
 Each sample sums hundreds of bins, so by the central limit theorem its noise is Gaussian
 with that variance, and the negative log-likelihood of the transient counts, seen through

@@ -38,7 +38,7 @@ Measured. A simulated point scatterer (analytic simulator, 100 ps jitter, shifte
 of 10 ps later), planes over 0.4-0.6 m, default rounds: sigma 82.6 ps, tau 92.1 ps (the
 albedo still absorbs part of both), held-out error -33.7 dB against -25.1 dB without the
 terms; with the single plane at the point's depth, 96 ps and 97.9 ps. The shared diffuse S
-at 16x with count splitting (thinning seed 0, one run with ``response.rounds: 1``): sigma
+at 16x with count splitting (count-splitting seed 0, one run with ``response.rounds: 1``): sigma
 2.0 ps, tau -2.1 ps, held-out excess -4.50 dB against -4.41 dB without the terms (the same
 split: interp's -1.91 dB in both); the fit took 278 s on two loaded cores.
 """

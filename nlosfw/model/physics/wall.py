@@ -65,7 +65,7 @@ class WallSamples:
 
 def wall_samples(field: PhasorField, who: str = "rsd_prior") -> WallSamples:
     """The training samples of ``field`` on their wall grid: a regular grid field as it is,
-    or scattered samples (one row, (1, N); :func:`nlosfw.model.protocol.scattered_field`)
+    or scattered samples (one row, (1, N); :func:`nlosfw.evaluation.scattered_field`)
     on the smallest regular grid that holds them all, its spacing the closest distinct
     coordinates per axis. A DataError naming model ``who`` if they lie on no such grid."""
     layout = grid_layout(field.wall_xyz)

@@ -11,7 +11,7 @@ import pytest
 
 from nlosfw import run
 from nlosfw.capture import SPEED_OF_LIGHT
-from nlosfw.model import split_field
+from nlosfw.evaluation import split_field
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate import scene_from_config
 from nlosfw.testing import heldout_error_db, tiny_scene_config

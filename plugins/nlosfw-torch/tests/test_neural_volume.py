@@ -18,8 +18,8 @@ from nlosfw_torch.neural_volume import TorchPlaneOperator, volume_albedo
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.common import ConfigError, FitError
+from nlosfw.evaluation import SpatialSampling, split_field
 from nlosfw.image import grid_layout
-from nlosfw.model import SpatialSampling, split_field
 from nlosfw.model.hybrid import plane_stack, stack_bytes
 from nlosfw.model.neural import FieldMode, FieldShape, NetworkBuild
 from nlosfw.model.physics import (

@@ -11,7 +11,7 @@ import pytest
 pytest.importorskip("torch")
 
 from nlosfw.common import ConfigError
-from nlosfw.model import SpatialSampling, split_field
+from nlosfw.evaluation import SpatialSampling, split_field
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures, heldout_error_db
 

@@ -13,7 +13,8 @@ torch = pytest.importorskip("torch")
 from nlosfw_torch.models import PETorch, SirenTorch, TanhTorch  # noqa: E402
 
 from nlosfw.common import ConfigError, DataError, FitError  # noqa: E402
-from nlosfw.model import TrainingStep, field_metrics, preset_config, split_field  # noqa: E402
+from nlosfw.evaluation import field_metrics, split_field  # noqa: E402
+from nlosfw.model import TrainingStep, preset_config  # noqa: E402
 from nlosfw.testing import (  # noqa: E402
     BACKEND_CASES,
     assert_backend_matches_numpy,

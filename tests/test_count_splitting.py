@@ -1,7 +1,7 @@
-"""Count splitting (issue 22): binomial thinning of photon counts, its refusals, the noise
-floor of the held-out measurement error, and a run with it end to end.
+"""Count splitting: the binomial split of photon counts, its refusals, the noise floor of the
+held-out measurement error, and a run with it end to end.
 
-The statistics are checked against Poisson theory (a Poisson(mu) count thinned with p = 1/2
+The statistics are checked against Poisson theory (a Poisson(mu) count split binomially with p = 1/2
 gives two independent Poisson(mu / 2) counts) and the floor against a Monte-Carlo estimate
 over independently drawn captures."""
 
@@ -20,16 +20,17 @@ import pytest
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.hdf5 import write_capture
-from nlosfw.capture.thinning import count_scale, count_variance, photon_counts, thin
+from nlosfw.capture.photon_counts import count_scale, count_variance
 from nlosfw.cli import main
 from nlosfw.common.errors import ConfigError
-from nlosfw.model.heldout import HeldoutMeasurement, heldout_measurement
+from nlosfw.evaluation.count_splitting import capture_counts, split_counts
+from nlosfw.evaluation.heldout import HeldoutMeasurement, heldout_measurement
+from nlosfw.evaluation.noise_floor import field_variance, kernel_power
 from nlosfw.pipeline.settings import run_settings
 from nlosfw.testing.fixtures import tiny_capture
 from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.interface import PhasorTransform
-from nlosfw.transform.noise_floor import field_variance, kernel_power
 from nlosfw.transform.wavelet import WaveletTransform
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -55,7 +56,7 @@ def test_halves_add_up_and_are_independent_poisson_halves():
     base = tiny_capture(resolution=4, bins=400)
     big = np.random.default_rng(2).poisson(mu, size=(20000, 4, 4)).astype(np.float32)
     capture = base.replace(H=big)
-    halves = thin(capture, seed=3)
+    halves = split_counts(capture, seed=3)
     a = np.asarray(halves.a.H, dtype=np.float64)
     b = np.asarray(halves.b.H, dtype=np.float64)
     assert np.array_equal(a + b, big)                       # n = a + b, bin by bin
@@ -68,16 +69,16 @@ def test_halves_add_up_and_are_independent_poisson_halves():
     r = np.corrcoef(a.ravel(), b.ravel())[0, 1]
     assert abs(r) < 0.01
     # the same seed splits the same way, another seed differently
-    again = thin(capture, seed=3)
+    again = split_counts(capture, seed=3)
     assert np.array_equal(again.a.H, halves.a.H)
-    assert not np.array_equal(thin(capture, seed=4).a.H, halves.a.H)
+    assert not np.array_equal(split_counts(capture, seed=4).a.H, halves.a.H)
 
 
 def test_a_fixed_count_splits_binomially():
     """Given n, A's count is Binomial(n, 1/2): mean n/2, variance n/4."""
     base = tiny_capture(resolution=4, bins=400)
     H = np.full((400, 4, 4), 10.0, dtype=np.float32)
-    a = np.concatenate([np.asarray(thin(base.replace(H=H), seed=s).a.H).ravel()
+    a = np.concatenate([np.asarray(split_counts(base.replace(H=H), seed=s).a.H).ravel()
                         for s in range(30)])
     assert a.mean() == pytest.approx(5.0, abs=0.03)          # 192,000 draws
     assert a.var() == pytest.approx(2.5, rel=0.03)
@@ -92,8 +93,8 @@ def test_scaled_counts_of_a_simulated_capture_split_in_counts():
     scaled = capture.replace(H=(np.asarray(capture.H) / scale).astype(np.float32),
                              scene_info=info)
     assert count_scale(scaled) == scale
-    assert np.array_equal(photon_counts(scaled, "x"), np.asarray(capture.H).astype(np.int64))
-    halves = thin(scaled, seed=0)
+    assert np.array_equal(capture_counts(scaled, "x"), np.asarray(capture.H).astype(np.int64))
+    halves = split_counts(scaled, seed=0)
     assert halves.count_scale == scale
     total = np.asarray(halves.a.H, dtype=np.float64) + np.asarray(halves.b.H, dtype=np.float64)
     assert np.allclose(total * scale, capture.H, atol=1e-3)
@@ -111,14 +112,14 @@ def test_scaled_counts_of_a_simulated_capture_split_in_counts():
 def test_what_is_not_counts_is_refused_naming_the_capture(H, why):
     capture = tiny_capture(resolution=4, bins=256).replace(H=H)
     with pytest.raises(ConfigError, match=why) as err:
-        thin(capture, seed=0, where="scan.hdf5")
-    assert err.value.option == "split.thinning" and "scan.hdf5" in str(err.value)
+        split_counts(capture, seed=0, where="scan.hdf5")
+    assert err.value.option == "split.count_splitting" and "scan.hdf5" in str(err.value)
 
 
-def test_background_subtraction_is_refused_with_thinning():
+def test_background_subtraction_is_refused_with_count_splitting():
     with pytest.raises(ConfigError, match="capture.background") as err:
-        run_settings({"split": {"thinning": True}, "capture": {"background": "bg.hdf5"}})
-    assert err.value.option == "split.thinning"
+        run_settings({"split": {"count_splitting": True}, "capture": {"background": "bg.hdf5"}})
+    assert err.value.option == "split.count_splitting"
 
 
 def test_a_float_capture_file_is_refused_before_the_run(tmp_path, monkeypatch, capsys):
@@ -127,16 +128,16 @@ def test_a_float_capture_file_is_refused_before_the_run(tmp_path, monkeypatch, c
     capture = tiny_capture(resolution=8)                    # analytic: float radiance
     path = tmp_path / "radiance.hdf5"
     write_capture(path, capture)
-    status = main([f"capture.path={path}", "split.thinning=true", "model=interp"])
+    status = main([f"capture.path={path}", "split.count_splitting=true", "model=interp"])
     err = capsys.readouterr().err
     assert status == 2
-    assert err.startswith("error: split.thinning: ") and str(path) in err
+    assert err.startswith("error: split.count_splitting: ") and str(path) in err
     assert "not integer photon counts" in err and err.count("\n") == 1
     assert not (tmp_path / "outputs").exists()
 
 
 @pytest.mark.parametrize("option, overrides", [
-    ("split.thinning", ["split.thinning=true", "model=interp"]),
+    ("split.count_splitting", ["split.count_splitting=true", "model=interp"]),
     ("model.likelihood", ["model=rsd_prior", "model.likelihood=poisson"]),   # needs counts too
 ])
 def test_a_simulated_scene_without_photon_noise_is_refused_before_the_run(
@@ -171,7 +172,7 @@ def test_transforms_whose_floor_is_unknown_are_refused(transform, why):
     capture, _ = _counts_capture(5.0)
     with pytest.raises(ConfigError, match=why) as err:
         field_variance(transform, capture, "odd")
-    assert err.value.option == "split.thinning"
+    assert err.value.option == "split.count_splitting"
 
 
 # ---------------------------------------------------------------- the noise floor
@@ -220,32 +221,33 @@ def test_floor_matches_monte_carlo_and_a_perfect_predictor_sits_on_it(transform)
 
 # ---------------------------------------------------------------- a run with it
 @pytest.fixture(scope="module")
-def thinned_sweep(tmp_path_factory) -> Path:
+def split_sweep(tmp_path_factory) -> Path:
     """The real-data study's preset on a simulated capture of counts (the tiny scene with
-    Poisson noise), one sparsity, interp only, two thinning seeds."""
-    tmp = tmp_path_factory.mktemp("thinned")
+    Poisson noise), one sparsity, interp only, two count-splitting seeds."""
+    tmp = tmp_path_factory.mktemp("count-split")
     sweep = tmp / "sweep"
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("NLOSFW_CACHE_DIR", str(tmp / "cache"))
         mp.chdir(tmp)
         assert main(["-m", "experiment=sparsity_real", "scene=tiny", "scene.noise.model=poisson",
                      "scene.noise.photons=2e5", "model=interp", "split.spatial_step=2",
-                     "sampling=grid", "split.thinning_seed=1,2", "transform.n_frequencies=21",
-                     "reconstruction.n_depths=4", f"hydra.sweep.dir={sweep}"]) == 0
+                     "sampling=grid", "split.count_splitting_seed=1,2",
+                     "transform.n_frequencies=21", "reconstruction.n_depths=4",
+                     f"hydra.sweep.dir={sweep}"]) == 0
     return sweep
 
 
-def test_a_run_with_thinning_scores_against_half_b(thinned_sweep):
-    run = thinned_sweep / "0"
+def test_a_run_with_count_splitting_scores_against_half_b(split_sweep):
+    run = split_sweep / "0"
     m = json.loads((run / "metrics.json").read_text())
-    assert m["schema_version"] == 8
-    thinning = m["capture"]["thinning"]
-    assert thinning["seed"] == 1 and thinning["count_scale"] > 0
-    total = (thinning["counts_a"] + thinning["counts_b"]) / thinning["count_scale"]
+    assert m["schema_version"] == 9
+    halves = m["capture"]["count_splitting"]
+    assert halves["seed"] == 1 and halves["count_scale"] > 0
+    total = (halves["counts_a"] + halves["counts_b"]) / halves["count_scale"]
     # half A holds about half the photons (binomial: within a few standard deviations)
-    n = thinning["counts_a"] + thinning["counts_b"]
-    assert abs(thinning["counts_a"] - n / 2) < 5 * math.sqrt(n / 4)
-    assert m["capture"]["total"] == pytest.approx(thinning["counts_a"] / thinning["count_scale"],
+    n = halves["counts_a"] + halves["counts_b"]
+    assert abs(halves["counts_a"] - n / 2) < 5 * math.sqrt(n / 4)
+    assert m["capture"]["total"] == pytest.approx(halves["counts_a"] / halves["count_scale"],
                                                   rel=1e-4)
     assert total > m["capture"]["total"]
     held = m["field"]["interp"]["splits"]["heldout_measurement"]
@@ -259,15 +261,15 @@ def test_a_run_with_thinning_scores_against_half_b(thinned_sweep):
     assert sources["ceiling"]["ssim"] < 1.0 and math.isfinite(sources["ceiling"]["psnr"])
 
 
-def test_the_study_report_shows_the_excess_and_the_ceiling(thinned_sweep):
-    assert main(["report", str(thinned_sweep)]) == 0
-    report = thinned_sweep / "report"
+def test_the_study_report_shows_the_excess_and_the_ceiling(split_sweep):
+    assert main(["report", str(split_sweep)]) == 0
+    report = split_sweep / "report"
     rows = list(csv.DictReader((report / "study.csv").open()))
     by_series = {r["series"]: r for r in rows}
     assert set(by_series) == {"true", "ceiling", "raw", "interp"}
     interp = by_series["interp"]
     assert interp["runs"] == "2" and interp["seeds"] == "1 2"
-    runs = [json.loads((thinned_sweep / k / "metrics.json").read_text()) for k in ("0", "1")]
+    runs = [json.loads((split_sweep / k / "metrics.json").read_text()) for k in ("0", "1")]
     excess = [r["field"]["interp"]["splits"]["heldout_measurement"]["excess_db"] for r in runs]
     assert float(interp["heldout_excess_db_mean"]) == pytest.approx(np.mean(excess), rel=1e-4)
     ceiling = [r["reconstruction"]["sources"]["ceiling"]["psnr"] for r in runs]
@@ -277,12 +279,12 @@ def test_the_study_report_shows_the_excess_and_the_ceiling(thinned_sweep):
     assert "held-out excess (dB)" in text and "Count splitting" in text
 
 
-def test_the_benchmark_collects_the_study_with_its_verdicts(thinned_sweep, tmp_path):
+def test_the_benchmark_collects_the_study_with_its_verdicts(split_sweep, tmp_path):
     """benchmarks/sparsity_real.py collect: the JSON holds the study's rows, the markdown its
     table (labelled as a reduced run) and the verdict against interp."""
     out = tmp_path / "real.json"
     result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "sparsity_real.py"),
-                             "collect", str(thinned_sweep), "--reduced", "--out", str(out),
+                             "collect", str(split_sweep), "--reduced", "--out", str(out),
                              "--ran-on", "<b>[a GPU](x)</b> | y"],
                             cwd=tmp_path, capture_output=True, text=True, timeout=600,
                             check=False)
@@ -290,7 +292,7 @@ def test_the_benchmark_collects_the_study_with_its_verdicts(thinned_sweep, tmp_p
     results = json.loads(out.read_text())
     assert results["reduced"] is True and results["completed"] == 2
     rows = {r["series"]: r for r in results["rows"]}
-    runs = [json.loads((thinned_sweep / k / "metrics.json").read_text()) for k in ("0", "1")]
+    runs = [json.loads((split_sweep / k / "metrics.json").read_text()) for k in ("0", "1")]
     floor = [r["field"]["interp"]["splits"]["heldout_measurement"]["floor_db"] for r in runs]
     assert rows["interp"]["scores"]["heldout_floor_db"]["mean"] == pytest.approx(
         np.mean(floor), rel=1e-6)
@@ -308,5 +310,5 @@ def test_the_measured_lct_capture_is_photon_counts():
     counts = np.asarray(loadmat(REAL / "data_diffuse_s.mat")["rect_data"])
     base = tiny_capture(resolution=4, bins=counts.shape[2])
     sample = counts[:4, :4, :].transpose(2, 0, 1).astype(np.float32)
-    halves = thin(base.replace(H=sample), seed=0)
+    halves = split_counts(base.replace(H=sample), seed=0)
     assert halves.counts_a + halves.counts_b == int(sample.sum())

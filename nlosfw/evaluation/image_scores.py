@@ -1,5 +1,7 @@
 """Scores of reconstructions: PSNR and SSIM (scikit-image), RMSE, and depth RMSE.
 
+The only module of nlosfw that imports ``skimage.metrics``.
+
 :func:`reconstruction_scores` is what every run reports for each source against the
 reconstruction of the full capture, as the sparse-scan NLOS papers score theirs: on
 amplitudes (the square root of a reconstruction's intensity), each normalised to its
@@ -23,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from nlosfw.common.errors import DataError
+from nlosfw.evaluation.undefined import Scored
 from nlosfw.image.reconstruction import Reconstruction
 
 #: Side of scikit-image's default SSIM window: smaller images (or volumes) have no SSIM.
@@ -113,8 +116,7 @@ def reconstruction_scores(reference: Reconstruction, test: Reconstruction,
 
 
 def scored(reference: Reconstruction, test: Reconstruction,
-           truth_depth: np.ndarray | None = None
-           ) -> tuple[dict[str, float | None], dict[str, str]]:
+           truth_depth: np.ndarray | None = None) -> Scored:
     """:func:`reconstruction_scores` as a run records them: every score a finite number or
     None, and why each None is (by score name; ``depth_rmse_m`` only with a
     ``truth_depth``)."""
@@ -134,7 +136,7 @@ def scored(reference: Reconstruction, test: Reconstruction,
         values["depth_rmse_m"], reason = depth_error(test, truth_depth)
         if reason is not None:
             reasons["depth_rmse_m"] = reason
-    return values, reasons
+    return Scored(values, reasons)
 
 
 def _undefined_image_score(name: str, value: float | None, a: np.ndarray,

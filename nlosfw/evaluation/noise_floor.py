@@ -11,7 +11,7 @@ Poisson counts v = n.
 transform works too when it is of this kind: an impulse at a different time bin at every
 scan point must give one magnitude per frequency at every point, and twice the probe
 must give twice the field (linear). A transform that fails the probe is refused for
-``split.thinning`` (its noise floor is not computed from counts this way).
+``split.count_splitting`` (its noise floor is not computed from counts this way).
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ from __future__ import annotations
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.thinning import OPTION, count_variance
+from nlosfw.capture.photon_counts import count_variance
 from nlosfw.common.errors import ConfigError
+from nlosfw.evaluation.count_splitting import OPTION
 from nlosfw.transform.common import histogram_2d, to_field_layout
 from nlosfw.transform.field import PhasorField
 from nlosfw.transform.interface import PhasorTransform
