@@ -2,9 +2,11 @@
 
 Each named configuration runs on the CPU as ``python -m nlosfw ...`` in a child process;
 its peak resident set size is read from ``resource.getrusage(RUSAGE_CHILDREN)`` of a
-wrapper process whose only child it is, once it has ended, and its estimate
-from :func:`nlosfw.pipeline.budget.estimate_memory` on the same composed configuration
-(the interpreter and its libraries included, as the run holds them too). The target: the
+wrapper process whose only child it is, once it has ended, and its estimate is the
+plan's (:func:`nlosfw.compose.plan_run`: ``RunPlan.memory``, each model's part its own
+estimate) of the same configuration, plus the interpreter and its libraries as the
+process that made the plan holds them (its capture read, its backend imported), as the
+run holds them too. The target: the
 measured peak within [estimate / 1.5, 1.5 × estimate]. Results go to
 ``benchmarks/results/bench_memory.json``.
 
@@ -39,6 +41,9 @@ SIREN = ("model=siren_torch", "model.steps=300", "imager=fft", "figures.enabled=
 
 #: The physics model on the real-data study's 16x grid (its kernel spectra cached).
 RSD_PRIOR = ("model=rsd_prior", "split.spatial_step=4", "imager=fft", "figures.enabled=false")
+#: The neural hidden volume on the same grid with count splitting: its operator dominates.
+NEURAL_VOLUME = ("model=neural_volume_torch", "split.spatial_step=4",
+                 "split.count_splitting=true", "imager=fft", "figures.enabled=false")
 
 #: name -> (overrides, needs the real capture)
 CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
@@ -50,24 +55,21 @@ CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
     "simulated-default-siren_torch": (SIREN, False),
     "simulated-default-siren_jax": (("model=siren_jax", *SIREN[1:]), False),
     "real-64x64x2048-rsd_prior-16x": ((f"capture.path={REAL}", *RSD_PRIOR), True),
+    "real-64x64x2048-neural_volume_torch-16x": ((f"capture.path={REAL}", *NEURAL_VOLUME),
+                                                True),
 }
 
 
 def estimate(overrides: tuple[str, ...]) -> float:
-    """The run's estimate (bytes), composed exactly as the command line composes it."""
-    from nlosfw.capture.source import file_transient_shape
-    from nlosfw.compose.inprocess import compose_run_config
-    from nlosfw.pipeline.budget import estimate_memory
-    from nlosfw.pipeline.model_budget import plugin_requires
+    """The run's estimate (bytes): its plan's, made exactly as the command line makes it,
+    and this process's resident memory once the plan is made (the program)."""
+    from nlosfw.compose import plan_run
+    from nlosfw.pipeline.budget import memory_summary, process_memory
     from nlosfw.plugins import load_plugins
 
-    host = load_plugins()
-    config = compose_run_config(list(overrides), host)
-    forced = (config.get("capture") or {}).get("format")
-    formats = host.capture_formats()
-    parts = estimate_memory(config, lambda path: file_transient_shape(path, forced, formats),
-                            program=True, requires=plugin_requires(host))
-    return sum(p.nbytes for p in parts)
+    plan = plan_run(list(overrides), load_plugins())
+    print(memory_summary(plan.memory), file=sys.stderr)
+    return plan.memory.total + process_memory()
 
 
 def estimate_in_child(name: str) -> float:

@@ -25,6 +25,7 @@ needs one, and :func:`run` imports Hydra (to compose the configuration) when cal
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -37,12 +38,14 @@ from nlosfw.common import ConfigError
 from nlosfw.common.config import config_from_mapping
 from nlosfw.image import Reconstruction, wall_voxels
 from nlosfw.model import FieldModel
-from nlosfw.plugins import PluginHost, PluginKind, load_plugins
+from nlosfw.plugins import PluginHost, PluginKind, current_host
 from nlosfw.simulate import Scene, builtin_scene, scene_from_config
 from nlosfw.transform import PhasorField
 
 if TYPE_CHECKING:
     from nlosfw.pipeline import RunOutput
+
+log = logging.getLogger(__name__)
 
 
 def simulate_scene(scene: Scene | str | Mapping[str, object], simulator: str = "analytic",
@@ -142,10 +145,18 @@ def _shown(value: object) -> str:
 
 def transform_capture(capture: Capture, transform: str = "fft", **options: object) -> PhasorField:
     """The phasor field of ``capture`` (values ``[frequency, y, x]``) by transform plugin
-    ``transform`` (``fft``, ``wavelet``) with its ``options`` (``n_frequencies=51``)."""
+    ``transform`` (``fft``, ``wavelet``) with its ``options`` (``n_frequencies=51``); a band
+    that aliases on the wall grid logs its warning (:func:`nlosfw.transform.band_warning`)."""
+    from nlosfw.transform.frequencies import band_warning
+
     _of_type(capture, Capture, "capture", "a Capture")
     name = _plugin(PluginKind.PHASOR_TRANSFORM, transform, "transform")
-    return _host().registry.create(PluginKind.PHASOR_TRANSFORM, name, options).transform(capture)
+    field = _host().registry.create(PluginKind.PHASOR_TRANSFORM, name, options).transform(
+        capture)
+    warning = band_warning(field)
+    if warning is not None:
+        log.warning("%s", warning)
+    return field
 
 
 def fit_model(field: PhasorField, model: str = "interp", **options: object) -> FieldModel:
@@ -265,4 +276,5 @@ def _plugin(kind: PluginKind, name: object, option: str) -> str:
 
 
 def _host() -> PluginHost:
-    return load_plugins()
+    """The plugin host of the run in progress (:func:`nlosfw.plugins.hosting`), else a new one."""
+    return current_host()

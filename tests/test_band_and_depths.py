@@ -51,9 +51,10 @@ def test_automatic_band_ends_at_the_limit_of_each_geometry():
     assert confocal.frequencies[-1] == pytest.approx(1 / (4 * SPACING))      # 4 cycles/m
     assert confocal.frequencies[0] == pytest.approx(1 / (16 * SPACING))
     assert single.frequencies[-1] == pytest.approx(1 / (2 * SPACING))        # 8 cycles/m
-    assert confocal.metadata["band"] == {"grid_spacing": pytest.approx(SPACING),
-                                         "spatial_limit": pytest.approx(4.0),
-                                         "option": "transform.f_min", "aliases": False}
+    assert confocal.band.to_dict() == {"grid_spacing": pytest.approx(SPACING),
+                                       "spatial_limit": pytest.approx(4.0),
+                                       "option": "transform.f_min", "aliases": False}
+    assert "band" not in confocal.metadata
 
 
 def test_automatic_wavelet_is_twice_as_long_for_confocal():
@@ -61,7 +62,7 @@ def test_automatic_wavelet_is_twice_as_long_for_confocal():
     field = WaveletTransform().transform(capture)
     assert field.metadata["wavelet"]["wavelength"] == pytest.approx(8 * SPACING)
     assert field.frequencies.max() <= spatial_limit(SPACING, CaptureKind.CONFOCAL)
-    assert not field.metadata["band"]["aliases"]
+    assert not field.band.aliases
 
 
 @pytest.mark.parametrize("position", [(0.0, -0.05, 0.15), (0.3, -0.05, 0.2)])

@@ -27,7 +27,7 @@ from nlosfw.image.depths import depth_span
 from nlosfw.image.measured import histogram_field
 from nlosfw.image.reconstruction_io import read_reconstruction
 from nlosfw.image.transient import MEASURED_BAND
-from nlosfw.pipeline.image_stage import run_depth_range
+from nlosfw.pipeline.depth_plan import DepthPlan
 from nlosfw.pipeline.settings import ReconstructionSettings
 from nlosfw.plugins import load_plugins
 from tests.real_data import real_capture
@@ -212,7 +212,14 @@ def test_stop_after_capture_and_transform_draw_the_time_profile(workdir, point_c
 
 def test_the_run_depth_range_follows_depths_then_depth_range_then_the_signal(point_capture):
     _, capture = point_capture
+
+    def run_depth_range(settings: ReconstructionSettings, capture: object) -> tuple:
+        return DepthPlan.of(settings).span(capture)
+
     assert run_depth_range(ReconstructionSettings(depths=(0.7, 0.5, 0.6)), capture) == (0.5,
+                                                                                        0.7)
+    assert run_depth_range(ReconstructionSettings(depths=(0.7, 0.5, 0.6),
+                                                  depth_range=(0.3, 0.9)), capture) == (0.5,
                                                                                         0.7)
     assert run_depth_range(ReconstructionSettings(depth_range=(0.3, 0.9)), capture) == (0.3,
                                                                                         0.9)

@@ -15,6 +15,7 @@ import numpy as np
 
 from nlosfw.capture.enums import CaptureKind, GridFormat, HFormat, VolumeFormat
 from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.capture.hints import ImagingHints, hints_from
 from nlosfw.capture.scene_info import check_scene_info
 from nlosfw.common.errors import DataError
 
@@ -86,6 +87,10 @@ class Capture:
     volume_format: VolumeFormat = VolumeFormat.UNKNOWN
     scene_info: dict[str, Any] = field(default_factory=dict)
     """Free metadata: generating config, ground truth, noise, provenance."""
+    imaging_hints: ImagingHints | None = None
+    """How the capture's authors image it (:mod:`nlosfw.capture.hints`; None: no hints). Not
+    one of y-tal's fields: a file keeps them in ``scene_info["imaging_hints"]``, which is
+    read into this attribute (and out of ``scene_info``) when a capture is made."""
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__  # frozen: normalise types once, at construction
@@ -102,7 +107,10 @@ class Capture:
             value = getattr(self, name)
             if value is not None:
                 set_(self, name, np.asarray(value, dtype=np.float64))
-        set_(self, "scene_info", dict(self.scene_info or {}))
+        info, hints = hints_from(self.scene_info or {})
+        set_(self, "scene_info", info)
+        if self.imaging_hints is None and hints is not None:
+            set_(self, "imaging_hints", hints)
         self._validate()
 
     # ----------------------------------------------------------------- checks

@@ -10,6 +10,7 @@ Formats register through the ``register_capture_formats`` hook; the run's
 
 from __future__ import annotations
 
+import sys
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -99,7 +100,9 @@ def _refuse_unreadable(path: Path) -> None:
 
 def read_with(fmt: CaptureFormat, name: str, path: Path) -> Capture:
     """``fmt.read(path)``, every failure a one-line DataError naming the file (and the
-    format when the reader's own message does not)."""
+    format when the reader's own message does not). Raises the audit event
+    ``nlosfw.capture.read`` (path, format) first: one per full read of a capture file."""
+    sys.audit("nlosfw.capture.read", str(path), name)
     try:
         return fmt.read(path)
     except DataError as err:

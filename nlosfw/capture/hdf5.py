@@ -25,6 +25,7 @@ import numpy.typing as npt
 from nlosfw.capture.data import YTAL_FIELDS, Capture
 from nlosfw.capture.dataset_shapes import FIXED, ytal_shapes, znlos_shapes
 from nlosfw.capture.enums import GridFormat, HFormat, VolumeFormat
+from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError, one_line
 from nlosfw.common.hdf5 import new_file, write_header
@@ -87,8 +88,16 @@ def write_capture(path: str | Path, capture: Capture, compression: int = 0,
         if nlosfw_attributes:
             write_header(f, NLOSFW_CAPTURE_TYPE)
         for key in YTAL_FIELDS:
-            _write_field(f, key, getattr(capture, key), compression)
+            _write_field(f, key, _stored(capture, key), compression)
     return Path(path)
+
+
+def _stored(capture: Capture, key: str) -> object:
+    """Field ``key`` of ``capture`` as the file stores it: ``scene_info`` with the imaging
+    hints (y-tal's layout has no field of its own for them)."""
+    if key != "scene_info" or capture.imaging_hints is None:
+        return getattr(capture, key)
+    return {**capture.scene_info, HINTS_KEY: capture.imaging_hints.to_dict()}
 
 
 def read_capture(path: str | Path) -> Capture:

@@ -1,12 +1,13 @@
 """Imaging hints: how the authors of a published capture image it, attached to the capture.
 
-A capture's ``scene_info["imaging_hints"]`` may say which radiometric falloff to undo
-(``diffuse`` 1/r^4 or ``retroreflective`` 1/r^2), the Wiener filter's signal-to-noise
-ratio and the depth window the authors show. The transient imagers (``lct``, ``fk``,
-``fbp``) use them when their own options ``falloff`` and ``snr`` are not set; an option
-given explicitly always wins. The phasor-field transform copies the hints into the field's
-metadata (``field.metadata["imaging_hints"]``), so an imager that gets only a field sees
-them too.
+A capture's typed ``imaging_hints`` (:class:`ImagingHints`) may say which radiometric
+falloff to undo (``diffuse`` 1/r^4 or ``retroreflective`` 1/r^2), the Wiener filter's
+signal-to-noise ratio and the depth window the authors show. The transient imagers
+(``lct``, ``fk``, ``fbp``) use them when their own options ``falloff`` and ``snr`` are not
+set; an option given explicitly always wins. The phasor-field transform copies them to
+the field's ``imaging_hints``, so an imager that gets only a field sees them too. On disk
+they stay where y-tal's layout keeps free metadata (``scene_info["imaging_hints"]``,
+:data:`HINTS_KEY`); a capture or field read from such a mapping takes them out of it.
 
 The Stanford LCT captures get their hints from the authors' ``cnlos_reconstruction.m``
 (per scene: ``isdiffuse``, ``snr``, ``z_offset``; the displayed depth window runs from
@@ -16,13 +17,15 @@ retroreflective charts and letters use 1/r^2 and SNR 0.8.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-from nlosfw.capture.data import Capture
+if TYPE_CHECKING:
+    from nlosfw.capture.data import Capture
 
-#: The key of the hints in ``Capture.scene_info`` and ``PhasorField.metadata``.
+#: The key of the hints in a capture file's ``scene_info`` (and in the metadata of fields
+#: and captures written before the hints were typed attributes).
 HINTS_KEY = "imaging_hints"
 
 
@@ -104,11 +107,18 @@ def lct_hints(stem: str, half_width: float, n_bins: int, delta_t: float) -> Imag
 
 def capture_hints(capture: Capture) -> ImagingHints:
     """The hints attached to ``capture`` (empty hints when none are)."""
-    return ImagingHints.from_mapping(capture.scene_info.get(HINTS_KEY))
+    return capture.imaging_hints or ImagingHints()
 
 
 def with_hints(capture: Capture, hints: ImagingHints) -> Capture:
-    """A copy of ``capture`` carrying ``hints`` in its scene_info."""
-    info = dict(capture.scene_info)
-    info[HINTS_KEY] = hints.to_dict()
-    return dataclasses.replace(capture, scene_info=info)
+    """A copy of ``capture`` carrying ``hints``."""
+    return capture.replace(imaging_hints=hints)
+
+
+def hints_from(info: Mapping[str, object]) -> tuple[dict[str, object], ImagingHints | None]:
+    """(``info`` without :data:`HINTS_KEY`, the hints it held or None): how a capture's
+    ``scene_info`` or a field's metadata written with the hints in it is read."""
+    if HINTS_KEY not in info:
+        return dict(info), None
+    rest = {k: v for k, v in info.items() if k != HINTS_KEY}
+    return rest, ImagingHints.from_mapping(info[HINTS_KEY])

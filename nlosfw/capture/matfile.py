@@ -29,6 +29,7 @@ from nlosfw.common.hdf5_guard import (
     read_dataset,
 )
 from nlosfw.common.inputs import describe_input
+from nlosfw.common.reading import binary, hdf5_file, opened
 
 if TYPE_CHECKING:
     import h5py
@@ -50,7 +51,7 @@ class MatVariable:
 def is_hdf5(path: Path) -> bool:
     """Whether ``path`` holds HDF5 (a MATLAB 7.3 file is HDF5 after a 512-byte user block)."""
     try:
-        with open(path, "rb") as f:
+        with binary(path) as f:
             head = f.read(2048 + 8)
     except OSError:
         return False
@@ -60,7 +61,7 @@ def is_hdf5(path: Path) -> bool:
 def mat_version(path: Path) -> int | None:
     """5 or 73 for a MATLAB file of that version, None for anything else."""
     try:
-        with open(path, "rb") as f:
+        with binary(path) as f:
             head = f.read(128)
     except OSError:
         return None
@@ -75,7 +76,15 @@ def mat_version(path: Path) -> int | None:
 
 def mat_variables(path: Path) -> dict[str, MatVariable]:
     """The top-level variables of a v5 or v7.3 file (HDF5 without MATLAB's header counts as
-    7.3), by name, without reading their data. DataError if it is neither."""
+    7.3), by name, without reading their data. DataError if it is neither. Listed once
+    while :func:`~nlosfw.common.reading.read_once` holds the file."""
+    current = opened(path)
+    if current is not None:
+        return dict(current.memo("mat_variables", lambda: _mat_variables(path)))
+    return _mat_variables(path)
+
+
+def _mat_variables(path: Path) -> dict[str, MatVariable]:
     describe_input(path)
     if is_hdf5(path):
         try:
@@ -92,7 +101,8 @@ def mat_variables(path: Path) -> dict[str, MatVariable]:
             raise DataError(f"{path}: not a readable MATLAB file (truncated or corrupt: a "
                             "variable ends past the end of the file)")
         try:
-            found = scipy.io.whosmat(str(path))
+            with binary(path) as f:
+                found = scipy.io.whosmat(f)
         except Exception as err:  # scipy raises several types for damaged files
             raise DataError(f"{path}: not a readable MATLAB file (truncated or corrupt: "
                             f"{one_line(err)})") from None
@@ -107,7 +117,7 @@ def _mat5_complete(path: Path) -> bool:
     import struct
 
     size = path.stat().st_size
-    with open(path, "rb") as f:
+    with binary(path) as f:
         head = f.read(128)
         order = "<" if head[126:128] == b"IM" else ">"
         pos = 128
@@ -152,7 +162,7 @@ def hdf5_keys(path: Path, group: str = "") -> set[str] | None:
     import h5py
 
     try:
-        with h5py.File(path, "r") as f:
+        with hdf5_file(path) as f:
             check_file(f, path)
             node = f[group] if group else f
             return set(node.keys()) if isinstance(node, h5py.Group) else None
@@ -169,7 +179,7 @@ def hdf5_shape(path: Path, name: str) -> tuple[int, ...] | None:
     import h5py
 
     try:
-        with h5py.File(path, "r") as f:
+        with hdf5_file(path) as f:
             check_file(f, path)
             node = f.get(name)
             if not isinstance(node, h5py.Dataset) or node.shape is None:
@@ -246,7 +256,8 @@ def read_mat_array(path: Path, name: str, dtype: npt.DTypeLike | None = None,
                         f"{format_bytes(limit)} of memory available; refused before "
                         "reading it")
     try:
-        value = scipy.io.loadmat(str(path), variable_names=[name])[name]
+        with binary(path) as f:
+            value = scipy.io.loadmat(f, variable_names=[name])[name]
     except KeyError:
         raise DataError(f"{path}: no variable '{name}'") from None
     except Exception as err:  # scipy raises several types for damaged files

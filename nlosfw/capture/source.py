@@ -1,18 +1,25 @@
 """The capture of a file: its format (forced or detected), reading, preprocessing.
 
-Used twice with the same code: by the configuration's checks, so that a bad file or
-option ends with one line before any output exists, and by the pipeline's capture stage.
-The options are ``capture.*`` (:class:`CaptureSource`); a format's defaults
+A capture file is opened once (:func:`open_capture`, through
+:func:`~nlosfw.common.reading.read_once`): its format detected once, its header read
+once (:meth:`CaptureFile.transient_shape`, for the memory estimate before the data is
+read), then read and preprocessed once (:meth:`CaptureFile.load`) and hashed from the
+same descriptor (the cache key). A run's plan does this before anything is written, so
+that a bad file or option ends with one line before any output exists, and the capture
+stage uses the capture the plan read. The options are ``capture.*``
+(:class:`CaptureSource`); a format's defaults
 (:meth:`~nlosfw.capture.CaptureFormat.defaults`) fill the options the run leaves unset,
 and every step applied is recorded with its source. The installed formats come as a
 :class:`FormatCatalogue` (the plugin registry builds it), so this stage needs no plugin
-machinery.
+machinery. Every full read of a capture file raises the audit event
+``nlosfw.capture.read`` (:func:`sys.audit`) with the file's path and format.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,9 +31,10 @@ from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.preprocess import AppliedStep, Extras, Preprocessing, preprocess
 from nlosfw.capture.scan import on_scan_grid
 from nlosfw.common.config import require
-from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.common.errors import ConfigError, DataError, one_line
 from nlosfw.common.hashing import cache_key, file_digest
 from nlosfw.common.inputs import regular_file
+from nlosfw.common.reading import OpenedFile, read_once
 
 #: What a cache key of a preprocessed capture covers (JSON-like values).
 KeyMaterial = dict[str, object]
@@ -95,48 +103,93 @@ class Prepared:
 
 @dataclass(frozen=True, eq=False)
 class FileCapture:
-    """A capture read from a file (``format`` read it) and preprocessed."""
+    """A capture read from a file (``format`` read it) and preprocessed; ``digest`` is the
+    SHA-256 of the file's bytes, hashed through the descriptor that read it."""
 
     path: Path
     format: str
     prepared: Prepared
+    digest: str
 
     def cache_key(self, reader_version: str) -> str:
         """Key of the preprocessed capture: the file's bytes, its format and the reader's
         version, every step's value, and the bytes of the files the steps read."""
-        return cache_key({"file": file_digest(self.path), "format": self.format,
+        return cache_key({"file": self.digest, "format": self.format,
                           "reader": reader_version, **self.prepared.key_material})
 
 
-def file_transient_shape(path: Path, forced: str | None, formats: FormatCatalogue
-                         ) -> tuple[int, int, int] | None:
-    """(time bins, sensor points, laser points) of a capture file from its format's reading
-    of the header (for the memory estimate); None when the file or its format cannot tell
-    (reading the file says why)."""
+@dataclass(frozen=True, eq=False)
+class CaptureFile:
+    """A capture file open (:func:`open_capture`), its format chosen: what can be asked of
+    it before it is read, and its one read."""
+
+    path: Path
+    format: str
+    reader: CaptureFormat
+    source: CaptureSource
+    formats: FormatCatalogue
+    opened: OpenedFile
+
+    def transient_shape(self) -> tuple[int, int, int] | None:
+        """(time bins, sensor points, laser points) from the format's reading of the header
+        (for the memory estimate before the data is read); None when it cannot tell."""
+        try:
+            return self.reader.transient_shape(self.path)
+        except (ConfigError, DataError):
+            return None
+
+    def load(self) -> FileCapture:
+        """The capture read (once) and preprocessed: the run's options over the format's
+        defaults; the file's digest from the same descriptor."""
+        capture = read_with(self.reader, self.format, self.path)
+        options, from_format = self.source.options.merged_over(self.reader.defaults(self.path))
+        prepared = prepare(capture, options, from_format, self.formats, self.path)
+        return FileCapture(path=self.path, format=self.format, prepared=prepared,
+                           digest=self.opened.digest())
+
+
+@contextmanager
+def open_capture(source: CaptureSource, formats: FormatCatalogue) -> Iterator[CaptureFile]:
+    """``source.path`` open for the block, its format forced or detected (once): a one-line
+    error when it is missing, not a regular file, unreadable or of no format."""
+    if source.path is None:
+        raise ConfigError("capture.path", "no capture file given")
+    path = regular_file(source.path, "capture.path")
+    with ExitStack() as stack:
+        opened = stack.enter_context(_opened(path))
+        name, fmt = formats.choose(path, source.format)
+        yield CaptureFile(path=path, format=name, reader=fmt, source=source,
+                          formats=formats, opened=opened)
+
+
+@contextmanager
+def _opened(path: Path) -> Iterator[OpenedFile]:
+    """:func:`~nlosfw.common.reading.read_once`, a file that cannot be opened a one-line
+    DataError."""
     try:
-        return formats.choose(path, forced)[1].transient_shape(path)
-    except (ConfigError, DataError):
-        return None
+        stack = ExitStack()
+        opened = stack.enter_context(read_once(path))
+    except OSError as err:
+        raise DataError(f"{path}: cannot be read ({err.strerror or one_line(err)})") from None
+    with stack:
+        yield opened
 
 
 def read_capture_file(path: Path, forced: str | None, formats: FormatCatalogue
                       ) -> tuple[str, CaptureFormat, Capture]:
-    """The format of ``path`` and the capture it reads there (no preprocessing)."""
+    """The format of ``path`` and the capture it reads there (no preprocessing), the file
+    opened once."""
     regular_file(path, "capture.path")
-    name, fmt = formats.choose(path, forced)
-    return name, fmt, read_with(fmt, name, path)
+    with _opened(path):
+        name, fmt = formats.choose(path, forced)
+        return name, fmt, read_with(fmt, name, path)
 
 
 def load_file_capture(source: CaptureSource, formats: FormatCatalogue) -> FileCapture:
     """Read ``source.path`` (format forced or detected) and preprocess it: the run's options
-    over the format's defaults."""
-    if source.path is None:
-        raise ConfigError("capture.path", "no capture file given")
-    path = Path(source.path).expanduser()
-    name, fmt, capture = read_capture_file(path, source.format, formats)
-    options, from_format = source.options.merged_over(fmt.defaults(path))
-    return FileCapture(path=path, format=name,
-                       prepared=prepare(capture, options, from_format, formats, path))
+    over the format's defaults (the file opened once)."""
+    with open_capture(source, formats) as file:
+        return file.load()
 
 
 def prepare(capture: Capture, options: Preprocessing, from_format: frozenset[str],
@@ -156,8 +209,9 @@ def prepare(capture: Capture, options: Preprocessing, from_format: frozenset[str
         if origin is not None and bg_path.resolve() == origin.resolve():
             raise ConfigError("capture.background", f"{options.background} is the capture file "
                                                     "itself; give the background measurement")
-        _, _, background = read_capture_file(bg_path, None, formats)
-        material["background"] = file_digest(bg_path)
+        with _opened(bg_path):                  # read and hashed through one descriptor
+            _, _, background = read_capture_file(bg_path, None, formats)
+            material["background"] = file_digest(bg_path)
     source = "the capture" if origin is None else str(origin)
     result, steps = preprocess(capture, options, from_format, Extras(delays, background, source))
     material["steps"] = [[s.option, s.value] for s in steps]

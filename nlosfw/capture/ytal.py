@@ -24,6 +24,7 @@ from nlosfw.capture.hdf5 import (
 )
 from nlosfw.capture.matfile import hdf5_keys, hdf5_shape
 from nlosfw.common.errors import DataError
+from nlosfw.common.reading import hdf5_file
 
 
 def _nlosfw_type(path: Path) -> str | None:
@@ -31,10 +32,8 @@ def _nlosfw_type(path: Path) -> str | None:
     keys = hdf5_keys(path)
     if keys is None or not {"H", "H_format"} <= keys:
         return None
-    import h5py
-
     try:
-        with h5py.File(path, "r") as f:
+        with hdf5_file(path) as f:
             found = f.attrs.get("nlosfw_type", "")
     except OSError:
         return None

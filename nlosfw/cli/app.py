@@ -7,19 +7,30 @@ will run (:func:`nlosfw.compose.preflight`: every swept composition, the plugins
 files, the memory, the output directories) run in :class:`PreflightCallback`, a Hydra
 callback called after Hydra has composed the configuration and before it writes
 anything (``on_run_start``, ``on_multirun_start``); ``--cfg``, ``--info`` and ``--help``
-run no job and no check. Hydra runs with ``HYDRA_FULL_ERROR`` so that its own errors
+run no job and no check.
+
+A command builds one plugin host (:func:`main`) and hands it down: to Hydra's callback
+and to the jobs it runs in this process (:data:`_COMMAND`, set for the command's
+duration), and to whatever needs the registry within (:func:`nlosfw.plugins.hosting`). A
+single run is composed once, by Hydra: the callback makes the run's plan from Hydra's
+configuration (the check) and the job runs that plan, its capture file read once. A
+worker process of a parallel sweep builds its own host once (:func:`_worker_host`), and
+each job of a sweep makes its own plan. Hydra runs with ``HYDRA_FULL_ERROR`` so that its own errors
 (an unknown group option, a wrong type) reach :func:`main` as exceptions, which end as
 one line naming the option (exit status 2), as every other mistake does.
 """
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 import sys
 import traceback
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -40,12 +51,42 @@ from nlosfw.compose import (
     preflight,
     register_configs,
 )
-from nlosfw.pipeline import Pipeline, make_plan
+from nlosfw.compose.checks import task_config
+from nlosfw.pipeline import Pipeline, RunPlan, make_plan
+from nlosfw.plugins import PluginHost, hosting
 
 if TYPE_CHECKING:
     from omegaconf import DictConfig
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(eq=False)
+class _Command:
+    """One command's plugin host, and the plan of its single run once the check has made
+    it (taken by the job)."""
+
+    host: PluginHost
+    plan: RunPlan | None = None
+
+
+#: The command running in this process (set by :func:`main` for its duration; None in a
+#: worker process of a parallel sweep).
+_COMMAND: ContextVar[_Command | None] = ContextVar("nlosfw_command", default=None)
+
+
+@functools.cache
+def _worker_host() -> PluginHost:
+    """The plugin host of a worker process of a parallel sweep: built once per process."""
+    from nlosfw.plugins import load_plugins
+
+    return load_plugins()
+
+
+def _command() -> _Command:
+    """The command running here, or a worker process's (a host of its own)."""
+    command = _COMMAND.get()
+    return _Command(_worker_host()) if command is None else command
 
 
 def main(argv: Sequence[str]) -> int:
@@ -57,15 +98,17 @@ def main(argv: Sequence[str]) -> int:
     refuse_flags(argv)  # before Hydra's parser sees them, in any spelling it accepts
     argv = normalise_overrides(argv)
     check_override_shapes(argv)
-    from nlosfw.plugins import load_plugins
+    from nlosfw.plugins import load_plugins  # looked up here: tests substitute it
 
     host = load_plugins()
     register_configs(host)
     ensure_resolvers()
     decorated = hydra.main(config_path=str(config_dir()), config_name="config",
                            version_base="1.3")(_task)
+    token = _COMMAND.set(_Command(host))
     try:
-        with _hydra_argv(argv), _hydra_full_error(), workers.forwarding() as sweep:
+        with _hydra_argv(argv), _hydra_full_error(), hosting(host), \
+                workers.forwarding() as sweep:
             decorated()
             outcomes.check(sweep)     # a sweep whose jobs failed: one line naming them
     except (HydraException, OmegaConfBaseException) as err:
@@ -83,6 +126,8 @@ def main(argv: Sequence[str]) -> int:
             option, f"{where}: {err.strerror or one_line(err)}")) from None
     except RecursionError:  # Hydra's parser on a deeply nested value
         raise ConfigError("", "command line: an override is nested too deeply") from None
+    finally:
+        _COMMAND.reset(token)
     return 0
 
 
@@ -143,11 +188,11 @@ def _check(config: DictConfig, multirun: bool) -> None:
     """Every check of :func:`~nlosfw.compose.preflight`; any failure ends the command with
     one line and ``SystemExit`` (Hydra would turn an exception into a warning and start the
     run): a mistake with its exit status, a check that could not decide (an exception that
-    is not an NlosfwError: a bug, in nlosfw or a plugin) with 2, nothing written."""
+    is not an NlosfwError: a bug, in nlosfw or a plugin) with 2, nothing written. A single
+    run's configuration is Hydra's, not composed again, and its plan is kept for the job."""
     from omegaconf import OmegaConf
 
-    from nlosfw.plugins import load_plugins
-
+    command = _command()
     try:
         given = config.hydra.overrides
         hydra = [str(o) for o in OmegaConf.to_container(given.hydra, resolve=False) or []]
@@ -156,7 +201,8 @@ def _check(config: DictConfig, multirun: bool) -> None:
         # line; hydra.mode is Hydra's own record of -m
         overrides = [o for o in hydra if not o.startswith("hydra.mode=")] + task
         config_name = str(config.hydra.job.config_name or "config")
-        preflight(overrides, load_plugins(), config_name, multirun)
+        command.plan = preflight(overrides, command.host, config_name, multirun,
+                                 composed_run=None if multirun else config)
     except NlosfwError as err:
         report_user_error(err)
         raise SystemExit(err.exit_status) from None
@@ -179,11 +225,24 @@ def _task(cfg: DictConfig) -> float | None:
 
 
 def _job(cfg: DictConfig) -> float | None:
+    command = _command()
+    with hosting(command.host):
+        return _run_job(cfg, command)
+
+
+def _job_plan(cfg: DictConfig, command: _Command) -> RunPlan:
+    """The job's plan: the one the check made of this very configuration (a single run),
+    else made now (a job of a sweep)."""
+    config = task_config(cfg)
+    plan, command.plan = command.plan, None
+    if plan is not None and plan.config == config:
+        return plan
+    return make_plan(config, command.host)
+
+
+def _run_job(cfg: DictConfig, command: _Command) -> float | None:
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
-    from omegaconf import OmegaConf
-
-    from nlosfw.plugins import load_plugins
 
     logging.captureWarnings(True)  # library warnings go to run.log, not the console
     hydra = HydraConfig.get()
@@ -192,13 +251,12 @@ def _job(cfg: DictConfig) -> float | None:
         job = outcomes.Outcome(num=int(hydra.job.num),
                                overrides=tuple(str(o) for o in hydra.overrides.task))
     pipeline: Pipeline | None = None
+    host = command.host
+    reporter: ConsoleReporter | None = None
     try:
-        plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
-        if not isinstance(plain, dict):
-            raise ConfigError("", "the composed configuration is not a mapping")
-        host = load_plugins()
-        plan = make_plan({str(k): v for k, v in plain.items()}, host)
-        host.manager.register(ConsoleReporter(host, plan.settings))
+        plan = _job_plan(cfg, command)
+        reporter = ConsoleReporter(host, plan.settings)
+        host.manager.register(reporter)
         pipeline = Pipeline(plan, Path(hydra.runtime.output_dir), host,
                             resume=job is not None)
         objective = pipeline.run()
@@ -214,6 +272,9 @@ def _job(cfg: DictConfig) -> float | None:
         stage = None if pipeline is None else pipeline.stage_reached
         _failed(unexpected_error(err, stage), 1, job)
         return None
+    finally:
+        if reporter is not None:
+            host.manager.unregister(reporter)
     folder = outcomes.sweep_folder()
     if job is not None and folder is not None:
         outcomes.record(folder, job)

@@ -26,6 +26,7 @@ from nlosfw.common.errors import (
     one_line,
 )
 from nlosfw.common.files import atomic_path, write_text
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.common.progress import ProgressCallback, accepts_progress
 from nlosfw.common.text import override_value
 from nlosfw.common.version import __version__
@@ -42,10 +43,13 @@ __all__ = [
     "Configurable",
     "DataError",
     "FitError",
+    "MemoryEstimate",
+    "MemoryPart",
     "moved_names",
     "NlosfwError",
     "one_line",
     "override_value",
+    "PlanShape",
     "PluginError",
     "ProgressCallback",
     "require",

@@ -6,6 +6,7 @@ import hashlib
 import json
 from pathlib import Path
 
+from nlosfw.common.reading import digest
 from nlosfw.common.version import __version__
 
 
@@ -23,9 +24,6 @@ def cache_key(material: object) -> str:
 
 
 def file_digest(path: Path) -> str:
-    """SHA-256 of a file's bytes (read in 1 MiB blocks)."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+    """SHA-256 of a file's bytes (read in 1 MiB blocks; through the open descriptor, and
+    once, while :func:`nlosfw.common.reading.read_once` holds that file)."""
+    return digest(path)

@@ -28,6 +28,7 @@ import numpy.typing as npt
 from nlosfw.common import memory
 from nlosfw.common.errors import DataError, one_line
 from nlosfw.common.files import format_bytes
+from nlosfw.common.reading import binary, hdf5_file
 
 #: Soft links followed in a row before a chain is refused (a loop).
 _MAX_SOFT_HOPS = 16
@@ -49,23 +50,21 @@ def open_checked(path: Path, what: str = "file") -> Iterator[h5py.File]:
     """``path`` open read-only with h5py after :func:`check_file`; h5py's errors opening it
     become a one-line DataError ("not a readable HDF5 ``what``": truncated or corrupt, or
     not HDF5 at all)."""
-    try:
-        f = h5py.File(path, "r")
-    except OSError as err:
-        reason = "truncated or corrupt" if _has_signature(path) else "not HDF5"
-        raise DataError(f"{path}: not a readable HDF5 {what} ({reason}: {one_line(err)})"
-                        ) from None
-    try:
+    with contextlib.ExitStack() as stack:
+        try:
+            f = stack.enter_context(hdf5_file(path))
+        except OSError as err:
+            reason = "truncated or corrupt" if _has_signature(path) else "not HDF5"
+            raise DataError(f"{path}: not a readable HDF5 {what} ({reason}: "
+                            f"{one_line(err)})") from None
         check_file(f, path)
         yield f
-    finally:
-        f.close()
 
 
 def _has_signature(path: Path) -> bool:
     """Whether ``path`` starts with HDF5's signature (at 0 or after a user block)."""
     try:
-        with open(path, "rb") as f:
+        with binary(path) as f:
             head = f.read(2048 + 8)
     except OSError:
         return False

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import copy
 import logging
+import threading
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from typing import Final
 
 from nlosfw.common.text import controls_visible
@@ -27,3 +31,38 @@ class VisibleFormatter(logging.Formatter):
 
     def format(self, record: logging.LogRecord) -> str:
         return controls_visible(super().format(record))
+
+
+class _Recorder(logging.Handler):
+    """Keeps the records of one thread at INFO and above (handled as usual elsewhere)."""
+
+    def __init__(self, records: list[logging.LogRecord], thread: int) -> None:
+        super().__init__(logging.INFO)
+        self.records, self.thread = records, thread
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if record.thread == self.thread:
+            self.records.append(record)
+
+
+@contextmanager
+def recorded(name: str = OWN_LOGGERS) -> Iterator[list[logging.LogRecord]]:
+    """The records this thread logs at INFO and above under logger ``name`` in the block,
+    as a list that fills while it runs (the records reach their handlers as usual)."""
+    records: list[logging.LogRecord] = []
+    handler = _Recorder(records, threading.get_ident())
+    logger = logging.getLogger(name)
+    logger.addHandler(handler)
+    try:
+        yield records
+    finally:
+        logger.removeHandler(handler)
+
+
+def to_file(records: Iterable[logging.LogRecord]) -> None:
+    """Log ``records`` again, to the run's log file only (:data:`FILE_ONLY`): what was said
+    before the run's log existed (its plan's reading of the capture)."""
+    for record in records:
+        again = copy.copy(record)
+        again.console = False
+        logging.getLogger(record.name).handle(again)

@@ -8,7 +8,7 @@ this process (:mod:`~nlosfw.compose.inprocess`).
 """
 
 from nlosfw.compose.checks import composition_error, preflight, validate_config
-from nlosfw.compose.inprocess import compose_run_config, run_in_process
+from nlosfw.compose.inprocess import compose_run_config, plan_run, run_in_process
 from nlosfw.compose.store import (
     RUN_SCHEMA,
     ensure_resolvers,
@@ -24,6 +24,7 @@ __all__ = [
     "ensure_resolvers",
     "hydra_session",
     "normalise_overrides",
+    "plan_run",
     "preflight",
     "register_configs",
     "run_in_process",

@@ -17,31 +17,15 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
-from nlosfw.capture.data import Capture
-from nlosfw.capture.photon_counts import photon_counts
-from nlosfw.capture.source import file_transient_shape, load_file_capture
+from nlosfw.capture.source import CaptureSource
 from nlosfw.common.errors import ConfigError, NlosfwError, PluginError, one_line
-from nlosfw.common.schema import is_schema_node, problem
-from nlosfw.compose.capture_checks import check_capture_kind, check_scene_preprocessing
+from nlosfw.common.schema import problem
 from nlosfw.compose.output_dirs import check_output_dirs
 from nlosfw.compose.store import hydra_session
-from nlosfw.evaluation.count_splitting import OPTION as SPLIT_OPTION
-from nlosfw.evaluation.count_splitting import check_count_split
-from nlosfw.evaluation.noise_floor import DFT_TRANSFORMS, kernel_power
-from nlosfw.pipeline.budget import check_memory
-from nlosfw.pipeline.model_budget import plugin_requires
-from nlosfw.pipeline.plan import check_model_choice, check_reference_choice
-from nlosfw.pipeline.settings import (
-    NO_MODEL,
-    OPTIONAL_GROUPS,
-    SELECTOR_GROUPS,
-    RunSettings,
-    run_settings,
-)
-from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
-from nlosfw.simulate.geometry import validate_scene
-from nlosfw.simulate.scene import NoiseModel, scene_from_config
-from nlosfw.transform.counts import check_counts_times
+from nlosfw.pipeline.plan import PlainConfig, RunPlan, make_plan
+from nlosfw.pipeline.plan_plugins import check_imports
+from nlosfw.pipeline.settings import OPTIONAL_GROUPS, SELECTOR_GROUPS, run_settings
+from nlosfw.plugins import RUN_KINDS, PluginHost
 
 if TYPE_CHECKING:
     from hydra.core.config_loader import ConfigLoader
@@ -51,18 +35,21 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 _PLUGIN_GROUPS = tuple(k.value for k in RUN_KINDS)
-#: The plugins that take the capture as it is: they must take its kind.
-_TAKE_THE_CAPTURE = (PluginKind.PHASOR_TRANSFORM, PluginKind.IMAGER)
 _MAX_PREFLIGHT_COMPOSITIONS = 64
 
 
 def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "config",
-              multirun: bool = False, outputs: bool = True) -> None:
+              multirun: bool = False, outputs: bool = True,
+              composed_run: DictConfig | None = None) -> RunPlan | None:
     """Compose and validate the config for every swept value; raise a one-line NlosfwError.
 
     Swept values come from ``overrides`` and, for a multirun, from the
     ``hydra.sweeper.params`` a preset or primary config declares. With ``outputs`` the
-    output directories are checked too.
+    output directories are checked too. Validating a configuration is making its plan
+    (:func:`validate_config`): for a single run the plan is returned, for a multirun every
+    combination's plan is made and discarded (each job makes its own) and None returned.
+    ``composed_run``: the configuration of a single run as Hydra composed it (its ``hydra``
+    node included), used as it is instead of being composed again.
     """
     from hydra import compose
     from hydra.core.global_hydra import GlobalHydra
@@ -87,9 +74,13 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
 
         done: dict[tuple[tuple[str, ...], bool], DictConfig] = {}
 
+        if composed_run is not None and not multirun:   # Hydra's own composition
+            done[(tuple(fixed), True)] = composed_run
+            done[(tuple(fixed), False)] = _without_hydra(composed_run)
+
         def composed(combo: list[str], with_hydra: bool = False) -> DictConfig:
             """The config of ``combo``, composed once per preflight (a copy each time:
-            a single run asks for the same composition four times, 0.6 s each)."""
+            a single run asks for the same composition several times, 0.6 s each)."""
             key = (tuple(combo), with_hydra)
             if key not in done:
                 try:
@@ -113,11 +104,12 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
         combos = itertools.product(*[[f"{key}={v}" for v in values] for key, values in sweeps])
         total = math.prod(len(values) for _, values in sweeps)
         chdir = bool(composed(first, with_hydra=True).hydra.job.get("chdir", False))
+        plan = None
         for combo in itertools.islice(combos, _MAX_PREFLIGHT_COMPOSITIONS):
             cfg = composed(fixed + list(combo))
             if chdir:
-                _refuse_relative_inputs(cfg)
-            validate_config(cfg, host)
+                _refuse_relative_inputs(run_settings(task_config(cfg)).capture)
+            plan = validate_config(cfg, host)
         if total > _MAX_PREFLIGHT_COMPOSITIONS:
             log.warning("checked the first %d of %d sweep combinations before starting; "
                         "the others are checked when their run starts",
@@ -125,6 +117,17 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
         if outputs:
             check_output_dirs(composed, list(overrides), first,
                               [f"{k}={v}" for k, v in declared.items()], multirun)
+    return None if multirun else plan
+
+
+def _without_hydra(cfg: DictConfig) -> DictConfig:
+    """A copy of ``cfg`` without Hydra's own node (the job's configuration)."""
+    from omegaconf import open_dict
+
+    task = copy.deepcopy(cfg)
+    with open_dict(task):
+        task.pop("hydra", None)
+    return task
 
 
 def composition_error(err: Exception, host: PluginHost | None = None) -> NlosfwError:
@@ -137,7 +140,7 @@ def composition_error(err: Exception, host: PluginHost | None = None) -> NlosfwE
         group, _, name = str(err.missing_cfg_file).rpartition("/")
         if host is not None and group in _PLUGIN_GROUPS and (group, name) in host.registry:
             try:
-                _check_imports(host.registry.get(group, name))
+                check_imports(host.registry.get(group, name))
             except PluginError as broken:
                 return broken
         if group in SELECTOR_GROUPS:
@@ -155,164 +158,39 @@ def composition_error(err: Exception, host: PluginHost | None = None) -> NlosfwE
     return ConfigError("", one_line(err, whole=True))
 
 
-def _refuse_relative_inputs(cfg: Mapping[str, object]) -> None:
+def _refuse_relative_inputs(capture: CaptureSource) -> None:
     """With ``hydra.job.chdir=true`` the run starts in its run directory, where a relative
     input path would name another file: refuse it naming the option."""
-    capture = cfg.get("capture")
-    if not isinstance(capture, Mapping):
-        return
-    for name in ("path", "background", "tofgrid"):
-        value = capture.get(name)
+    for name, value in (("path", capture.path), ("background", capture.background),
+                        ("tofgrid", capture.tofgrid)):
         if isinstance(value, str) and value and not value.startswith(("/", "~")):
             raise ConfigError(f"capture.{name}", f"'{value}' is a relative path, but "
                               "hydra.job.chdir=true runs in the run directory, where it names "
                               "another file; give an absolute path")
 
 
-def validate_config(cfg: Mapping[str, object], host: PluginHost) -> None:
-    """Check a composed config: plugin names, installed dependencies, options, scene,
-    settings, the memory it needs, and its capture file or the files it names."""
-    settings = run_settings(cfg)
-    check_model_choice(cfg, settings)
-    counts_needed = False           # a model's likelihood needs the field's Poisson variance
-    times_needed = False            # or the counts themselves, in the capture's own times
-    transform_config: object = None
-    for group in _PLUGIN_GROUPS:
-        node = cfg.get(group)
-        if not isinstance(node, Mapping) or not node:
-            raise ConfigError(group, "no plugin selected")
-        if group == PluginKind.FIELD_MODEL.value and node.get("name") == NO_MODEL:
-            continue  # model=none: no field model to check
-        spec = host.registry.get(group, str(node.get("name")))
-        _check_plugin(spec, f"{group} plugin")
-        config = spec.make_config(_plugin_options(node, spec.config_class()))
-        if group == PluginKind.FIELD_MODEL.value:
-            _check_model_config(spec, config)
-        counts_needed |= _needs_counts(config, settings, "model")
-        times_needed |= bool(getattr(config, "uses_photon_counts", False))
-        if group == PluginKind.PHASOR_TRANSFORM.value:
-            transform_config = config
-        if group == PluginKind.IMAGER.value:
-            check_reference_choice(settings, spec.name,
-                                   bool(getattr(spec.load(), "full_grid_only", False)))
-    for label, options in settings.compare.items():
-        rest = dict(options)
-        spec = host.registry.get(PluginKind.FIELD_MODEL, str(rest.pop("name")))
-        _check_plugin(spec, f"compare.{label}: model plugin")
-        try:
-            config = spec.make_config(rest)
-            _check_model_config(spec, config)
-        except ConfigError as err:
-            raise ConfigError(f"compare.{label}.{err.option.split('.', 1)[-1]}",
-                              err.problem) from None
-        counts_needed |= _needs_counts(config, settings, f"compare.{label}")
-        times_needed |= bool(getattr(config, "uses_photon_counts", False))
-    formats = host.capture_formats()
-    # before anything sized by the configuration is allocated
-    check_memory(cfg, file_shape=lambda path: file_transient_shape(
-        path, settings.capture.format, formats), requires=plugin_requires(host))
-    if settings.capture.path is None:
-        scene = validate_scene(scene_from_config(cfg.get("scene"))).scene
-        if scene.noise.model != NoiseModel.poisson:   # what needs counts is refused here
-            if settings.split.count_splitting:
-                raise ConfigError(SPLIT_OPTION, "count splitting needs photon counts, but "
-                                  "the simulated capture has no photon noise; set "
-                                  "scene.noise.model=poisson")
-            if settings.capture.pileup_pulses is not None:
-                raise ConfigError("capture.pileup_pulses", "the pile-up correction needs "
-                                  "photon counts, but the simulated capture has no photon "
-                                  "noise; set scene.noise.model=poisson or leave it null")
-            if counts_needed:
-                raise ConfigError("model.likelihood", "a Poisson likelihood needs photon "
-                                  "counts, but the simulated capture has none; set "
-                                  "scene.noise.model=poisson or use least_squares")
-        simulator_node = cfg.get("simulator")
-        if not isinstance(simulator_node, Mapping):
-            raise ConfigError("simulator", "no plugin selected")
-        simulator = host.registry.get(PluginKind.SIMULATOR, str(simulator_node.get("name")))
-        simulator.create(_plugin_options(simulator_node, simulator.config_class())
-                         ).check(scene)
-        layout = check_scene_preprocessing(scene, settings.capture.options, formats)
-        check_capture_kind(layout, cfg, host, f"scene {scene.name}'s capture "
-                           f"(scene.capture.type={scene.capture.type})",
-                           (PluginKind.SIMULATOR, *_TAKE_THE_CAPTURE))
-        return
-    # a malformed file, a wrong format or an option that does not fit the file must fail
-    # here, before any output exists
-    loaded = load_file_capture(settings.capture, formats)
-    check_capture_kind(loaded.prepared.capture, cfg, host, str(loaded.path))
-    if settings.split.count_splitting:  # it needs photon counts: refused here, not later
-        check_count_split(loaded.prepared.capture, settings.split.count_splitting_seed,
-                          str(loaded.path))
-        _check_noise_floor(cfg, host, loaded.prepared.capture)
-    if counts_needed:
-        likelihood = ("model.likelihood", "the Poisson likelihood")
-        photon_counts(loaded.prepared.capture, str(loaded.path), *likelihood)
-        if times_needed:
-            check_counts_times(loaded.prepared.capture.geometry, transform_config,
-                               str(loaded.path))
-        _check_noise_floor(cfg, host, loaded.prepared.capture, *likelihood)
+def validate_config(cfg: Mapping[str, object] | DictConfig, host: PluginHost) -> RunPlan:
+    """Check a composed config by making its plan (:func:`~nlosfw.pipeline.make_plan`, the
+    one validator: plugin names, installed dependencies, options, scene, settings, the
+    memory it needs, and its capture file, read once, or the files it names)."""
+    return make_plan(task_config(cfg), host)
 
 
-def _check_model_config(spec: PluginSpec, config: object) -> None:
-    """The model plugin's own checks of what its options name (``check_config``)."""
-    check = getattr(spec.load(), "check_config", None)
-    if callable(check):
-        check(config)
+def task_config(cfg: Mapping[str, object] | DictConfig) -> PlainConfig:
+    """The resolved configuration of a run as plain data: a composed config without Hydra's
+    own node (as Hydra hands it to the job), or a plain mapping as it is."""
+    from omegaconf import DictConfig, OmegaConf, open_dict
 
-
-def _needs_counts(config: object, settings: RunSettings, option: str) -> bool:
-    """Whether a model's likelihood needs the capture's photon counts; a ConfigError for
-    ``split.spectral`` when it takes the counts themselves while frequencies are held out
-    (the counts hold every frequency)."""
-    if getattr(config, "uses_photon_counts", False) and settings.split.spectral != "none":
-        raise ConfigError("split.spectral", f"{option}: the photon counts' likelihood sees "
-                          "every frequency of the counts, so no frequency can be held out; "
-                          f"set split.spectral=none (got {settings.split.spectral})")
-    return bool(getattr(config, "uses_noise_variance", False)
-                or getattr(config, "uses_photon_counts", False))
-
-
-def _check_noise_floor(cfg: Mapping[str, object], host: PluginHost, capture: Capture,
-                       option: str = SPLIT_OPTION, purpose: str = "count splitting"
-                       ) -> None:
-    """Count splitting's noise floor (and a Poisson likelihood) needs a DFT-like transform:
-    the built-in ones are; another is probed on the capture (a ConfigError for ``option``
-    when it is not)."""
-    node = cfg.get("transform")
-    name = str(node.get("name")) if isinstance(node, Mapping) else ""
-    if name in DFT_TRANSFORMS or not isinstance(node, Mapping):
-        return
-    spec = host.registry.get(PluginKind.PHASOR_TRANSFORM, name)
-    kernel_power(spec.create(_plugin_options(node, spec.config_class())), capture, name,
-                 option, purpose)
-
-
-def _check_plugin(spec: PluginSpec, what: str) -> None:
-    """A one-line PluginError, before the run starts, when the plugin ``what`` names needs
-    packages that are not installed (with the command that installs them) or its code
-    cannot be imported."""
-    command = spec.install_command()
-    if command:
-        raise PluginError(f"{what} '{spec.name}' needs packages that are not installed; "
-                          f"run: {command}")
-    _check_imports(spec)
-
-
-def _check_imports(spec: PluginSpec) -> None:
-    """A one-line PluginError when a selected plugin's code cannot be imported (a typo in its
-    factory path, an import error, a missing dependency), before the run starts."""
-    reason = spec.import_problem()
-    if reason:
-        raise PluginError(f"{reason} (see: python -m nlosfw plugins {spec.qualified_name})")
-
-
-def _plugin_options(node: Mapping[str, object], config_class: type) -> Mapping[str, object]:
-    """A plugin's options from its composed group node: the node itself when Hydra composed
-    it from the plugin's entry (its ``name`` is part of that schema), else without ``name``."""
-    if is_schema_node(node, config_class):
-        return node
-    return {k: v for k, v in node.items() if k != "name"}
+    if not isinstance(cfg, DictConfig):
+        return cfg
+    if "hydra" in cfg:
+        cfg = copy.deepcopy(cfg)
+        with open_dict(cfg):
+            del cfg["hydra"]
+    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    if not isinstance(plain, dict):  # a composed config is a mapping
+        raise ConfigError("", "the composed configuration is not a mapping")
+    return {str(k): v for k, v in plain.items()}
 
 
 def _values(override: Override) -> list[str]:
@@ -334,7 +212,7 @@ def _check_group_choice(key: str, values: list[str], loader: ConfigLoader,
             continue
         if value not in options:
             if key in _PLUGIN_GROUPS and (key, value) in host.registry:
-                _check_imports(host.registry.get(key, value))
+                check_imports(host.registry.get(key, value))
             raise _unknown_choice(key, value, sorted(options))
 
 

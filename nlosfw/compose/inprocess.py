@@ -28,8 +28,8 @@ from nlosfw.compose.store import (
     normalise_overrides,
     register_configs,
 )
-from nlosfw.pipeline import Pipeline, PlainConfig, RunOutput, make_plan
-from nlosfw.plugins import PluginHost, load_plugins
+from nlosfw.pipeline import Pipeline, PlainConfig, RunOutput, RunPlan
+from nlosfw.plugins import PluginHost, hosting, load_plugins
 
 log = logging.getLogger(__name__)
 
@@ -42,14 +42,14 @@ def run_in_process(overrides: Sequence[str], output_dir: str | Path | None = Non
                           f"{overrides!r} (write [{overrides!r}])")
     overrides = [str(o) for o in overrides]
     host = load_plugins()
-    config = compose_run_config(overrides, host, config_name)
-    plan = make_plan(config, host)
-    run_dir = _new_run_dir(output_dir)
-    write_text(run_dir / ".hydra" / "overrides.yaml", yaml_safe.dump(overrides))
-    pipeline = Pipeline(plan, run_dir, host)
-    with _run_log(run_dir / "run.log"):
-        pipeline.run()
-    return RunOutput(dir=run_dir, config=config, metrics=pipeline.metrics,
+    with hosting(host):
+        plan = plan_run(overrides, host, config_name)
+        run_dir = _new_run_dir(output_dir)
+        write_text(run_dir / ".hydra" / "overrides.yaml", yaml_safe.dump(overrides))
+        pipeline = Pipeline(plan, run_dir, host)
+        with _run_log(run_dir / "run.log"):
+            pipeline.run()
+    return RunOutput(dir=run_dir, config=plan.config, metrics=pipeline.metrics,
                      stages=pipeline.stage_results)
 
 
@@ -60,10 +60,17 @@ def compose_run_config(overrides: Sequence[str], host: PluginHost,
     ``overrides`` are the command line's (``+group=name`` included); a sweep, a flag or
     a ``hydra.*`` setting is refused with a one-line :class:`ConfigError`.
     """
+    return plan_run(overrides, host, config_name).config
+
+
+def plan_run(overrides: Sequence[str], host: PluginHost,
+             config_name: str = "config") -> RunPlan:
+    """The plan of one run (:func:`~nlosfw.pipeline.make_plan`), its configuration composed
+    once and checked as the command line checks it (the output directories too); the
+    overrides as for :func:`compose_run_config`."""
     from hydra import compose
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
-    from omegaconf import OmegaConf
     from omegaconf.errors import OmegaConfBaseException
 
     overrides = normalise_overrides([str(o) for o in overrides])
@@ -86,15 +93,15 @@ def compose_run_config(overrides: Sequence[str], host: PluginHost,
     with hydra_session():  # one thread at a time: Hydra's state is the process's
         register_configs(host)
         ensure_resolvers()
-        preflight(overrides, host, config_name)
         try:
-            cfg = compose(config_name=config_name, overrides=list(overrides))
+            cfg = compose(config_name=config_name, overrides=list(overrides),
+                          return_hydra_config=True)
         except (HydraException, OmegaConfBaseException) as err:
-            raise composition_error(err) from None
-    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
-    if not isinstance(plain, dict):  # a composed config is a mapping
-        raise ConfigError("", f"config {config_name!r} is not a mapping")
-    return {str(k): v for k, v in plain.items()}
+            raise composition_error(err, host) from None
+        plan = preflight(overrides, host, config_name, composed_run=cfg)
+    if plan is None:  # a single run's preflight returns its plan
+        raise ConfigError("overrides", "no run to plan")
+    return plan
 
 
 def _new_run_dir(output_dir: str | Path | None) -> Path:

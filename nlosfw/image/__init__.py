@@ -16,7 +16,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.image.depths import automatic_depths, depth_span
     from nlosfw.image.fft import FFTImager, FFTImagerConfig
     from nlosfw.image.fk import FKImager
-    from nlosfw.image.interface import Imager, ImagerConfig
+    from nlosfw.image.interface import Imager, ImagerConfig, ImagerNeeds
     from nlosfw.image.lct import (
         FBPImager,
         FBPImagerConfig,
@@ -56,6 +56,7 @@ __all__ = [
     "FFTImagerConfig",
     "FKImager",
     "Imager",
+    "ImagerNeeds",
     "ImagerConfig",
     "LCTImager",
     "LCTImagerConfig",

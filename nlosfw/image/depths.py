@@ -29,12 +29,9 @@ from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.signal import signal_depth_range
 from nlosfw.common.errors import ConfigError
-from nlosfw.transform.field import PhasorField
 
 log = logging.getLogger(__name__)
 
-#: The key of a run's depth range [near, far] (m) in a field's metadata.
-DEPTH_RANGE_KEY = "depth_range"
 #: Most planes the automatic rule chooses (beyond it the step grows, with an INFO line).
 MAX_AUTOMATIC_PLANES = 512
 
@@ -50,13 +47,18 @@ def automatic_depths(span: tuple[float, float], f_max: float, kind: CaptureKind,
     """Planes from ``span[0]`` to ``span[1]`` at most :func:`depth_step` apart (both ends
     included; at most ``max_planes``)."""
     near, far = float(span[0]), float(span[1])
-    step = depth_step(f_max, kind)
-    n = max(2, math.ceil((far - near) / step - 1e-9) + 1)
+    n = automatic_count(span, f_max, kind)
     if n > max_planes:
         log.info("automatic depths: %d planes %.4g m apart would span %.4g-%.4g m; using %d",
-                 n, step, near, far, max_planes)
+                 n, depth_step(f_max, kind), near, far, max_planes)
         n = max_planes
     return np.linspace(near, far, n)
+
+
+def automatic_count(span: tuple[float, float], f_max: float, kind: CaptureKind) -> int:
+    """How many planes :func:`automatic_depths` puts over ``span`` before its cap."""
+    step = depth_step(f_max, kind)
+    return max(2, math.ceil((float(span[1]) - float(span[0])) / step - 1e-9) + 1)
 
 
 def depth_span(capture: Capture) -> tuple[float, float]:
@@ -86,14 +88,3 @@ def depth_span(capture: Capture) -> tuple[float, float]:
             return centre - half, centre + half
     found = signal_depth_range(capture)
     return (0.3, 2.0) if found is None else found
-
-
-def field_depth_range(field: PhasorField) -> tuple[float, float] | None:
-    """The run's depth range a field carries in its metadata (:data:`DEPTH_RANGE_KEY`, set
-    by the pipeline before a field model is fitted), or None."""
-    value = field.metadata.get(DEPTH_RANGE_KEY)
-    if (isinstance(value, (list, tuple)) and len(value) == 2
-            and all(isinstance(v, (int, float)) for v in value)
-            and 0 <= float(value[0]) < float(value[1])):
-        return float(value[0]), float(value[1])
-    return None

@@ -28,7 +28,8 @@ class Imager(Configurable[ImagerConfigT], ABC):
     config_class: ClassVar[type] = ImagerConfig
     #: True for imagers that image only fields on the wall's full regular grid, in the time
     #: domain (lct, fk, fbp): the pipeline gives them the ``raw`` source's samples on the
-    #: full grid with zeros elsewhere, and does not warn about band aliasing for them.
+    #: full grid with zeros elsewhere, and does not warn about band aliasing for them. A
+    #: declaration: the run's plan reads it (:class:`ImagerNeeds`), nothing else does.
     full_grid_only: ClassVar[bool] = False
 
     @abstractmethod
@@ -41,6 +42,16 @@ class Imager(Configurable[ImagerConfigT], ABC):
         (:mod:`nlosfw.common.progress`; declare the ``progress`` capability). An imager
         without the keyword still works: the pipeline then shows no per-block progress.
         """
+
+
+@dataclass(frozen=True)
+class ImagerNeeds:
+    """What an imager needs of the fields it images, as its class declares it:
+    ``time_domain``, the field on the wall's full grid (the transient imagers), which the
+    run decides the measured-capture band, the ``raw`` source's zero filling, the
+    reference picture and the band-aliasing warning from."""
+
+    time_domain: bool = False
 
 
 #: The interface class of each plugin kind (by :class:`~nlosfw.plugins.PluginKind` value).

@@ -42,4 +42,4 @@ def histogram_field(capture: Capture, config: FFTTransformConfig | None = None) 
     freqs = full_band_frequencies(capture.n_bins, capture.delta_t)
     return transform_capture(capture, freqs, FieldOptions(
         transform="fft", method=base.method, remove_device_legs=base.remove_device_legs,
-        metadata={"band": band_info(freqs, None, capture.kind, HISTOGRAM_BAND)}))
+        band=band_info(freqs, None, capture.kind, HISTOGRAM_BAND)))

@@ -46,7 +46,7 @@ from typing import ClassVar, TypeVar
 import numpy as np
 
 from nlosfw.capture.enums import CaptureKind
-from nlosfw.capture.hints import HINTS_KEY, ImagingHints
+from nlosfw.capture.hints import ImagingHints
 from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
@@ -218,7 +218,7 @@ END_TAPER = 0.1
 
 def field_hints(field: PhasorField) -> ImagingHints:
     """The imaging hints the field carries from its capture (empty when none)."""
-    return ImagingHints.from_mapping(field.metadata.get(HINTS_KEY))
+    return field.imaging_hints or ImagingHints()
 
 
 def canonical_wall(field: PhasorField) -> WallGrid:

@@ -14,6 +14,7 @@ import numpy.typing as npt
 from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Configurable, require, require_seed
 from nlosfw.common.errors import DataError, FitError
+from nlosfw.common.memory import MemoryEstimate, PlanShape
 from nlosfw.transform.field import PhasorField
 
 
@@ -33,15 +34,36 @@ class FieldModelConfig:
     @property
     def uses_noise_variance(self) -> bool:
         """Whether the fit weighs samples by the training field's ``variance`` (the run then
-        computes it, from a capture of photon counts); False unless a model says so."""
+        computes it, from a capture of photon counts); False unless a model says so. A
+        declaration: the run's plan reads it (:class:`ModelNeeds`), nothing else does."""
         return False
 
     @property
     def uses_photon_counts(self) -> bool:
         """Whether the fit takes the training field's photon counts (``PhasorField.counts``:
         the run then carries them, from a capture of photon counts, with no frequency held
-        out); False unless a model says so."""
+        out); False unless a model says so. A declaration: the run's plan reads it."""
         return False
+
+
+@dataclass(frozen=True)
+class ModelNeeds:
+    """What a field model's fit needs from the run beyond the training field's values, as
+    its config declares it: the field's Poisson ``noise_variance``, the ``photon_counts``
+    it was transformed from. The run's plan reads the declarations once; the stages read
+    these."""
+
+    photon_counts: bool = False
+    noise_variance: bool = False
+
+    @property
+    def counts(self) -> bool:
+        """Whether the capture must hold photon counts (for either need)."""
+        return self.photon_counts or self.noise_variance
+
+    def __or__(self, other: ModelNeeds) -> ModelNeeds:
+        return ModelNeeds(photon_counts=self.photon_counts or other.photon_counts,
+                          noise_variance=self.noise_variance or other.noise_variance)
 
 
 @dataclass(frozen=True)
@@ -81,6 +103,16 @@ class FieldModel(Configurable[ModelConfigT], ABC):
     def check_config(cls, config: ModelConfigT) -> None:
         """Check what ``config`` names outside itself (a registered network, its options)
         before a run starts: a one-line ConfigError naming the option. Default: nothing."""
+
+    @classmethod
+    def estimate_memory(cls, config: ModelConfigT, shape: PlanShape) -> MemoryEstimate:
+        """The memory a fit and prediction of this model with ``config`` hold beyond the
+        fields the run counts itself (the training field, the predicted field), for a run
+        of ``shape``: its own arrays, a backend's runtime, a network's training. From the
+        options and the sizes alone, nothing allocated or imported; a part that depends on
+        what the shape does not know yet (None) is bounded or left out. Default: nothing
+        (a model that holds little beside its fields)."""
+        return MemoryEstimate()
 
     @abstractmethod
     def fit(self, field: PhasorField, validation: PhasorField | None = None,

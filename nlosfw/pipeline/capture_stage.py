@@ -17,7 +17,7 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.hdf5 import read_capture, write_capture
-from nlosfw.capture.source import load_file_capture, prepare
+from nlosfw.capture.source import prepare
 from nlosfw.common.config import config_to_dict
 from nlosfw.common.hashing import cache_key, file_digest
 from nlosfw.evaluation.count_splitting import split_counts
@@ -45,8 +45,11 @@ def capture_stage(run: StageContext, done: StageResults) -> CaptureResult:
 
 
 def _file_capture(run: StageContext) -> CaptureResult:
-    """The capture of ``capture.path``, preprocessed; the run is labelled with its format."""
-    loaded = load_file_capture(run.plan.settings.capture, run.plan.formats)
+    """The capture of ``capture.path`` as the plan read and preprocessed it; the run is
+    labelled with its format."""
+    loaded = run.plan.capture
+    if loaded is None:  # make_plan reads the file of every plan with capture.path
+        raise ValueError("a capture file's run needs the plan's capture")
     versions = run.plan.format_versions or {}
     key = loaded.cache_key(versions.get(loaded.format, "unknown"))
     return CaptureResult(capture=loaded.prepared.capture, key=key, source="file",

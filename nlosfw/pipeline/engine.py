@@ -19,43 +19,46 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
-from nlosfw.capture.source import file_transient_shape
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import NlosfwError, one_line
-from nlosfw.common.logs import FILE_ONLY
+from nlosfw.common.logs import FILE_ONLY, to_file
 from nlosfw.common.version import __version__
 from nlosfw.pipeline import lifecycle
-from nlosfw.pipeline.budget import check_memory, memory_summary
+from nlosfw.pipeline.budget import memory_summary
 from nlosfw.pipeline.cache import Cache
 from nlosfw.pipeline.capture_stage import capture_stage
-from nlosfw.pipeline.context import Stage, StageContext, fits_models
+from nlosfw.pipeline.context import Stage, StageContext, StageFunction, always, fits_models
 from nlosfw.pipeline.events import RunEvents
 from nlosfw.pipeline.field_stages import fit_stage, predict_stage, transform_stage
 from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
 from nlosfw.pipeline.image_stage import reconstruct_stage, report_stage
 from nlosfw.pipeline.interrupts import as_interruption, signals_raise
 from nlosfw.pipeline.metrics import RunError, RunInfo, RunMetrics, Status
-from nlosfw.pipeline.model_budget import plugin_requires
 from nlosfw.pipeline.pause import pause_point
 from nlosfw.pipeline.plan import RunPlan
 from nlosfw.pipeline.recorder import MetricsRecorder
 from nlosfw.pipeline.results import StageResults
+from nlosfw.pipeline.settings import STAGES as STAGE_NAMES
 from nlosfw.plugins import PluginHost
 
 log = logging.getLogger(__name__)
 
-#: The stages of a run, in order.
-STAGES: tuple[Stage, ...] = (
-    Stage("capture", capture_stage),
-    Stage("transform", transform_stage),
-    Stage("fit", fit_stage, fits_models),
-    Stage("predict", predict_stage, fits_models),
-    Stage("reconstruct", reconstruct_stage),
-    Stage("report", report_stage),
-)
+#: What each stage runs, and whether a plan performs it (``model=none``: no fit, no predict).
+_STAGE_FUNCTIONS: dict[str, tuple[StageFunction, Callable[[RunPlan], bool]]] = {
+    "capture": (capture_stage, always),
+    "transform": (transform_stage, always),
+    "fit": (fit_stage, fits_models),
+    "predict": (predict_stage, fits_models),
+    "reconstruct": (reconstruct_stage, always),
+    "report": (report_stage, always),
+}
+
+#: The stages of a run, in the order :data:`nlosfw.pipeline.settings.STAGES` names them.
+STAGES: tuple[Stage, ...] = tuple(Stage(name, *_STAGE_FUNCTIONS[name]) for name in STAGE_NAMES)
 
 
 class Pipeline:
@@ -92,13 +95,8 @@ class Pipeline:
         is written; a failed or interrupted (SIGINT, SIGTERM) run leaves metrics.json
         saying where and why, and no temporary file."""
         settings = self.plan.settings
-
-        def file_shape(path: Path) -> tuple[int, int, int] | None:
-            return file_transient_shape(path, settings.capture.format, self.plan.formats)
-
-        requires = plugin_requires(self.host)
-        check_memory(self.plan.config, file_shape=file_shape, requires=requires)
-        log.info(memory_summary(self.plan.config, file_shape, requires))
+        to_file(self.plan.read_log)         # said while the plan read the capture file
+        log.info("%s", memory_summary(self.plan.memory))
         with signals_raise(), lifecycle.held(
                 self.run_dir, self.plan.config, PLANNED_NAMES,
                 overwrite=settings.output.overwrite, resume=self.resume) as hold:

@@ -10,8 +10,7 @@ import dataclasses
 import logging
 import re
 import time
-from collections.abc import Callable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Callable
 from functools import partial
 
 import numpy as np
@@ -23,8 +22,6 @@ from nlosfw.common.errors import ConfigError, FitError
 from nlosfw.common.hashing import cache_key
 from nlosfw.evaluation.noise_floor import field_variance, kernel_power
 from nlosfw.evaluation.splits import split_field
-from nlosfw.image.depths import DEPTH_RANGE_KEY, depth_span
-from nlosfw.image.transient import measured_band_frequencies
 from nlosfw.model.interface import TrainingStep
 from nlosfw.pipeline.context import StageContext
 from nlosfw.pipeline.measure import fit_metrics, prediction_scores, split_metrics, transform_metrics
@@ -39,25 +36,28 @@ from nlosfw.pipeline.results import (
     required,
 )
 from nlosfw.pipeline.settings import Artefact
-from nlosfw.transform import frequencies as frequencies_module
 from nlosfw.transform.common import histogram_2d, to_field_layout
 from nlosfw.transform.counts import check_counts_times
-from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField, PhotonCounts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
-from nlosfw.transform.frequencies import warn_aliasing
+from nlosfw.transform.frequencies import band_warning
 from nlosfw.transform.interface import PhasorTransform
 
 log = logging.getLogger(__name__)
 
 def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
-    """The capture's phasor field (cached), and the noise-free capture's; write it."""
+    """The capture's phasor field (cached), and the noise-free capture's; write it. The
+    transform is the plan's (for a capture file imaged by a time-domain imager, the
+    measured-capture band); the band's aliasing warning is said once, when the run images
+    the band on the wall."""
     capture = required(done.capture, "capture")
     planned = run.plan.transform
     task = f"phasor field ({planned.name})"
-    transform = _transform_for(run, capture)
+    transform = planned.plugin
+    if run.plan.transform_note:
+        log.info("%s", run.plan.transform_note)
     canonical = config_to_dict(transform.config)
-    time_domain = run.plan.imager.plugin.full_grid_only     # no band-aliasing warning
+    needs = run.plan.needs
 
     def cached_field(source: Capture, source_key: str) -> tuple[PhasorField, bool]:
         key = cache_key({"capture": source_key, "transform": planned.name,
@@ -67,34 +67,22 @@ def transform_stage(run: StageContext, done: StageResults) -> TransformResult:
             lambda p, f: write_phasor_field(p, f), read_phasor_field)
 
     run.events.progress(task, 0)
-    frequencies_log = logging.getLogger(frequencies_module.__name__)
-    quiet = _NoAliasWarning()
-    if time_domain:
-        frequencies_log.addFilter(quiet)
-    try:
-        with _once_per_message(frequencies_log):
-            field, hit = cached_field(capture.capture, capture.key)
-            clean = None
-            if capture.clean is not None and capture.clean_key is not None:
-                clean = cached_field(capture.clean, capture.clean_key)[0]
-            if not time_domain:
-                _warn_aliasing(field)
-            score = variance = power = None
-            if capture.count_split is not None and capture.score_key is not None:
-                score = cached_field(capture.count_split.b, capture.score_key)[0]
-                power = kernel_power(transform, capture.count_split.b, planned.name)
-                variance = field_variance(transform, capture.count_split.b, planned.name,
-                                          power=power)
-            if any(getattr(m.model.config, "uses_noise_variance", False)
-                   for m in run.plan.models):
-                field = field.replace(variance=_training_variance(transform, capture,
-                                                                  planned.name, power))
-            if any(getattr(m.model.config, "uses_photon_counts", False)
-                   for m in run.plan.models):
-                field = field.replace(counts=_training_counts(transform, capture, planned.name,
-                                                              power))
-    finally:
-        frequencies_log.removeFilter(quiet)
+    field, hit = cached_field(capture.capture, capture.key)
+    clean = None
+    if capture.clean is not None and capture.clean_key is not None:
+        clean = cached_field(capture.clean, capture.clean_key)[0]
+    if not run.plan.imager_needs.time_domain:     # a time-domain imager images no wall band
+        _warn_aliasing(field)
+    score = variance = power = None
+    if capture.count_split is not None and capture.score_key is not None:
+        score = cached_field(capture.count_split.b, capture.score_key)[0]
+        power = kernel_power(transform, capture.count_split.b, planned.name)
+        variance = field_variance(transform, capture.count_split.b, planned.name, power=power)
+    if needs.noise_variance:
+        field = field.replace(variance=_training_variance(transform, capture, planned.name,
+                                                          power))
+    if needs.photon_counts:
+        field = field.replace(counts=_training_counts(transform, capture, planned.name, power))
     run.events.progress(task, 1, 1, f"{field.n_frequencies} frequencies"
                         + (" (cached)" if hit else ""))
     run.files.write("phasor_field", lambda p: write_phasor_field(p, field),
@@ -141,10 +129,8 @@ def fit_stage(run: StageContext, done: StageResults) -> FitResult:
     model to its training samples; write the selected model."""
     field = required(done.transform, "transform").field
     # the run's depth range bounds a model's own depth search (rsd_prior's)
-    span = run.plan.settings.reconstruction.depth_range or depth_span(
-        required(done.capture, "capture").capture)
-    field = field.replace(metadata={**field.metadata,
-                                    DEPTH_RANGE_KEY: [float(v) for v in span]})
+    field = field.replace(depth_range=run.plan.depths.span(
+        required(done.capture, "capture").capture))
     s = run.plan.settings.split
     split = split_field(field, s.sampling, spectral=s.spectral,
                         spectral_fraction=s.spectral_fraction)
@@ -224,60 +210,6 @@ def _report_step(run: StageContext, planned: PlannedModel, step: TrainingStep) -
 
 def _warn_aliasing(field: PhasorField) -> None:
     """The band's aliasing warning, also for a field from the cache (once per run)."""
-    band = field.metadata.get("band")
-    if isinstance(band, Mapping) and band.get("aliases") and band.get("grid_spacing") is not None:
-        warn_aliasing(float(field.frequencies.max()), float(band["grid_spacing"]),
-                      field.geometry.kind, str(band.get("option", "transform")))
-
-
-def _transform_for(run: StageContext, capture: CaptureResult) -> PhasorTransform:
-    """The run's transform; for a capture file imaged by a time-domain imager (lct, fk,
-    fbp) with the ``fft`` transform's default band, the measured-capture band instead
-    (:func:`nlosfw.image.transient.measured_band_frequencies`; ``transform.f_min``,
-    ``f_max`` or ``frequencies`` choose another)."""
-    plugin = run.plan.transform.plugin
-    cfg = plugin.config
-    if (capture.source != "file" or not run.plan.imager.plugin.full_grid_only
-            or not isinstance(plugin, FFTTransform) or cfg.frequencies
-            or cfg.f_min is not None or cfg.f_max is not None):
-        return plugin
-    c = capture.capture
-    freqs = measured_band_frequencies(c.n_bins, c.delta_t)
-    log.info("a measured capture imaged by %s: the band %.3g-%.3g cycles/m (%d DFT bins); "
-             "transform.f_min/f_max choose another", run.plan.imager.name, freqs[0], freqs[-1],
-             freqs.size)
-    return FFTTransform(dataclasses.replace(cfg, frequencies=tuple(float(f) for f in freqs)))
-
-
-class _NoAliasWarning(logging.Filter):
-    """Drops the band-aliasing warnings (time-domain imagers do not image the band's
-    wall field)."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return "alias" not in record.getMessage()
-
-
-class _OnceFilter(logging.Filter):
-    """Lets each distinct message through once."""
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.seen: set[str] = set()
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        message = record.getMessage()
-        if message in self.seen:
-            return False
-        self.seen.add(message)
-        return True
-
-
-@contextmanager
-def _once_per_message(logger: logging.Logger) -> Iterator[None]:
-    """Within the block, ``logger`` logs each distinct message once."""
-    once = _OnceFilter()
-    logger.addFilter(once)
-    try:
-        yield
-    finally:
-        logger.removeFilter(once)
+    message = band_warning(field)
+    if message is not None:
+        log.warning("%s", message)

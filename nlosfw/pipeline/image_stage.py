@@ -12,7 +12,6 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
-from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.files import format_bytes
 from nlosfw.common.logs import FILE_ONLY
 from nlosfw.common.progress import accepts_progress
@@ -24,10 +23,9 @@ from nlosfw.evaluation.reference import (
     reference_reason,
 )
 from nlosfw.evaluation.splits import FieldSplit
-from nlosfw.image.depths import automatic_depths, depth_span
 from nlosfw.image.interface import Imager
 from nlosfw.image.measured import histogram_field
-from nlosfw.image.reconstruction import Reconstruction, wall_voxels
+from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.reconstruction_io import write_reconstruction
 from nlosfw.pipeline.context import StageContext
 from nlosfw.pipeline.measure import reconstruction_metrics, truth_depth_image
@@ -39,7 +37,7 @@ from nlosfw.pipeline.results import (
     StageResults,
     required,
 )
-from nlosfw.pipeline.settings import Artefact, ReconstructionSettings
+from nlosfw.pipeline.settings import Artefact
 from nlosfw.transform.fft import FFTTransform
 from nlosfw.transform.field import PhasorField
 
@@ -60,14 +58,14 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
         split = required(done.fit, "fit").split
         sources = {name: with_capture_hints(f, capture)
                    for name, f in done.fields.by_source().items()}
-        if imager.plugin.full_grid_only and sources["raw"].grid_shape != \
+        if run.plan.imager_needs.time_domain and sources["raw"].grid_shape != \
                 done.fields.true.grid_shape:
             sources["raw"] = with_capture_hints(zero_filled(split, done.fields.true), capture)
         # as in the thesis figures: images from one frequency at a time, too
         chosen = chosen_frequencies(split,
                                     run.plan.settings.reconstruction.single_frequency_images)
     true = sources["true"]
-    voxels = run_voxels(run.plan.settings.reconstruction, capture, true)
+    voxels = run.plan.depths.voxels(capture, true)
     log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
              len(sources) * (1 + len(chosen)), imager.name, len(sources), ", ".join(sources),
              true.n_frequencies,
@@ -101,45 +99,19 @@ def report_stage(run: StageContext, done: StageResults) -> None:
     if results is not None:
         run.events.write_report(run.files, results, run.recorder.metrics, settings)
     elif done.capture is not None and done.reconstructions is None:
-        span = run_depth_range(settings.reconstruction, done.capture.capture)
+        span = run.plan.depths.span(done.capture.capture)
         run.events.write_capture_report(run.files, done.capture, span, run.recorder.metrics,
                                         settings)
     else:  # the report stage runs only after all the others, or after a stop
         raise ValueError("the report stage needs every stage's results")
 
 
-def run_depth_range(settings: ReconstructionSettings, capture: Capture) -> tuple[float, float]:
-    """[m] The nearest and farthest plane a run images: of ``depths``, else
-    ``depth_range``, else the depths that hold signal (:func:`depth_span`)."""
-    if settings.depths:
-        return min(settings.depths), max(settings.depths)
-    near, far = settings.depth_range or depth_span(capture)
-    return float(near), float(far)
-
-
-def run_voxels(settings: ReconstructionSettings, capture: Capture,
-               field: PhasorField) -> np.ndarray:
-    """Planes on the wall's grid at the configured depths, or at ``n_depths`` planes, or
-    (the default) at the band's depth resolution (:mod:`nlosfw.image.depths`), over
-    ``depth_range`` or the depths that hold signal."""
-    if settings.depths:
-        depths = np.asarray(settings.depths, dtype=float)
-    else:
-        span = run_depth_range(settings, capture)
-        depths = (np.linspace(span[0], span[1], settings.n_depths)
-                  if settings.n_depths is not None
-                  else automatic_depths(span, float(field.frequencies.max()),
-                                        field.geometry.kind))
-    return wall_voxels(field, depths)
-
-
 def with_capture_hints(field: PhasorField, capture: Capture) -> PhasorField:
     """``field`` carrying the capture's imaging hints (a field model's prediction does not
     inherit the transform's metadata)."""
-    hints = capture.scene_info.get(HINTS_KEY)
-    if hints is None or HINTS_KEY in field.metadata:
+    if capture.imaging_hints is None or field.imaging_hints is not None:
         return field
-    return field.replace(metadata={**field.metadata, HINTS_KEY: hints})
+    return field.replace(imaging_hints=capture.imaging_hints)
 
 
 def zero_filled(split: FieldSplit, field: PhasorField) -> PhasorField:
@@ -147,7 +119,7 @@ def zero_filled(split: FieldSplit, field: PhasorField) -> PhasorField:
     source for imagers that image only the full wall grid (a zero adds nothing to a
     back-projection or to the light-cone convolution)."""
     values = np.where(split.spatial_mask[None], field.values, 0).astype(field.values.dtype)
-    return field.replace(values=values, metadata={**field.metadata, "zero_filled": True})
+    return field.replace(values=values, zero_filled=True)
 
 
 def chosen_frequencies(split: FieldSplit, count: int) -> dict[FrequencySplit, int]:
@@ -198,7 +170,7 @@ def _reference_field(run: StageContext, result: CaptureResult,
     settings = run.plan.settings
     choice = settings.reconstruction.histogram_reference
     imager = run.plan.imager
-    reason = reference_reason(choice, imager.name, imager.plugin.full_grid_only,
+    reason = reference_reason(choice, imager.name, run.plan.imager_needs.time_domain,
                               result.source == "file", result.capture)
     if reason is not None:
         _no_reference(choice is True, reason)
@@ -213,9 +185,8 @@ def _reference_field(run: StageContext, result: CaptureResult,
     transform = run.plan.transform.plugin
     field = histogram_field(capture, transform.config
                             if isinstance(transform, FFTTransform) else None)
-    hints = result.capture.scene_info.get(HINTS_KEY)
-    if hints is not None and HINTS_KEY not in field.metadata:
-        field = field.replace(metadata={**field.metadata, HINTS_KEY: hints})
+    if field.imaging_hints is None and result.capture.imaging_hints is not None:
+        field = field.replace(imaging_hints=result.capture.imaging_hints)
     log.info("reference picture: the histograms at native bins, %d frequencies to %.4g "
              "cycles/m (estimated memory %s; not scored)", field.n_frequencies,
              float(field.frequencies.max()), format_bytes(needed))

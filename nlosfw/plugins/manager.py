@@ -1,10 +1,18 @@
-"""Discover plugin modules through entry points and collect their registrations."""
+"""Discover plugin modules through entry points and collect their registrations.
+
+A command builds one :class:`PluginHost` (:func:`load_plugins`) and makes it the host of
+what it runs (:func:`hosting`); what needs the registry within (:func:`current_host`: a
+model finding its registered network) uses that one instead of building another. Each
+build raises the audit event ``nlosfw.plugins.load`` (:func:`sys.audit`)."""
 
 from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Mapping, Sequence
+import sys
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from functools import partial
 from importlib.metadata import entry_points
@@ -103,6 +111,7 @@ def load_plugins(env: Mapping[str, str] | None = None,
     in-process plugin modules as ``(distribution, name, module)`` triples, for
     tests and embedding. No plugin factory is imported here.
     """
+    sys.audit("nlosfw.plugins.load")
     env = os.environ if env is None else env
     rules = PluginFilter.parse(env.get(ENV_VAR, ""))
     manager = pluggy.PluginManager(hookspecs.PROJECT)
@@ -142,8 +151,27 @@ def load_plugins(env: Mapping[str, str] | None = None,
     return PluginHost(manager=manager, registry=registry, broken=broken)
 
 
+_HOST: ContextVar[PluginHost | None] = ContextVar("nlosfw_plugin_host", default=None)
+
+
+@contextmanager
+def hosting(host: PluginHost) -> Iterator[PluginHost]:
+    """``host`` is the plugin host of what runs in the block (:func:`current_host`)."""
+    token = _HOST.set(host)
+    try:
+        yield host
+    finally:
+        _HOST.reset(token)
+
+
+def current_host() -> PluginHost:
+    """The host of the command running (:func:`hosting`), else a new one."""
+    host = _HOST.get()
+    return load_plugins() if host is None else host
+
+
 def _network_specs(backend: str) -> dict[str, PluginSpec]:
-    return {spec.factory.name: spec for spec in load_plugins().registry.specs("model")
+    return {spec.factory.name: spec for spec in current_host().registry.specs("model")
             if isinstance(spec.factory, NetworkSpec) and spec.factory.backend.value == backend}
 
 

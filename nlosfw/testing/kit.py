@@ -23,6 +23,7 @@ def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
     from nlosfw.testing import (
         checks_capture_format,
         checks_imager,
+        checks_memory,
         checks_model,
         checks_simulator,
         checks_transform,
@@ -32,7 +33,7 @@ def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
     specific = {
         PluginKind.SIMULATOR: checks_simulator.SIMULATOR_CHECKS,
         PluginKind.PHASOR_TRANSFORM: checks_transform.TRANSFORM_CHECKS,
-        PluginKind.FIELD_MODEL: checks_model.MODEL_CHECKS,
+        PluginKind.FIELD_MODEL: checks_model.MODEL_CHECKS + checks_memory.MEMORY_CHECKS,
         PluginKind.IMAGER: checks_imager.IMAGER_CHECKS,
         PluginKind.CAPTURE_FORMAT: checks_capture_format.CAPTURE_FORMAT_CHECKS,
     }[PluginKind(kind)]

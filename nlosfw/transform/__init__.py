@@ -11,10 +11,11 @@ from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
     from nlosfw.transform.fft import FFTTransform, FFTTransformConfig
-    from nlosfw.transform.field import PhasorField, PhotonCounts, regular_grid_spacing
+    from nlosfw.transform.field import Band, PhasorField, PhotonCounts, regular_grid_spacing
     from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
     from nlosfw.transform.frequencies import (
         aliasing_warning,
+        band_warning,
         default_band,
         dft_length,
         spatial_limit,
@@ -29,6 +30,8 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
 
 __all__ = [
     "aliasing_warning",
+    "Band",
+    "band_warning",
     "default_band",
     "dft_length",
     "FFTTransform",

@@ -16,9 +16,8 @@ import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind, GridFormat
-from nlosfw.capture.hints import HINTS_KEY
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.transform.field import PhasorField
+from nlosfw.transform.field import Band, PhasorField
 from nlosfw.transform.temporal_dft import temporal_dft, unit_phasor
 
 
@@ -63,13 +62,14 @@ def to_field_layout(values: np.ndarray, capture: Capture) -> np.ndarray:
 class FieldOptions:
     """How :func:`transform_capture` makes a field: the transform's name (recorded in the
     field's metadata), its DFT method, whether to remove the device legs, and the field's
-    spectral weights and extra metadata."""
+    spectral weights, band and extra metadata."""
 
     transform: str
     method: str
     remove_device_legs: bool
     weights: np.ndarray | None = None
     metadata: Mapping[str, object] = dataclasses.field(default_factory=dict)
+    band: Band | None = None
 
 
 def transform_capture(capture: Capture, frequencies: np.ndarray,
@@ -108,7 +108,6 @@ def transform_capture(capture: Capture, frequencies: np.ndarray,
         "device_legs_removed": removed,
     }
     info.update(options.metadata)  # no wall-clock time: same capture, same bytes
-    if HINTS_KEY in capture.scene_info:     # how the capture's authors image it
-        info[HINTS_KEY] = capture.scene_info[HINTS_KEY]
     return PhasorField(values=values, frequencies=f, wall_xyz=wall_points(capture),
-                       geometry=geometry, weights=options.weights, metadata=info)
+                       geometry=geometry, weights=options.weights, metadata=info,
+                       band=options.band, imaging_hints=capture.imaging_hints)

@@ -42,7 +42,8 @@ class FFTTransformConfig(PhasorTransformConfig):
     linearly over [f_min, f_max]. By default f_max is the wall grid's aliasing
     limit, 1/(2Δ) for a single laser spot and 1/(4Δ) for a confocal scan (the path
     doubles), Δ the wall grid spacing, capped at the temporal Nyquist limit; and
-    f_min = f_max / 4. A band past the aliasing limit logs one warning.
+    f_min = f_max / 4. A band past the aliasing limit is recorded in
+    the field's ``band`` (a run that images it on the wall warns once).
     """
 
     frequencies: tuple[float, ...] = ()
@@ -87,9 +88,17 @@ class FFTTransform(PhasorTransform[FFTTransformConfig]):
 
     config_class = FFTTransformConfig
 
+    def frequency_count(self, n_bins: int) -> int:
+        """The explicit frequencies' count, else ``n_frequencies``."""
+        return len(self.config.frequencies) or self.config.n_frequencies
+
+    def planned_frequencies(self, capture: Capture) -> np.ndarray | None:
+        """:meth:`frequencies_for`."""
+        return self.frequencies_for(capture)
+
     def frequencies_for(self, capture: Capture) -> np.ndarray:
-        """The frequencies this transform uses for ``capture`` (validated; warns once if
-        they alias on the wall grid)."""
+        """The frequencies this transform uses for ``capture`` (validated; whether they
+        alias on the wall grid is the field's ``band``)."""
         return self._band(capture)[0]
 
     def _band(self, capture: Capture) -> tuple[np.ndarray, float | None, str]:
@@ -100,7 +109,7 @@ class FFTTransform(PhasorTransform[FFTTransformConfig]):
             spacing = wall_spacing(cfg.grid_spacing, capture, required=False)
             option = "transform.frequencies"
             return validate_frequencies(freqs, capture.delta_t, spacing, option,
-                                        capture.kind), spacing, option
+                                        capture.kind, warn=False), spacing, option
         spacing = (cfg.grid_spacing if cfg.grid_spacing is not None
                    else grid_spacing(capture.sensor_grid_xyz))
         try:
@@ -109,7 +118,7 @@ class FFTTransform(PhasorTransform[FFTTransformConfig]):
             raise err.within("transform") from None
         option = "transform.f_max" if cfg.f_max is not None else "transform.f_min"
         return validate_frequencies(np.linspace(lo, hi, cfg.n_frequencies), capture.delta_t,
-                                    spacing, option, capture.kind), spacing, option
+                                    spacing, option, capture.kind, warn=False), spacing, option
 
     def transform(self, capture: Capture) -> PhasorField:
         """The phasor field of ``capture`` (layout [frequency, y, x], no weights)."""
@@ -118,4 +127,4 @@ class FFTTransform(PhasorTransform[FFTTransformConfig]):
         return transform_capture(capture, freqs, FieldOptions(
             transform="fft", method=self.config.method,
             remove_device_legs=self.config.remove_device_legs,
-            metadata={"band": band_info(freqs, spacing, capture.kind, option)}))
+            band=band_info(freqs, spacing, capture.kind, option)))

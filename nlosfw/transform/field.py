@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
 from nlosfw.capture.geometry import CaptureGeometry
+from nlosfw.capture.hints import ImagingHints, hints_from
 from nlosfw.common.errors import DataError
 
 if TYPE_CHECKING:
@@ -30,6 +32,60 @@ class FieldChanges(TypedDict, total=False):
     metadata: dict[str, object]
     variance: np.ndarray | None
     counts: PhotonCounts | None
+    band: Band | None
+    imaging_hints: ImagingHints | None
+    zero_filled: bool
+    depth_range: tuple[float, float] | None
+
+
+#: The metadata keys of fields written before these were typed attributes of
+#: :class:`PhasorField` (``band``, ``imaging_hints``, ``zero_filled``, ``depth_range``): a
+#: field made with them in its metadata takes them out into the attributes.
+LEGACY_KEYS = ("band", "zero_filled", "depth_range")
+
+
+@dataclass(frozen=True)
+class Band:
+    """What a transform checked its band against: the wall spacing (None: not checked, an
+    irregular wall or a band never imaged on the wall), the highest frequency that does not
+    alias there, whether the band passes it, and the option that chose the band (named in
+    the aliasing warning)."""
+
+    option: str
+    grid_spacing: float | None = None
+    spatial_limit: float | None = None
+    aliases: bool = False
+
+    def to_dict(self) -> dict[str, object]:
+        """Plain values (a field file's YAML)."""
+        return {"grid_spacing": self.grid_spacing, "spatial_limit": self.spatial_limit,
+                "option": self.option, "aliases": self.aliases}
+
+    @classmethod
+    def from_mapping(cls, mapping: object) -> Band | None:
+        """The band a field file's mapping records; None for anything else."""
+        if not isinstance(mapping, Mapping):
+            return None
+
+        def number(key: str) -> float | None:
+            value = mapping.get(key)
+            if isinstance(value, (int, float)) and not isinstance(value, bool) \
+                    and math.isfinite(value) and value > 0:
+                return float(value)
+            return None
+
+        return cls(option=str(mapping.get("option", "")), grid_spacing=number("grid_spacing"),
+                   spatial_limit=number("spatial_limit"), aliases=mapping.get("aliases") is True)
+
+
+def depth_range_of(value: object) -> tuple[float, float] | None:
+    """``value`` as a depth range [near, far] (m, 0 <= near <= far, finite), or None."""
+    if (isinstance(value, (list, tuple)) and len(value) == 2
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            and all(math.isfinite(float(v)) for v in value)
+            and 0 <= float(value[0]) <= float(value[1])):
+        return float(value[0]), float(value[1])
+    return None
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,6 +132,13 @@ class PhasorField:
     (so every frequency, whatever frequencies the field keeps); a fit may take the exact
     Poisson likelihood of them. Neither is written to field files.
 
+    ``band`` is what the transform checked its band against (None: not recorded),
+    ``imaging_hints`` how the capture's authors image it (from the capture), ``zero_filled``
+    says the values are training samples on the full grid with zeros elsewhere (the ``raw``
+    source of a time-domain imager), and ``depth_range`` [near, far] (m) the run's depths
+    of the hidden scene, which bounds a model's own search for it (None: none given).
+    ``metadata`` holds anything else (the transform's record of the capture's time axis).
+
     Scattered wall samples (an irregular scan) are a field with one row: ``wall_xyz``
     (1, N, 3) and ``values`` (F, 1, N); :meth:`grid_spacing` is None for them.
     """
@@ -88,9 +151,14 @@ class PhasorField:
     metadata: dict[str, object] = field(default_factory=dict)
     variance: np.ndarray | None = None
     counts: PhotonCounts | None = None
+    band: Band | None = None
+    imaging_hints: ImagingHints | None = None
+    zero_filled: bool = False
+    depth_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
+        self._take_legacy_keys()
         values = np.asarray(self.values)
         if not np.iscomplexobj(values):
             values = values.astype(np.complex64)
@@ -99,10 +167,32 @@ class PhasorField:
         set_(self, "wall_xyz", np.asarray(self.wall_xyz, dtype=np.float64))
         if self.weights is not None:
             set_(self, "weights", np.atleast_1d(np.asarray(self.weights, dtype=np.complex128)))
-        set_(self, "metadata", dict(self.metadata or {}))
         if self.variance is not None:
             set_(self, "variance", np.asarray(self.variance, dtype=np.float64))
         self._validate()
+
+    def _take_legacy_keys(self) -> None:
+        """The typed attributes a metadata mapping written before them holds, moved out of
+        it (an attribute given explicitly wins)."""
+        set_ = object.__setattr__
+        metadata, hints = hints_from(self.metadata or {})
+        legacy = {key: metadata.pop(key) for key in LEGACY_KEYS if key in metadata}
+        set_(self, "metadata", metadata)
+        if self.imaging_hints is None and hints is not None:
+            set_(self, "imaging_hints", hints)
+        if self.band is None and "band" in legacy:
+            set_(self, "band", Band.from_mapping(legacy["band"]))
+        if not self.zero_filled and legacy.get("zero_filled") is True:
+            set_(self, "zero_filled", True)
+        if self.depth_range is None and "depth_range" in legacy:
+            set_(self, "depth_range", depth_range_of(legacy["depth_range"]))
+        if self.depth_range is not None:
+            found = depth_range_of(self.depth_range)
+            if found is None:
+                raise DataError(f"depth_range: must be [near, far] metres with 0 <= near <= "
+                                f"far, got {self.depth_range}")
+            set_(self, "depth_range", found)
+        set_(self, "zero_filled", bool(self.zero_filled))
 
     def _validate(self) -> None:
         v, f, w = self.values, self.frequencies, self.wall_xyz

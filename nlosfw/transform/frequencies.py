@@ -26,6 +26,7 @@ import numpy as np
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.common.errors import ConfigError, DataError
+from nlosfw.transform.field import Band, PhasorField
 
 log = logging.getLogger(__name__)
 
@@ -121,14 +122,24 @@ def warn_aliasing(f_max: float, spacing: float | None, kind: CaptureKind, option
 
 
 def band_info(frequencies: np.ndarray, spacing: float | None, kind: CaptureKind,
-              option: str) -> dict[str, object]:
-    """What a transform records about its band in the field's metadata (``band``): the wall
-    spacing it was checked against, the aliasing limit, whether it aliases, the option."""
+              option: str) -> Band:
+    """What a transform records about its band (the field's ``band``): the wall spacing it
+    was checked against, the aliasing limit, whether it aliases, the option."""
     f_max = float(np.max(frequencies))
     limit = None if spacing is None else spatial_limit(spacing, kind)
-    return {"grid_spacing": None if spacing is None else float(spacing),
-            "spatial_limit": limit, "option": option,
-            "aliases": aliasing_warning(f_max, spacing, kind, option) is not None}
+    return Band(grid_spacing=None if spacing is None else float(spacing),
+                spatial_limit=limit, option=option,
+                aliases=aliasing_warning(f_max, spacing, kind, option) is not None)
+
+
+def band_warning(field: PhasorField) -> str | None:
+    """The aliasing warning of ``field``'s band (None: it does not alias, or no band was
+    recorded): whoever images the field on the wall says it, once."""
+    band = field.band
+    if band is None or not band.aliases or band.grid_spacing is None:
+        return None
+    return aliasing_warning(float(field.frequencies.max()), band.grid_spacing,
+                            field.geometry.kind, band.option)
 
 
 def check_frequency_values(values: tuple[float, ...] | np.ndarray, option: str) -> None:
@@ -142,13 +153,15 @@ def check_frequency_values(values: tuple[float, ...] | np.ndarray, option: str) 
 
 def validate_frequencies(frequencies: np.ndarray, delta_t: float, spacing: float | None,
                          option: str = "frequencies",
-                         kind: CaptureKind = CaptureKind.SINGLE_SPOT) -> np.ndarray:
+                         kind: CaptureKind = CaptureKind.SINGLE_SPOT,
+                         warn: bool = True) -> np.ndarray:
     """Check ``frequencies`` against a capture; return them as a float64 array.
 
     Errors (one line, naming ``option``) on an empty set, non-finite or
-    non-positive values, or values above the temporal Nyquist limit; a logged
-    WARNING (:func:`warn_aliasing`) when they pass the wall grid's
-    :func:`spatial_limit` for the capture's ``kind``.
+    non-positive values, or values above the temporal Nyquist limit; with ``warn``, a
+    logged WARNING (:func:`warn_aliasing`) when they pass the wall grid's
+    :func:`spatial_limit` for the capture's ``kind`` (the built-in transforms record it in
+    the field's band instead: :func:`band_info`, :func:`band_warning`).
     """
     f = np.atleast_1d(np.asarray(frequencies, dtype=float))
     if f.size == 0:
@@ -159,7 +172,8 @@ def validate_frequencies(frequencies: np.ndarray, delta_t: float, spacing: float
         raise ConfigError(option, f"{f.max():.6g} cycles/m is above the capture's temporal "
                                   f"Nyquist limit 1/(2*delta_t) = {nyquist:.6g}; valid: 0 < f <= "
                                   f"{nyquist:.6g}")
-    warn_aliasing(float(f.max()), spacing, kind, option)
+    if warn:
+        warn_aliasing(float(f.max()), spacing, kind, option)
     return f
 
 

@@ -35,7 +35,7 @@ from nlosfw.capture.data import Capture
 from nlosfw.common.config import require
 from nlosfw.common.errors import ConfigError
 from nlosfw.transform.common import FieldOptions, check_capture, transform_capture
-from nlosfw.transform.field import PhasorField
+from nlosfw.transform.field import Band, PhasorField
 from nlosfw.transform.frequencies import (
     band_info,
     path_multiplier,
@@ -131,6 +131,10 @@ class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
             wavelength = cfg.wavelength_factor * spacing * path_multiplier(capture.kind)
         return GaussianWavelet(wavelength, cfg.n_cycles * wavelength / 6.0), spacing
 
+    def planned_frequencies(self, capture: Capture) -> np.ndarray | None:
+        """The kept bins (:meth:`frequencies_for`)."""
+        return self.frequencies_for(capture)[0]
+
     def frequencies_for(self, capture: Capture) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
         """(frequencies, weights, description) of the kept bins for ``capture``."""
         cfg = self.config
@@ -155,7 +159,7 @@ class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
                               f"no bin k*df (df = {df:.6g}) lies in the band {fc:.6g} ± "
                               f"{half:.6g} cycles/m; use a smaller frequency_step")
         option = "transform.wavelength"
-        f = validate_frequencies(f, capture.delta_t, spacing, option, capture.kind)
+        f = validate_frequencies(f, capture.delta_t, spacing, option, capture.kind, warn=False)
         weights = df * wavelet.spectrum(f)
         info = {
             "wavelength": float(wavelet.wavelength),
@@ -180,4 +184,4 @@ class WaveletTransform(PhasorTransform[WaveletTransformConfig]):
         return transform_capture(capture, freqs, FieldOptions(
             transform="wavelet", method=self.config.method,
             remove_device_legs=self.config.remove_device_legs, weights=weights,
-            metadata={"wavelet": info, "band": band}))
+            metadata={"wavelet": info}, band=band if isinstance(band, Band) else None))

@@ -1,5 +1,6 @@
 """The memory estimate counts the program itself where a run's peak is compared with it,
-and not where it is compared with the memory left beside the program (issue 20)."""
+and not where it is compared with the memory left beside the program; its parts are the
+engine's arrays and what each field model estimates of itself."""
 
 from __future__ import annotations
 
@@ -13,13 +14,16 @@ import pytest
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import memory
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.pipeline import model_budget
-from nlosfw.pipeline.budget import check_memory, estimate_memory, memory_summary
+from nlosfw.common.memory import MemoryEstimate
+from nlosfw.model.neural import memory as neural_memory
+from nlosfw.pipeline.budget import check_memory, memory_summary
 from nlosfw.testing import fixtures
+from tests.planned import TINY, planned
 
-CONFIG = {"scene": {"wall": {"resolution": [16, 16]}, "time": {"bins": 512}},
-          "transform": {"name": "fft", "n_frequencies": 21}, "model": {"name": "interp"},
-          "reconstruction": {"n_depths": 4}}
+
+@pytest.fixture(scope="module")
+def interp():
+    return planned(TINY)
 
 
 def test_process_memory_grows_with_an_array_this_process_holds():
@@ -36,83 +40,81 @@ def test_process_memory_grows_with_an_array_this_process_holds():
     assert nbytes == 50_000_000 and grown >= 0.9 * nbytes
 
 
-def test_the_program_is_a_part_of_the_estimate_only_when_asked():
-    arrays = estimate_memory(CONFIG)
-    with_program = estimate_memory(CONFIG, program=True)
-    assert [p.what for p in with_program] == [p.what for p in arrays] + ["the program"]
-    assert with_program[-1].nbytes > 10_000_000
-    assert "the program" in memory_summary(CONFIG)
+def test_the_program_is_a_part_of_the_summary_not_of_the_check(interp):
+    arrays = interp.memory
+    assert [p.what for p in arrays.parts] == ["the transient H", "the phasor transform",
+                                              "the fields imaged", "the voxels and images"]
+    summary = memory_summary(arrays)
+    assert "the program" in summary
+    program = float(summary.rsplit("the program ", 1)[1].split()[0])
+    assert program > 10                              # MB: Python and numpy at least
     # the memory available is what is left beside the program: the check leaves it out
-    check_memory(CONFIG, available=int(sum(p.nbytes for p in arrays)) + 1)
+    check_memory(arrays, available=int(arrays.total) + 1)
 
 
 # ------------------------------------------------------------ neural models' own memory
-NEURAL = {**CONFIG, "model": {"name": "siren_torch", "hidden": [64, 32, 16], "batch_size": 512,
-                              "steps": 10, "eval_every": 1}}
-TORCH = ("nlosfw_torch", "torch")
+NEURAL = (*TINY[:-1], "model=siren_torch", "model.hidden=[64,32,16]", "model.batch_size=512",
+          "model.steps=10", "model.eval_every=1")
 
 
-def _requires(name: str) -> tuple[str, ...]:
-    """A registry's declared requirements, standing in for plugin_requires(host)."""
-    return {"siren_torch": TORCH, "pe_jax": ("nlosfw_jax", "jax", "optax")}.get(name, ())
+def _parts(estimate: MemoryEstimate) -> dict[str, float]:
+    return {p.what: p.nbytes for p in estimate.merged()}
 
 
-def test_a_neural_model_adds_its_runtime_and_training_by_the_documented_formula(monkeypatch):
-    monkeypatch.setattr(model_budget, "imported", lambda module: False)
-    arrays = estimate_memory(NEURAL)
-    parts = estimate_memory(NEURAL, requires=_requires)
-    assert parts[:len(arrays)] == arrays and len(parts) == len(arrays) + 2
-    runtime, training = parts[-2:]
-    torch = model_budget.BACKENDS["torch"]
-    samples = 21 * 16 * 16                         # F · S · L of CONFIG's 16 × 16 wall
-    assert runtime.what == "the model's runtime"
-    assert runtime.nbytes == torch.imported + torch.working
-    assert training.nbytes == pytest.approx(torch.per_sample * samples
-                                            + torch.per_activation * 512 * (64 + 32 + 16))
-    # an imported backend is the program's memory already: only its working memory is added
-    monkeypatch.setattr(model_budget, "imported", lambda module: True)
-    assert estimate_memory(NEURAL, requires=_requires)[-2].nbytes == torch.working
+def test_a_neural_model_adds_its_runtime_and_training_by_the_documented_formula(
+        interp, monkeypatch):
+    plan = planned(NEURAL)
+    parts = _parts(plan.memory)
+    for what in ("the transient H", "the phasor transform"):     # one field more, not these
+        assert parts[what] == _parts(interp.memory)[what]
+    torch = neural_memory.BACKENDS["torch"]
+    samples = 21 * 16 * 16                         # F · S · L of the tiny 16 × 16 wall
+    assert parts["the model's runtime"] == torch.working     # torch imported by the plan
+    assert parts["the model's training"] == pytest.approx(
+        torch.per_sample * samples + torch.per_activation * 512 * (64 + 32 + 16))
+    assert parts["the training history"] == 10 * neural_memory.HISTORY_ENTRY
+    whys = {p.what: p.why for p in plan.memory.parts}
+    assert whys["the model's training"].startswith("model (siren_torch): 5376 samples")
+    # a backend not imported yet is its import as well
+    monkeypatch.delitem(sys.modules, "torch")
+    assert neural_memory.runtime_part("torch").nbytes == torch.imported + torch.working
 
 
-def test_interp_and_unknown_models_add_nothing_and_a_batch_is_at_most_the_samples():
-    interp = estimate_memory(CONFIG, requires=_requires)
-    assert [p.what for p in interp] == [p.what for p in estimate_memory(CONFIG)]
-    assert "the model's runtime" not in [p.what for p in estimate_memory(NEURAL)]
-    data, activations = model_budget.training_bytes({"batch_size": 10**9, "hidden": [8]},
-                                                    "jax", 100.0)
-    jax = model_budget.BACKENDS["jax"]
-    assert (data, activations) == (jax.per_sample * 100, jax.per_activation * 100 * 8)
+def test_interp_adds_nothing_and_a_batch_is_at_most_the_samples(interp):
+    from nlosfw.model.neural import FieldMode, FieldShape, SirenFieldConfig
+
+    assert "the model's runtime" not in _parts(interp.memory)
+    config = SirenFieldConfig(batch_size=10**9, hidden=(8,), steps=1)
+    parts = _parts(neural_memory.network_memory(config, "jax",
+                                                FieldShape(FieldMode.multi, (4, 4), 1), 100.0))
+    jax = neural_memory.BACKENDS["jax"]
+    assert parts["the model's training"] == jax.per_sample * 100 + jax.per_activation * 100 * 8
+    assert _parts(neural_memory.network_memory(config, "no_such_backend", FieldShape(
+        FieldMode.multi, (4, 4), 1), 100.0)) == {}
 
 
-def test_a_runtime_shared_by_two_models_is_counted_once(monkeypatch):
-    monkeypatch.setattr(model_budget, "imported", lambda module: False)
-    config = {**NEURAL, "compare": {"b": {"name": "siren_torch", "hidden": [8],
-                                         "batch_size": 4},
-                                    "c": {"name": "pe_jax", "hidden": [8], "batch_size": 4}}}
-    runtime = estimate_memory(config, requires=_requires)[-2]
-    torch, jax = model_budget.BACKENDS["torch"], model_budget.BACKENDS["jax"]
-    assert runtime.nbytes == torch.imported + torch.working + jax.imported + jax.working
-    assert runtime.why == "jax and torch and its first training"
+def test_a_runtime_shared_by_two_models_is_counted_once():
+    plan = planned((*NEURAL, "+compare.b={name:siren_torch,hidden:[8],batch_size:4}",
+                    "+compare.c={name:pe_jax,hidden:[8],batch_size:4}"))
+    runtimes = [p for p in plan.memory.merged() if p.what == "the model's runtime"]
+    torch, jax = neural_memory.BACKENDS["torch"], neural_memory.BACKENDS["jax"]
+    assert sorted(p.nbytes for p in runtimes) == sorted([torch.working, jax.working])
+    assert sorted(p.why for p in runtimes) == ["jax and its first training",
+                                               "torch and its first training"]
+    counted = [p for p in plan.memory.parts if p.what == "the model's runtime"]
+    assert len(counted) == 3                   # three models' estimates, two runtimes
+    whys = [p.why for p in plan.memory.parts if p.what == "the model's training"]
+    assert [w.split(":")[0] for w in whys] == ["model (siren_torch)", "compare.b (siren_torch)",
+                                               "compare.c (pe_jax)"]
 
 
-def test_the_check_refuses_a_run_whose_arrays_fit_but_whose_model_does_not():
-    arrays = int(sum(p.nbytes for p in estimate_memory(NEURAL)))
-    check_memory(NEURAL, available=arrays + 1)
+def test_the_check_refuses_a_run_whose_arrays_fit_but_whose_model_does_not(interp):
+    plan = planned(NEURAL)
+    arrays = int(interp.memory.total)
+    check_memory(interp.memory, available=arrays + 1)
     with pytest.raises(ConfigError, match=r"this run needs about .*, most of it for the "
-                                          r"model's runtime \(torch"):
-        check_memory(NEURAL, available=arrays + 1, requires=_requires)
-
-
-def test_the_backend_is_read_from_the_plugins_declared_requirements_without_importing_it():
-    code = ("import sys; from nlosfw.plugins import load_plugins; "
-            "from nlosfw.pipeline.model_budget import plugin_requires, backend_of; "
-            "r = plugin_requires(load_plugins()); "
-            "print(backend_of(r('siren_torch')), backend_of(r('siren_jax')), "
-            "backend_of(r('interp')), list(r('no_such_model')), "
-            "'torch' in sys.modules, 'jax' in sys.modules)")
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=600, check=True)
-    assert done.stdout.split() == ["torch", "jax", "None", "[]", "False", "False"]
+                                          r"model's (runtime \(torch|training \(model)"):
+        check_memory(plan.memory, available=arrays + 1)
 
 
 # ------------------------------------------- a defined dataset larger than the memory left

@@ -29,6 +29,7 @@ from nlosfw.capture.source import read_capture_file
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.hdf5_guard import ANY_SHAPE, Expected
+from nlosfw.model.neural import memory as neural_memory
 from nlosfw.model.neural.catalogue import (
     FIELD_NETWORKS,
     THESIS_NETWORKS,
@@ -36,14 +37,13 @@ from nlosfw.model.neural.catalogue import (
     field_network_state,
 )
 from nlosfw.model.neural.config import FieldMode, FieldShape
-from nlosfw.model.neural.encodings import HashGridFieldConfig, hash_grid_layout
 from nlosfw.model.neural.mlp import reference_state, thesis_architecture
-from nlosfw.pipeline import model_budget
-from nlosfw.pipeline.budget import check_memory, estimate_memory
+from nlosfw.pipeline.budget import check_memory
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate.analytic import AnalyticSimulator
 from nlosfw.simulate.scene import scene_from_config
 from nlosfw.testing import fixtures, layouts
+from tests.planned import TINY, planned
 
 GB = 1_000_000_000
 #: The address space a measured process may take: enough for Python, numpy, h5py and
@@ -78,32 +78,26 @@ def measured(code: str, *args: str, cwd: Path | None = None) -> tuple[int, str, 
 
 
 # ======================================================= networks in the memory estimate
-TINY = {"scene": {"wall": {"resolution": [16, 16]}, "time": {"bins": 512}},
-        "transform": {"name": "fft", "n_frequencies": 21},
-        "reconstruction": {"n_depths": 4}}
-
-
-@pytest.fixture(scope="module")
-def catalogue():
-    return model_budget.plugin_requires(load_plugins())
-
-
-def _parameters(config, catalogue):
-    parts = {p.what: p for p in estimate_memory(config, requires=catalogue)}
+def _parameters(overrides):
+    """The networks' parameters part of the plan of a tiny run with ``overrides``."""
+    parts = {p.what: p for p in planned((*TINY[:-1], *overrides)).memory.parts}
     return parts.get("the networks' parameters")
 
 
-def test_two_layers_of_50000_units_are_refused_for_their_weights(catalogue):
+def _memory(overrides):
+    return planned((*TINY[:-1], *overrides)).memory
+
+
+def test_two_layers_of_50000_units_are_refused_for_their_weights():
     """The named example: model.hidden=[50000,50000] (a small batch keeps the activations
     small) was estimated at about 340 MB and then allocated 10 GB per weight matrix."""
-    config = {**TINY, "model": {"name": "siren_torch", "hidden": [50000, 50000],
-                                "batch_size": 16}}
+    overrides = ("model=siren_torch", "model.hidden=[50000,50000]", "model.batch_size=16")
     weights = 3 * 50000 + 50000 + 50000 * 50000 + 50000 + 50000 * 2 + 2
-    part = _parameters(config, catalogue)
+    part = _parameters(overrides)
     assert part is not None and part.nbytes == 36.0 * weights      # torch: 36 B a parameter
     assert part.why.startswith(f"model (siren_torch): {weights:,} parameters")
     with pytest.raises(ConfigError) as caught:
-        check_memory(config, available=64 * GB, requires=catalogue)
+        check_memory(_memory(overrides), available=64 * GB)
     text = str(caught.value)
     assert "\n" not in text and "most of it for the networks' parameters" in text
     assert "90.0 GB)" in text and "but 64.0 GB are available" in text
@@ -129,66 +123,57 @@ def test_the_command_line_refuses_it_before_anything_is_allocated(workdir, name,
     assert len(line) == 1 and "Traceback" not in err, err
     assert "most of it for the networks' parameters (model (" + name in line[0]
     assert "but 10.0 GB are available" in line[0]
-    # composing and checking the configuration takes about 260 MB (Hydra, the plugins);
-    # one of the weight matrices alone is 1.6 GB
+    # composing and checking the configuration takes about 260 MB (Hydra, the plugins; the
+    # plan imports the model's backend); one of the weight matrices alone is 1.6 GB
     assert grown < GB, f"grew {grown / 1e6:.0f} MB before the refusal"
     assert not (workdir / "outputs").exists()
-    assert bytes_each == model_budget.BACKENDS[name.split("_")[1]].per_parameter
+    assert bytes_each == neural_memory.BACKENDS[name.split("_")[1]].per_parameter
 
 
-def test_a_hash_grid_behind_a_small_network_is_counted(catalogue):
-    """Not the widths: the neural volume's network is a hash grid whose 32 levels of 2^24
-    rows of 16 features hold 8.6 billion parameters before one hidden layer of 8 units."""
-    options = {"levels": 32, "features_per_level": 16, "log2_table_size": 24,
-               "finest_resolution": 100000}
-    config = {**TINY, "model": {"name": "neural_volume_torch", "network": "hashgrid",
-                                "network_hidden": [8], "network_options": options}}
-    part = _parameters(config, catalogue)
-    layout = hash_grid_layout(HashGridFieldConfig(**options),
-                              FieldShape(FieldMode.multi, (16, 16), 21))
-    assert sum(layout.table_sizes) > 19 * 2**24               # 19 levels full, 13 smaller
-    tables = sum(layout.table_sizes) * 16
-    mlp = (32 * 16 + 1) * 8 + (8 + 1) * 2
-    assert part is not None and part.nbytes == 36.0 * (tables + mlp)
+def test_a_hash_grid_behind_a_small_network_is_counted():
+    """Not the widths: the neural volume's network is a hash grid whose 32 levels of up to
+    2^24 rows of 16 features hold billions of parameters before one hidden layer of 8."""
+    options = ("model=neural_volume_torch", "model.network=hashgrid", "model.network_hidden=[8]",
+               "+model.network_options={levels:32,features_per_level:16,log2_table_size:24,"
+               "finest_resolution:100000}")
+    part = _parameters(options)
+    assert part is not None and part.nbytes > 36.0 * 16 * 19 * 2**24   # 19 levels full
     with pytest.raises(ConfigError, match=r"most of it for the networks' parameters \(model "
-                                          r"\(neural_volume_torch\): 5,311,809,450 "):
-        check_memory(config, available=64 * GB, requires=catalogue)
+                                          r"\(neural_volume_torch\): [0-9,]{13} parameters"):
+        check_memory(_memory(options), available=64 * GB)
 
 
-def test_single_mode_counts_one_network_per_frequency(catalogue):
+def test_single_mode_counts_one_network_per_frequency():
     """pe_jax in single mode trains one network per frequency: 151 of 2.0 million."""
-    config = {**TINY, "transform": {"name": "fft", "n_frequencies": 151},
-              "model": {"name": "pe_jax", "mode": "single", "hidden": [1400, 1400],
-                        "batch_size": 16, "octaves": 4}}
+    single = ("transform.n_frequencies=151", "model=pe_jax", "model.mode=single",
+              "model.hidden=[1400,1400]", "model.batch_size=16", "model.octaves=4")
     per_network = (16 + 1) * 1400 + (1400 + 1) * 1400 + (1400 + 1) * 2
-    part = _parameters(config, catalogue)
+    part = _parameters(single)
     assert part is not None and part.nbytes == 30.0 * 151 * per_network
     with pytest.raises(ConfigError, match=r"networks' parameters \(model \(pe_jax\): "
                                           r"300,188,302 parameters"):
-        check_memory(config, available=8 * GB, requires=catalogue)
-    multi = _parameters({**config, "model": {**config["model"], "mode": "multi"}}, catalogue)
+        check_memory(_memory(single), available=8 * GB)
+    multi = _parameters((*single[:2], "model.mode=multi", *single[3:]))
     assert multi is not None and multi.nbytes < part.nbytes / 100
 
 
-def test_the_residual_and_volume_networks_are_counted(catalogue):
-    config = {**TINY, "model": {"name": "neural_volume_jax", "network": "fourier",
-                                "network_hidden": [64], "network_options": {"features": 10}}}
-    part = _parameters(config, catalogue)
+def test_the_residual_and_volume_networks_are_counted():
+    part = _parameters(("model=neural_volume_jax", "model.network=fourier",
+                        "model.network_hidden=[64]", "+model.network_options={features:10}"))
     assert part is not None and part.nbytes == 30.0 * (3 * 10 + 20 * 64 + 64 + 64 * 2 + 2)
-    config = {**TINY, "model": {"name": "rsd_residual_torch", "network": "wire",
-                                "network_hidden": [30000, 30000]}}
-    part = _parameters(config, catalogue)      # complex layers: two real numbers a weight
+    residual = ("model=rsd_residual_torch", "model.network=wire",
+                "model.network_hidden=[30000,30000]")
+    part = _parameters(residual)      # complex layers: two real numbers a weight
     complex_layer = 2 * (30000 * 30000 + 30000) + 2 * (30000 + 1)
     assert part is not None and part.nbytes == 36.0 * (3 * 30000 + 30000 + complex_layer)
     with pytest.raises(ConfigError, match=r"networks' parameters \(model "
                                           r"\(rsd_residual_torch\): 1,800,240,002 parameters"):
-        check_memory(config, available=32 * GB, requires=catalogue)
+        check_memory(_memory(residual), available=32 * GB)
 
 
-def test_models_without_networks_add_no_parameters(catalogue):
+def test_models_without_networks_add_no_parameters():
     for name in ("interp", "rsd_prior", "nearest"):
-        assert _parameters({**TINY, "model": {"name": name}}, catalogue) is None
-    assert _parameters({**TINY, "model": {"name": "no_such_model"}}, catalogue) is None
+        assert _parameters((f"model={name}",)) is None
 
 
 @pytest.mark.parametrize("mode", ["multi", "single"])
@@ -211,17 +196,30 @@ def test_every_networks_shapes_are_its_initial_states(mode):
                 name
 
 
-def test_counting_imports_no_backend():
-    code = ("import sys; from nlosfw.plugins import load_plugins; "
-            "from nlosfw.pipeline.model_budget import plugin_requires; "
-            "from nlosfw.model.neural import FieldShape, FieldMode; "
-            "r = plugin_requires(load_plugins()); s = FieldShape(FieldMode.multi, (8, 8), 5); "
-            "print(r.parameters('siren_torch', {'hidden': [10]}, s), "
-            "r.parameters('neural_volume_jax', {'network': 'hashgrid'}, s) > 0, "
-            "'torch' in sys.modules, 'jax' in sys.modules)")
+def test_counting_a_networks_parameters_allocates_nothing():
+    """400 million parameters are counted from the network's description: nothing of
+    their size is allocated, and no backend is imported to count them."""
+    import tracemalloc
+
+    from nlosfw.model.neural import SirenFieldConfig
+
+    shape = FieldShape(FieldMode.multi, (8, 8), 5)
+    code = ("import sys; from nlosfw.model.neural import SirenFieldConfig, FieldShape, "
+            "FieldMode; from nlosfw.model.neural.memory import parameter_count; "
+            "print(parameter_count(SirenFieldConfig(hidden=(10,)), "
+            "FieldShape(FieldMode.multi, (8, 8), 5)), 'torch' in sys.modules, "
+            "'jax' in sys.modules)")
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=600, check=True)
-    assert done.stdout.split() == [str(3 * 10 + 10 + 10 * 2 + 2), "True", "False", "False"]
+    assert done.stdout.split() == [str(3 * 10 + 10 + 10 * 2 + 2), "False", "False"]
+    tracemalloc.start()
+    try:
+        count = neural_memory.parameter_count(SirenFieldConfig(hidden=(20000, 20000)), shape)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert count == 3 * 20000 + 20000 + 20000 * 20000 + 20000 + 20000 * 2 + 2
+    assert peak < 1_000_000
 
 
 # ======================================================= datasets sized before they are read

@@ -14,9 +14,10 @@ from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.capture.hdf5 import read_capture, write_capture
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
-from nlosfw.pipeline.budget import check_memory, estimate_memory
+from nlosfw.pipeline.budget import check_memory
 from nlosfw.testing import fixtures, layouts
 from nlosfw.transform.field_io import read_phasor_field, write_phasor_field
+from tests.planned import TINY, planned
 
 
 def capture_file(path: Path, scene_info: str | None = None, **fields: object) -> Path:
@@ -105,7 +106,7 @@ def test_metadata_cannot_run_code(tmp_path):
     (["reconstruction.n_depths=10000000000"],
      "the voxels and images (10000000000 depth planes × 256 voxels each"),
     (["model=siren_torch", "model.steps=10000000000000", "model.eval_every=1"],
-     "the training history (model.steps / model.eval_every"),
+     "the training history (model (siren_torch): 10000000000000 steps / eval_every 1"),
 ])
 def test_huge_sizes_are_refused_with_the_estimate(workdir, tools, overrides, what):
     result = tools.run("scene=tiny", "model=interp", *overrides)
@@ -151,18 +152,15 @@ def test_a_matlab_capture_declaring_a_huge_transient_is_refused_before_it_is_rea
 
 
 def test_the_estimate_bounds_a_real_run_and_allow_large_overrides_it():
-    config = {"scene": {"wall": {"resolution": [16, 16]}, "time": {"bins": 512}},
-              "transform": {"name": "fft", "n_frequencies": 21}, "model": {"name": "interp"},
-              "reconstruction": {"n_depths": 4}}
-    parts = {p.what: p.nbytes for p in estimate_memory(config)}
+    estimate = planned(TINY).memory
+    parts = {p.what: p.nbytes for p in estimate.parts}
     capture = fixtures.tiny_capture(resolution=16, bins=512)
     assert capture.H.nbytes * 4 == parts["the transient H"]   # float64 + float32 + HDF5 image
-    total = sum(parts.values())
     with pytest.raises(ConfigError, match=r"this run needs about .* but 1\.0 kB are "
                                           r"available"):
-        check_memory(config, available=1000)
-    check_memory({**config, "limits": {"allow_large": True}}, available=1000)
-    check_memory(config, available=int(total) + 1)
+        check_memory(estimate, available=1000)
+    check_memory(estimate, allow_large=True, available=1000)
+    check_memory(estimate, available=int(estimate.total) + 1)
 
 
 # ------------------------------------------------------------- ground truth, geometry

@@ -40,6 +40,7 @@ import numpy as np
 
 from nlosfw.common.config import require, require_threads
 from nlosfw.common.errors import ConfigError, DataError, FitError
+from nlosfw.common.memory import MemoryEstimate, PlanShape
 from nlosfw.model.interface import (
     FieldModel,
     FieldModelConfig,
@@ -49,7 +50,8 @@ from nlosfw.model.interface import (
     check_training_field,
 )
 from nlosfw.model.model_files import read_model_file, stored_config, write_model_file
-from nlosfw.model.neural.config import NeuralFieldConfig, wrapped_network_config
+from nlosfw.model.neural.config import FieldMode, NeuralFieldConfig, wrapped_network_config
+from nlosfw.model.neural.memory import field_shape, network_memory
 from nlosfw.model.neural.trainer import NeuralFieldModel
 from nlosfw.model.physics.config import (
     FLAT_NAMES,
@@ -59,6 +61,7 @@ from nlosfw.model.physics.config import (
     options_in_group,
     prior_config,
 )
+from nlosfw.model.physics.likelihood import Likelihood
 from nlosfw.model.physics.prior import RSDPriorFieldModel
 from nlosfw.transform.field import PhasorField
 
@@ -108,12 +111,12 @@ class RSDResidualConfig(FieldModelConfig):
     @property
     def uses_noise_variance(self) -> bool:
         """With the prior's ``likelihood: poisson`` the fit needs the field's variance."""
-        return self.prior.uses_noise_variance
+        return self.prior.likelihood == Likelihood.poisson
 
     @property
     def uses_photon_counts(self) -> bool:
         """With the prior's ``likelihood: poisson_counts`` the fit needs the photon counts."""
-        return self.prior.uses_photon_counts
+        return self.prior.likelihood == Likelihood.poisson_counts
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -196,6 +199,14 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
         model's network options and the device (errors name ``model.network_lr``, ...)."""
         network = cls.network_class(config.network)
         network.check_config(_network_config(network, config))
+
+    @classmethod
+    def estimate_memory(cls, config: RSDResidualConfig, shape: PlanShape) -> MemoryEstimate:
+        """The residual network's training on the field (``rsd_prior``'s own arrays are
+        not counted: as for ``rsd_prior`` alone, they are small beside the fields)."""
+        net_config = _network_config(cls.network_class(config.network), config)
+        return network_memory(net_config, cls.backend,
+                              field_shape(shape, FieldMode(net_config.mode)), shape.samples)
 
     def _network_model(self) -> NeuralFieldModel:
         network = self.network_class(self.config.network)

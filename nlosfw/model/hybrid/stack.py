@@ -67,10 +67,15 @@ def plane_stack(op: SceneOperator) -> PlaneStack:
 
 
 def stack_bytes(op: SceneOperator) -> int:
-    """Bytes of :func:`plane_stack`'s arrays for ``op``: kernel spectra (Z, F, Ly, Lx) and,
-    unless confocal, laser legs (Z, F, Y, X), in the operator's dtype; nothing is computed."""
-    z, n_f = op.lattice.depths.size, op.frequencies.size
-    itemsize = np.dtype(op.options.dtype).itemsize
-    ly, lx = op.conv.shape
-    legs = 0 if op.confocal else int(np.prod(op.lattice.shape))
-    return z * n_f * (ly * lx + legs) * itemsize
+    """Bytes of :func:`plane_stack`'s arrays for ``op`` (:func:`stack_size`, in the
+    operator's dtype); nothing is computed."""
+    return stack_size(op.lattice.depths.size, op.frequencies.size, op.conv.shape,
+                      op.lattice.shape, op.confocal, np.dtype(op.options.dtype).itemsize)
+
+
+def stack_size(planes: int, frequencies: int, padded: tuple[int, int],
+               lattice: tuple[int, int], confocal: bool, itemsize: int) -> int:
+    """Bytes of the stacked constants: kernel spectra (Z, F, Ly, Lx) on the ``padded``
+    lattice and, unless ``confocal``, laser legs (Z, F, Y, X) on the voxel ``lattice``."""
+    legs = 0 if confocal else math.prod(lattice)
+    return planes * frequencies * (padded[0] * padded[1] + legs) * itemsize

@@ -60,11 +60,12 @@ import numpy as np
 
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.files import format_bytes
-from nlosfw.common.memory import available_memory
+from nlosfw.common.memory import MemoryEstimate, PlanShape, available_memory
 from nlosfw.image.fft import Precision
 from nlosfw.image.rsd_kernel import check_geometry
 from nlosfw.model.hybrid.stack import PlaneStack, plane_stack, stack_bytes
 from nlosfw.model.hybrid.volume_config import VOLUME_NAMES, NeuralVolumeConfig
+from nlosfw.model.hybrid.volume_memory import volume_memory
 from nlosfw.model.interface import (
     FieldModel,
     FitReport,
@@ -178,6 +179,21 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         """How many copies of :func:`plane_stack`'s arrays host memory holds while
         training (the stack itself, and any reordered copy the backend's operator makes)."""
         return 1
+
+    @classmethod
+    def held_stacks(cls, config: NeuralVolumeConfig, confocal: bool) -> float:
+        """How many stacks' worth host memory holds at the training's peak, for the run's
+        memory estimate (a backend that holds less than :meth:`stack_copies`' bound says
+        so). Default: :meth:`stack_copies`."""
+        return float(cls(config).stack_copies(confocal))
+
+    @classmethod
+    def estimate_memory(cls, config: NeuralVolumeConfig, shape: PlanShape) -> MemoryEstimate:
+        """The operator on the lattice, its planes bounded from the run's depth range, and
+        the network's training (:mod:`nlosfw.model.hybrid.volume_memory`)."""
+        network = cls.network_config(cls.network_class(config.network), config)
+        return volume_memory(config.prior_config(), network, cls.backend,
+                             cls.held_stacks(config, shape.confocal), shape)
 
     def learning_rate(self, step: int) -> float:
         """Adam's learning rate at ``step`` (0-based): cosine from ``lr`` to ``lr * lr_final``."""

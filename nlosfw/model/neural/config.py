@@ -144,6 +144,12 @@ class NeuralFieldConfig(FieldModelConfig):
         (:func:`mlp_shapes`); a network of another layout overrides it."""
         return mlp_shapes([shape.in_dim, *self.hidden, shape.out_dim])
 
+    def activation_widths(self) -> int:
+        """The units one training sample's activations take in a batch (the hidden layers'
+        widths; an encoding that adds outputs of its own counts them): what the memory
+        estimate multiplies by the batch (:mod:`nlosfw.model.neural.memory`)."""
+        return sum(self.hidden)
+
 
 C = TypeVar("C")
 

@@ -56,6 +56,10 @@ class FourierFieldConfig(NeuralFieldConfig):
         return {"features.B": (shape.in_dim, self.features),
                 **mlp_shapes([2 * self.features, *self.hidden, shape.out_dim], "mlp.")}
 
+    def activation_widths(self) -> int:
+        """The hidden layers and the 2 x features features."""
+        return sum(self.hidden) + 2 * self.features
+
 
 @dataclass(frozen=True)
 class HashGridFieldConfig(NeuralFieldConfig):

@@ -24,6 +24,7 @@ import numpy as np
 from nlosfw.common.config import config_from_mapping
 from nlosfw.common.deprecation import REMOVED_IN
 from nlosfw.common.errors import DataError, FitError
+from nlosfw.common.memory import MemoryEstimate, PlanShape
 from nlosfw.model.interface import (
     FieldModel,
     FitReport,
@@ -39,6 +40,7 @@ from nlosfw.model.neural.config import (
     NeuralFieldConfig,
     Preset,
 )
+from nlosfw.model.neural.memory import field_shape, network_memory
 from nlosfw.model.neural.normalisation import FieldNormalisation
 from nlosfw.model.neural.smoothness import FrequencySmoothness
 from nlosfw.model.neural.steps import BatchStream, field_inputs, learning_rate
@@ -96,6 +98,13 @@ class NeuralFieldModel(FieldModel[NeuralFieldConfig]):
     def check_config(cls, config: NeuralFieldConfig) -> None:
         """Before a run: the engine can use ``config.device`` on this machine."""
         cls.backend_class.check_device(config.device)
+
+    @classmethod
+    def estimate_memory(cls, config: NeuralFieldConfig, shape: PlanShape) -> MemoryEstimate:
+        """The backend's runtime, the training samples and batch, the network's parameters
+        and the history (:mod:`nlosfw.model.neural.memory`)."""
+        return network_memory(config, cls.backend, field_shape(shape, FieldMode(config.mode)),
+                              shape.samples)
 
     @classmethod
     def presets(cls) -> dict[str, Preset]:

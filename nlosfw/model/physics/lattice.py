@@ -21,7 +21,6 @@ import numpy as np
 
 from nlosfw.common.config import number
 from nlosfw.common.errors import ConfigError, FitError
-from nlosfw.image.depths import field_depth_range
 from nlosfw.image.plane_convolution import GridLayout
 from nlosfw.image.rsd_kernel import path_multiplier
 from nlosfw.model.physics.config import RSDPriorConfig
@@ -78,7 +77,7 @@ def depth_planes(config: RSDPriorConfig, values: np.ndarray, samples: WallSample
         f[lower], config.fit_frequencies, deepest))]
     freqs = f[chosen]
     coarse = 1.0 / (4.0 * float(freqs.max()))
-    lo, hi = field_depth_range(field) or (coarse, deepest)   # the run's range, if any
+    lo, hi = field.depth_range or (coarse, deepest)   # the run's range, if any
     depths = np.arange(max(coarse, lo), max(min(deepest, hi), lo) + coarse / 2, coarse)
     wall = samples.layout
     lattice = voxel_lattice(wall, max(wall.spacing), depths)

@@ -82,7 +82,7 @@ from nlosfw.model.physics.background import (
 from nlosfw.model.physics.config import RSDPriorConfig
 from nlosfw.model.physics.counts import CountsScene, refine_by_counts
 from nlosfw.model.physics.lattice import plan_lattice
-from nlosfw.model.physics.likelihood import sample_weights, weight_summary
+from nlosfw.model.physics.likelihood import Likelihood, sample_weights, weight_summary
 from nlosfw.model.physics.lobe import fit_lobe
 from nlosfw.model.physics.operator import (
     OperatorOptions,
@@ -148,7 +148,8 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
         samples, values, scale = training_values(field)
         wall, mask = samples.layout, samples.mask
         self._projection = background_projection(cfg.background, field, samples)
-        self._weights = sample_weights(field, samples) if cfg.uses_noise_variance else None
+        poisson = cfg.likelihood == Likelihood.poisson
+        self._weights = sample_weights(field, samples) if poisson else None
         lattice, chosen = self.plan_lattice(values, samples, field)
         depths, freqs = lattice.depths, field.frequencies[chosen]
         def operator(k: float, f: np.ndarray = freqs) -> SceneOperator:
@@ -173,7 +174,7 @@ class RSDPriorFieldModel(FieldModel[RSDPriorConfig]):
             lambda f: with_gains(response, f, operator(lobe, f).forward(albedo)),
             field.frequencies, values, scale)
         counts = None
-        if cfg.uses_photon_counts:
+        if cfg.likelihood == Likelihood.poisson_counts:
             scene = CountsScene(lattice, field.geometry, self._options(lobe=lobe), response,
                                 scale)
             counts = refine_by_counts(field, scene, albedo, cfg)

@@ -21,6 +21,7 @@ from nlosfw.model import TrainingStep
 from nlosfw.model.hybrid import (
     BestStep,
     FoldedSpectra,
+    NeuralVolumeConfig,
     NeuralVolumeFieldModel,
     PlaneStack,
     TrainedVolume,
@@ -170,6 +171,12 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         """Two on a confocal scan on the CPU (the operator's reordered spectra), else one
         (torch shares the numpy stack's memory on the CPU; a GPU holds its own)."""
         return 2 if confocal and resolve_device(self.config.device).type == "cpu" else 1
+
+    @classmethod
+    def held_stacks(cls, config: NeuralVolumeConfig, confocal: bool) -> float:
+        """The stack, and on a confocal scan on the CPU its folded spectra (one spectrum per
+        orbit of up to 8 lattice points: an eighth of it; :class:`TorchPlaneOperator`)."""
+        return 1.125 if confocal and resolve_device(config.device).type == "cpu" else 1.0
 
     def train(self, problem: VolumeProblem,
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
