@@ -54,6 +54,19 @@ def test_interleaved_holds_out_interior_frequencies_evenly():
     assert heldout_frequency_indices(151, "none", 0.1).size == 0
 
 
+@pytest.mark.parametrize("spectral", ["interleaved", "tail", "none"])
+def test_the_held_out_count_is_the_indices_count_without_making_them(spectral):
+    from nlosfw.evaluation.splits import heldout_frequency_count
+
+    for fraction in (0.01, 0.1, 0.25, 1 / 3, 0.5, 0.9, 0.99, 1.0):
+        for n in range(0, 400):
+            assert heldout_frequency_count(n, spectral, fraction) == \
+                heldout_frequency_indices(n, spectral, fraction).size, (n, fraction)
+    # a plan sizes a requested billion frequencies before it refuses them: no array made
+    assert heldout_frequency_count(10**12, spectral, 0.1) == (0 if spectral == "none"
+                                                               else 10**11)
+
+
 def test_split_rejects_bad_options():
     field = _field(8, 10)
     for kwargs in ({"spatial_step": 0}, {"spatial_step": 1.5}, {"spectral": "middle"},

@@ -162,6 +162,24 @@ def heldout_frequency_indices(n_frequencies: int, spectral: str, fraction: float
     return np.unique(idx)
 
 
+def heldout_frequency_count(n_frequencies: int, spectral: str, fraction: float) -> int:
+    """How many frequencies :func:`heldout_frequency_indices` holds out, without making
+    them (a plan sizes fields of any requested count before anything is allocated).
+
+    The interleaved indices are ``(i + 1/2) * F / n`` rounded, n <= F - 2, so consecutive
+    ones differ by more than one; only the last can meet its neighbour, where the clip to
+    F - 2 lowers it."""
+    if spectral == "none" or n_frequencies < 3:
+        return 0
+    n_hold = min(max(int(math.ceil(fraction * n_frequencies - 1e-9)), 1), n_frequencies - 2)
+    if spectral == "tail" or n_hold < 2:
+        return n_hold
+    step = n_frequencies / n_hold
+    last, before = (int(np.clip(np.round((i + 0.5) * step), 1, n_frequencies - 2))
+                    for i in (n_hold - 1, n_hold - 2))
+    return n_hold - int(last == before)
+
+
 def scattered_field(field: PhasorField, mask: np.ndarray) -> PhasorField:
     """The samples of a grid ``field`` where ``mask`` (Y, X) is True, as scattered samples:
     one row, wall (1, N, 3) and values (F, 1, N), in row-major order."""

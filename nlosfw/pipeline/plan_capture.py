@@ -31,7 +31,7 @@ from nlosfw.common.memory import PlanShape
 from nlosfw.evaluation.count_splitting import OPTION as SPLIT_OPTION
 from nlosfw.evaluation.count_splitting import check_count_split
 from nlosfw.evaluation.noise_floor import DFT_TRANSFORMS, kernel_power
-from nlosfw.evaluation.splits import SpatialPattern, heldout_frequency_indices
+from nlosfw.evaluation.splits import SpatialPattern, heldout_frequency_count
 from nlosfw.model.interface import ModelNeeds
 from nlosfw.pipeline.settings import SplitSettings
 from nlosfw.plugins.capabilities import Capability
@@ -197,5 +197,4 @@ class TrainingSplit:
 
     def frequencies(self, count: int) -> int:
         """The training frequencies of a field of ``count`` frequencies."""
-        held = heldout_frequency_indices(count, self.spectral, self.fraction)
-        return max(1, count - int(np.size(held)))
+        return max(1, count - heldout_frequency_count(count, self.spectral, self.fraction))
