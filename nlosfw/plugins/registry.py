@@ -89,6 +89,10 @@ class PluginSpec:
     declared_capabilities: tuple[str, ...] | None = None
     """What the plugin declared it can do in its ``register()`` call (``None``: nothing
     there; the class's ``capabilities`` then apply, see :attr:`capabilities`)."""
+    system_check: str | None = None
+    """``"module:function"`` of a light function (it imports no backend) that returns ''
+    when the machine has what the plugin needs outside Python (a system library), else one
+    line saying what to install; see :meth:`system_problem`."""
 
     def __post_init__(self) -> None:
         if self.declared_capabilities is not None:
@@ -137,6 +141,19 @@ class PluginSpec:
         if declared is None:
             return None
         return _as_tuple(declared, self.kind, self.label)
+
+    def system_problem(self) -> str:
+        """What the machine lacks for this plugin outside Python, in one line ('' when
+        nothing, or when it registered no ``system_check``). The conformance kit skips the
+        plugin's checks with it, unless ``NLOSFW_REQUIRE_SYSTEM=1``."""
+        if self.system_check is None:
+            return ""
+        try:
+            problem = import_object(self.system_check)()
+        except Exception as err:  # the plugin's own check failing is its bug: say so
+            return (f"{self.label}: its system check {self.system_check} failed: "
+                    f"{_reason(err)}")
+        return str(problem or "")
 
     def missing_requirements(self) -> list[tuple[str, str]]:
         """Required modules that cannot be found (checked without importing them)."""
@@ -367,6 +384,9 @@ class RegistrationOptions:
     (:data:`nlosfw.plugins.capabilities.VOCABULARY`; a name outside it is a one-line
     :class:`PluginError`); ``None`` takes the kind's defaults. The conformance kit picks
     its checks from them."""
+    system_check: str | None = None
+    """``"module:function"`` returning '' or what to install outside Python, in one line
+    (see :attr:`PluginSpec.system_check`)."""
 
 
 class RegistrationKwargs(TypedDict, total=False):
@@ -379,6 +399,7 @@ class RegistrationKwargs(TypedDict, total=False):
     test_config: Mapping[str, object] | None
     expected_failures: Mapping[str, str] | None
     capabilities: Iterable[str | Capability] | None
+    system_check: str | None
 
 
 @dataclass
@@ -414,6 +435,7 @@ class Registrar:
                                    else _as_tuple(opts.capabilities, self.kind,
                                                   f"{self.distribution}: {self.kind.value} "
                                                   f"plugin '{name}'")),
+            system_check=opts.system_check,
         )
         if self.accept(spec):
             self.registry.add(spec)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
@@ -15,6 +16,10 @@ if TYPE_CHECKING:
     import pytest
 
 Check = Callable[..., None]
+
+#: Set to 1 where the system libraries that plugins need must be there (CI): a plugin's
+#: checks then run, and fail, instead of skipping with what to install.
+REQUIRE_SYSTEM = "NLOSFW_REQUIRE_SYSTEM"
 
 
 def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
@@ -100,7 +105,10 @@ def check_cases(registry: Registry | None = None, kinds: Iterable[str] | None = 
 
 def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]:
     """``pytest.param``s of (spec, check) pairs: skipped ones with their reason, plugins
-    with missing dependencies skipped with the pip command, expected failures strict."""
+    with missing dependencies skipped with the pip command, those missing a system library
+    (:meth:`~nlosfw.plugins.registry.PluginSpec.system_problem`) with what to install unless
+    ``NLOSFW_REQUIRE_SYSTEM=1`` (then their checks run, and fail), expected failures
+    strict."""
     import pytest
 
     params = []
@@ -109,6 +117,8 @@ def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]
         missing = spec.install_command()
         if missing:
             marks.append(pytest.mark.skip(reason=f"{spec.qualified_name} needs: {missing}"))
+        elif os.environ.get(REQUIRE_SYSTEM) != "1" and (lacking := spec.system_problem()):
+            marks.append(pytest.mark.skip(reason=f"{spec.qualified_name}: {lacking}"))
         if planned.skip_reason:
             marks.append(pytest.mark.skip(reason=planned.skip_reason))
         reason = (spec.expected_failures.get(planned.name)
