@@ -90,9 +90,8 @@ class PluginSpec:
     """What the plugin declared it can do in its ``register()`` call (``None``: nothing
     there; the class's ``capabilities`` then apply, see :attr:`capabilities`)."""
     system_check: str | None = None
-    """``"module:function"`` of a light function (it imports no backend) that returns ''
-    when the machine has what the plugin needs outside Python (a system library), else one
-    line saying what to install; see :meth:`system_problem`."""
+    """``"module:function"`` of a light function: '' or what the machine lacks outside
+    Python, in one line (:func:`nlosfw.testing.system_problem` calls it)."""
 
     def __post_init__(self) -> None:
         if self.declared_capabilities is not None:
@@ -141,19 +140,6 @@ class PluginSpec:
         if declared is None:
             return None
         return _as_tuple(declared, self.kind, self.label)
-
-    def system_problem(self) -> str:
-        """What the machine lacks for this plugin outside Python, in one line ('' when
-        nothing, or when it registered no ``system_check``). The conformance kit skips the
-        plugin's checks with it, unless ``NLOSFW_REQUIRE_SYSTEM=1``."""
-        if self.system_check is None:
-            return ""
-        try:
-            problem = import_object(self.system_check)()
-        except Exception as err:  # the plugin's own check failing is its bug: say so
-            return (f"{self.label}: its system check {self.system_check} failed: "
-                    f"{_reason(err)}")
-        return str(problem or "")
 
     def missing_requirements(self) -> list[tuple[str, str]]:
         """Required modules that cannot be found (checked without importing them)."""
@@ -385,8 +371,7 @@ class RegistrationOptions:
     :class:`PluginError`); ``None`` takes the kind's defaults. The conformance kit picks
     its checks from them."""
     system_check: str | None = None
-    """``"module:function"`` returning '' or what to install outside Python, in one line
-    (see :attr:`PluginSpec.system_check`)."""
+    """``"module:function"`` returning '' or what to install outside Python, in one line."""
 
 
 class RegistrationKwargs(TypedDict, total=False):

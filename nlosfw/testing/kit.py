@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from nlosfw.common.config import Configurable, config_to_dict
 from nlosfw.common.errors import PluginError
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
-from nlosfw.plugins.registry import PluginSpec, Registry
+from nlosfw.plugins.registry import PluginSpec, Registry, import_object
 from nlosfw.testing.selection import CheckPlan, PlannedCheck, plan_check
 
 if TYPE_CHECKING:
@@ -103,10 +103,20 @@ def check_cases(registry: Registry | None = None, kinds: Iterable[str] | None = 
     return [(spec, planned) for spec in specs for planned in check_plan(spec).checks]
 
 
+def system_problem(spec: PluginSpec) -> str:
+    """What the machine lacks for ``spec`` outside Python (a system library), in one line,
+    from the function its ``system_check`` names ('' for nothing, or no check)."""
+    try:
+        return str(spec.system_check and import_object(spec.system_check)() or "")
+    except Exception as err:  # the plugin's own check failing is its bug: say so
+        return (f"{spec.label}: its system check {spec.system_check} failed: "
+                f"{type(err).__name__}: {err}")
+
+
 def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]:
     """``pytest.param``s of (spec, check) pairs: skipped ones with their reason, plugins
     with missing dependencies skipped with the pip command, those missing a system library
-    (:meth:`~nlosfw.plugins.registry.PluginSpec.system_problem`) with what to install unless
+    (:func:`system_problem`) with what to install unless
     ``NLOSFW_REQUIRE_SYSTEM=1`` (then their checks run, and fail), expected failures
     strict."""
     import pytest
@@ -117,7 +127,7 @@ def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]
         missing = spec.install_command()
         if missing:
             marks.append(pytest.mark.skip(reason=f"{spec.qualified_name} needs: {missing}"))
-        elif os.environ.get(REQUIRE_SYSTEM) != "1" and (lacking := spec.system_problem()):
+        elif os.environ.get(REQUIRE_SYSTEM) != "1" and (lacking := system_problem(spec)):
             marks.append(pytest.mark.skip(reason=f"{spec.qualified_name}: {lacking}"))
         if planned.skip_reason:
             marks.append(pytest.mark.skip(reason=planned.skip_reason))

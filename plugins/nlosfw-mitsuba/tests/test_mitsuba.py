@@ -56,14 +56,15 @@ def test_without_llvm_the_plugin_says_in_one_line_what_to_install(tmp_path: Path
                                                                    monkeypatch):
     """Its system check: the conformance kit and the tests below skip with this line."""
     from nlosfw.plugins import load_plugins
+    from nlosfw.testing import system_problem
 
     spec = load_plugins(env={}).registry.get("simulator", "mitsuba")
     monkeypatch.setenv("DRJIT_LIBLLVM_PATH", str(tmp_path / "libLLVM.so.19.1"))
-    problem = spec.system_problem()
+    problem = system_problem(spec)
     assert problem == llvm_problem()
     assert "apt-get install -y libllvm19" in problem and "\n" not in problem
     (tmp_path / "libLLVM.so.19.1").write_bytes(b"\x7fELF")
-    assert spec.system_problem() == ""
+    assert system_problem(spec) == ""
 
 
 # --------------------------------------------------------------------------- rendering
