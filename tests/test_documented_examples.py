@@ -1,6 +1,8 @@
 """Every example the documentation shows runs as shown.
 
-The Python blocks of the README's ``## Python API`` section and of ``docs/*.md``, the
+The Python block of the guide's Python API page (``docs/guide/python-api.md``) and those of
+the other pages of ``docs/`` (but the developer guide's, whose blocks are templates and copies
+of the example packages, checked by their own tests), the
 example of :mod:`nlosfw.api`'s docstring, and every keyword example (``gate=600``) and
 override list the docstrings of the public functions (``nlosfw.__all__``) give. Blocks run
 as written but for their sizes (:data:`SMALLER`: fewer samples and steps, a small run), so
@@ -27,12 +29,15 @@ from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures, layouts
 
 ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+#: The guide's page of the Python API: its block runs with :data:`SMALLER` sizes.
+API_PAGE = DOCS / "guide" / "python-api.md"
 #: A run of a few seconds, added to the runs the blocks start.
 TINY_RUN = ('"scene.wall.resolution=[16,16]", "transform.n_frequencies=21", '
             '"reconstruction.n_depths=4", "figures.enabled=false", ')
 #: Sizes replaced in the blocks (text -> text, each found exactly once in its block).
 SMALLER = {
-    "readme": {"samples=65536": "samples=256",
+    "guide": {"samples=65536": "samples=256",
                'steps=2000)': 'steps=20)',
                '"model.steps=2000"]': '"model.steps=20", ' + TINY_RUN + ']'},
     "api": {"steps=500)": "steps=20)",
@@ -43,12 +48,6 @@ SMALLER = {
 def python_blocks(markdown: str) -> list[str]:
     """The fenced ``python`` blocks of a Markdown text."""
     return re.findall(r"^```python\n(.*?)^```", markdown, re.S | re.M)
-
-
-def section(markdown: str, title: str) -> str:
-    start = markdown.index(f"\n{title}\n")
-    end = markdown.find("\n## ", start + len(title) + 2)
-    return markdown[start:] if end < 0 else markdown[start:end]
 
 
 def smaller(code: str, table: dict[str, str]) -> str:
@@ -89,18 +88,28 @@ def workdir(tmp_path, monkeypatch):
 
 
 # ----------------------------------------------------------------------- code blocks
-def test_the_readme_python_api_block_runs(workdir):
-    (block,) = python_blocks(section((ROOT / "README.md").read_text(), "## Python API"))
-    done = run_block(smaller(block, SMALLER["readme"]), "README.md, ## Python API")
+def test_the_guide_python_api_block_runs(workdir):
+    (block,) = python_blocks(API_PAGE.read_text())
+    done = run_block(smaller(block, SMALLER["guide"]), "docs/guide/python-api.md")
     assert isinstance(done["image"], nlosfw.Reconstruction)
     assert (workdir / "two_planes.hdf5").is_file()
 
 
+def documented_pages() -> list[Path]:
+    """The pages whose Python blocks run as written: every page of docs/ but the Python API
+    page (run smaller, above) and the developer guide's."""
+    return [page for page in sorted(DOCS.rglob("*.md"))
+            if page != API_PAGE and "developer" not in page.relative_to(DOCS).parts]
+
+
 def test_the_python_blocks_of_the_docs_run(workdir):
-    """docs/*.md: each Python block runs (they hold none today; one added is run here)."""
-    for page in sorted((ROOT / "docs").glob("*.md")):
+    """Each Python block of the user-facing pages runs (none holds one today; one added is
+    run here)."""
+    pages = documented_pages()
+    assert DOCS / "guide" / "running.md" in pages and DOCS / "reference" / "metrics.md" in pages
+    for page in pages:
         for i, block in enumerate(python_blocks(page.read_text())):
-            run_block(block, f"{page.name}, block {i + 1}")
+            run_block(block, f"{page.relative_to(ROOT)}, block {i + 1}")
 
 
 def test_the_api_module_example_runs(workdir):
