@@ -39,18 +39,18 @@ HREF = re.compile(r'href="' + re.escape(SCHEME) + r'([^"]*)"')
 
 def repository_target(page_src: str, target: str, docs_dir: Path) -> str | None:
     """The repository path (posix, from its root) a relative link of page ``page_src``
-    (relative to ``docs_dir``) points to when it leaves ``docs_dir``; else None."""
+    (relative to ``docs_dir``, the repository's ``docs/``) points to when it leaves
+    ``docs_dir``; else None (also for a link leaving the repository)."""
     if re.match(r"^[a-zA-Z][\w+.-]*:", target) or target.startswith(("/", "#")):
         return None
     path, _, anchor = target.partition("#")
     joined = posixpath.normpath(posixpath.join(posixpath.dirname(page_src), path))
     if not joined.startswith("../"):
         return None
-    root = docs_dir.parent
-    resolved = (docs_dir / joined).resolve()
-    try:
-        relative = resolved.relative_to(root.resolve()).as_posix()
-    except ValueError:
+    # by the path's text, not its resolved target: docs/ and the repository's folders may be
+    # links (a checkout assembled from several places)
+    relative = posixpath.normpath(posixpath.join(docs_dir.name, joined))
+    if relative.startswith("../"):
         return None
     return relative + (f"#{anchor}" if anchor else "")
 
@@ -98,7 +98,6 @@ def on_page_content(html: str, page: Any, config: Any, files: Any) -> str:
         # the checkout beside the built site: from the page's folder up to the site, then on
         site = Path(config["site_dir"]).resolve()
         up = os.path.relpath(Path(config["docs_dir"]).parent.resolve(), site)
-        depth = page.url.count("/") if config.get("use_directory_urls") else \
-            page.url.count("/")
+        depth = page.url.count("/")   # the page's folder below the site's root
         base = "../" * depth + ("" if up == "." else up.rstrip("/") + "/")
     return HREF.sub(lambda m: f'href="{base}{m.group(1)}"', html)
