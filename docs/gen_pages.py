@@ -204,11 +204,11 @@ def config_page() -> str:
         GENERATED, "",
         "# Configuration", "",
         "The options of a run, read from its schema (`nlosfw.pipeline.settings.RunConfig`), "
-        "with their defaults as [`conf/config.yaml`](../../conf/config.yaml) composes them "
-        "for a bare run before a scene is chosen. Set one with `group.option=value` on the "
+        "with the schema's defaults ([`conf/config.yaml`](../../conf/config.yaml), a scene or "
+        "a preset may set others; `python -m nlosfw --cfg job` prints a run's). Set one "
+        "with `group.option=value` on the "
         "command line (`split.spatial_step=4`), choose a scene or a plugin with "
-        "`group=name`, and print a run's whole composed configuration with "
-        "`python -m nlosfw --cfg job`. The plugin groups (`simulator`, `transform`, "
+        "`group=name`. The plugin groups (`simulator`, `transform`, "
         "`model`, `imager`) take the options of the plugin chosen: see its "
         "[page](../plugins/index.md). Options renamed since an earlier version are "
         "refused with their new name, listed in [CHANGELOG.md](../../CHANGELOG.md).", "",

@@ -74,8 +74,7 @@ MORE = (
     ("python -m nlosfw --hydra-help", "Hydra's own help (flags, --info, shell completion)"),
 )
 
-DOCS = ("README.md, docs/index.md (the guide, a page per plugin, the reference; mkdocs serve), "
-        "CONTRIBUTING.md in the source repository")
+DOCS = "README.md, docs/index.md (mkdocs serve), CONTRIBUTING.md in the source repository"
 
 
 def help_text(host: PluginHost, conf: Path) -> str:
