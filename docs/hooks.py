@@ -12,6 +12,9 @@ on it. This hook checks each one itself and makes it a link to the repository:
   ``repo_url``, else to the file in the checkout beside the built site (``site/``).
 
 Links inside ``docs/`` are left to MkDocs' own validation (``validation:`` in mkdocs.yml).
+Why not a ``docs/studies`` symlink: the study folders are code, results and figures read on
+GitHub, whose pages link out of the site (``run.py``, ``benchmarks/``); and MkDocs cannot relax
+``validation.links.not_found`` for one prefix only.
 """
 
 from __future__ import annotations

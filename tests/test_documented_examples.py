@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import ast
 import inspect
+import itertools
 import re
+import shlex
 import shutil
 import textwrap
 from pathlib import Path
@@ -217,3 +219,42 @@ def test_the_imager_example_of_reconstruct_runs():
     image = eval(span, {"load_plugins": load_plugins, "field": field,
                         "voxels": wall_voxels(field, [0.5, 0.6])})
     assert isinstance(image, nlosfw.Reconstruction) and image.intensity.shape[0] == 2
+
+
+# ------------------------------------------------------------ the README's Run commands
+#: The command line's subcommands (``python -m nlosfw <subcommand> ...``), not runs.
+SUBCOMMANDS = ("image", "report", "plugins", "cache")
+
+
+def readme_run_commands() -> list[list[str]]:
+    """The ``python -m nlosfw`` commands of the README's ``## Run`` block, as words."""
+    text = (ROOT / "README.md").read_text()
+    section = re.search(r"^## Run\n(.*?)(?=^## )", text, re.M | re.S)
+    assert section, "README.md has no '## Run' section"
+    block = re.search(r"```bash\n(.*?)```", section.group(1), re.S)
+    assert block, "README.md's Run section has no bash block"
+    commands = [shlex.split(line, comments=True) for line in block.group(1).splitlines()]
+    return [words[3:] for words in commands if words[:3] == ["python", "-m", "nlosfw"]]
+
+
+def test_the_readme_run_commands_compose(capture_files):
+    """Each run of the README's Run block composes as one configuration (each job of its
+    sweep; the capture file it names replaced by a real capture), and every other line is
+    one of the command line's subcommands."""
+    host = load_plugins()
+    commands = readme_run_commands()
+    assert [] in commands and any(c[:1] == ["-m"] for c in commands)
+    composed = 0
+    for words in commands:
+        if words[:1] and words[0] in SUBCOMMANDS:
+            continue
+        sweep = words[:1] == ["-m"]
+        overrides = [re.sub(r"=[\w./-]+\.mat$", f"={capture_files}", o)
+                     for o in (words[1:] if sweep else words)]
+        choices = [[f"{o.split('=', 1)[0]}={v}" for v in o.split("=", 1)[1].split(",")]
+                   if sweep and "," in o else [o] for o in overrides]
+        for job in itertools.product(*choices):
+            config = compose_run_config(list(job), host)
+            assert config["model"]["name"], job
+            composed += 1
+    assert composed >= 6     # the bare run, the capture file, the sweep's four jobs
