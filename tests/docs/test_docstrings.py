@@ -57,3 +57,13 @@ def test_the_pattern_finds_measurements():
         assert MEASURED.search(text), text
     for text in ("cos^k of the angle", "every 4th sample", "s the scene operator's", "16x"):
         assert not MEASURED.search(text), text
+
+
+def test_the_study_pages_a_docstring_names_are_studies():
+    studies = ("thesis_reproduction", "sparse_scans_simulated", "sparse_scans_measured",
+               "physics_terms_measured", "classical_imagers_measured")
+    named = {name for path in _sources()
+             for name in re.findall(r"studies/(\w+)/README\.md", path.read_text())}
+    assert named and named <= set(studies), sorted(named - set(studies))
+    if (ROOT / "studies").is_dir():
+        assert all((ROOT / "studies" / name / "README.md").is_file() for name in named)
