@@ -180,6 +180,12 @@ def index_page(plugins: Sequence[PluginInfo]) -> str:
              "Every plugin `python -m nlosfw plugins` lists, one page each: what it is, its "
              "options (from its config dataclass), when to use it and what was measured. A new "
              "plugin is a distribution of its own: [Writing a plugin](../developer/plugins.md).",
+             "",
+             "A network (any `torch.nn.Module` or equinox module registered with "
+             "`register_networks`) is the field model `<name>_<backend>`, listed with the field "
+             "models; `neural_volume_*`'s `model.network` takes any of them "
+             "([Adding a network](../developer/network.md)). `model=none` is not a plugin: it "
+             "fits no field model and images the capture alone.",
              ""]
     for kind, title in KIND_TITLES.items():
         here = [p for p in plugins if p.kind == kind]
