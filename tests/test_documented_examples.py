@@ -1,6 +1,8 @@
 """Every example the documentation shows runs as shown.
 
-The Python blocks of the README's ``## Python API`` section and of ``docs/*.md``, the
+The Python block of the guide's Python API page (``docs/guide/python-api.md``) and those of
+the other pages of ``docs/`` (but the developer guide's, whose blocks are templates and copies
+of the example packages, checked by their own tests), the
 example of :mod:`nlosfw.api`'s docstring, and every keyword example (``gate=600``) and
 override list the docstrings of the public functions (``nlosfw.__all__``) give. Blocks run
 as written but for their sizes (:data:`SMALLER`: fewer samples and steps, a small run), so
@@ -12,7 +14,9 @@ from __future__ import annotations
 
 import ast
 import inspect
+import itertools
 import re
+import shlex
 import shutil
 import textwrap
 from pathlib import Path
@@ -27,12 +31,15 @@ from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures, layouts
 
 ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+#: The guide's page of the Python API: its block runs with :data:`SMALLER` sizes.
+API_PAGE = DOCS / "guide" / "python-api.md"
 #: A run of a few seconds, added to the runs the blocks start.
 TINY_RUN = ('"scene.wall.resolution=[16,16]", "transform.n_frequencies=21", '
             '"reconstruction.n_depths=4", "figures.enabled=false", ')
 #: Sizes replaced in the blocks (text -> text, each found exactly once in its block).
 SMALLER = {
-    "readme": {"samples=65536": "samples=256",
+    "guide": {"samples=65536": "samples=256",
                'steps=2000)': 'steps=20)',
                '"model.steps=2000"]': '"model.steps=20", ' + TINY_RUN + ']'},
     "api": {"steps=500)": "steps=20)",
@@ -43,12 +50,6 @@ SMALLER = {
 def python_blocks(markdown: str) -> list[str]:
     """The fenced ``python`` blocks of a Markdown text."""
     return re.findall(r"^```python\n(.*?)^```", markdown, re.S | re.M)
-
-
-def section(markdown: str, title: str) -> str:
-    start = markdown.index(f"\n{title}\n")
-    end = markdown.find("\n## ", start + len(title) + 2)
-    return markdown[start:] if end < 0 else markdown[start:end]
 
 
 def smaller(code: str, table: dict[str, str]) -> str:
@@ -89,18 +90,28 @@ def workdir(tmp_path, monkeypatch):
 
 
 # ----------------------------------------------------------------------- code blocks
-def test_the_readme_python_api_block_runs(workdir):
-    (block,) = python_blocks(section((ROOT / "README.md").read_text(), "## Python API"))
-    done = run_block(smaller(block, SMALLER["readme"]), "README.md, ## Python API")
+def test_the_guide_python_api_block_runs(workdir):
+    (block,) = python_blocks(API_PAGE.read_text())
+    done = run_block(smaller(block, SMALLER["guide"]), "docs/guide/python-api.md")
     assert isinstance(done["image"], nlosfw.Reconstruction)
     assert (workdir / "two_planes.hdf5").is_file()
 
 
+def documented_pages() -> list[Path]:
+    """The pages whose Python blocks run as written: every page of docs/ but the Python API
+    page (run smaller, above) and the developer guide's."""
+    return [page for page in sorted(DOCS.rglob("*.md"))
+            if page != API_PAGE and "developer" not in page.relative_to(DOCS).parts]
+
+
 def test_the_python_blocks_of_the_docs_run(workdir):
-    """docs/*.md: each Python block runs (they hold none today; one added is run here)."""
-    for page in sorted((ROOT / "docs").glob("*.md")):
+    """Each Python block of the user-facing pages runs (none holds one today; one added is
+    run here)."""
+    pages = documented_pages()
+    assert DOCS / "guide" / "running.md" in pages and DOCS / "reference" / "metrics.md" in pages
+    for page in pages:
         for i, block in enumerate(python_blocks(page.read_text())):
-            run_block(block, f"{page.name}, block {i + 1}")
+            run_block(block, f"{page.relative_to(ROOT)}, block {i + 1}")
 
 
 def test_the_api_module_example_runs(workdir):
@@ -208,3 +219,42 @@ def test_the_imager_example_of_reconstruct_runs():
     image = eval(span, {"load_plugins": load_plugins, "field": field,
                         "voxels": wall_voxels(field, [0.5, 0.6])})
     assert isinstance(image, nlosfw.Reconstruction) and image.intensity.shape[0] == 2
+
+
+# ------------------------------------------------------------ the README's Run commands
+#: The command line's subcommands (``python -m nlosfw <subcommand> ...``), not runs.
+SUBCOMMANDS = ("image", "report", "plugins", "cache")
+
+
+def readme_run_commands() -> list[list[str]]:
+    """The ``python -m nlosfw`` commands of the README's ``## Run`` block, as words."""
+    text = (ROOT / "README.md").read_text()
+    section = re.search(r"^## Run\n(.*?)(?=^## )", text, re.M | re.S)
+    assert section, "README.md has no '## Run' section"
+    block = re.search(r"```bash\n(.*?)```", section.group(1), re.S)
+    assert block, "README.md's Run section has no bash block"
+    commands = [shlex.split(line, comments=True) for line in block.group(1).splitlines()]
+    return [words[3:] for words in commands if words[:3] == ["python", "-m", "nlosfw"]]
+
+
+def test_the_readme_run_commands_compose(capture_files):
+    """Each run of the README's Run block composes as one configuration (each job of its
+    sweep; the capture file it names replaced by a real capture), and every other line is
+    one of the command line's subcommands."""
+    host = load_plugins()
+    commands = readme_run_commands()
+    assert [] in commands and any(c[:1] == ["-m"] for c in commands)
+    composed = 0
+    for words in commands:
+        if words[:1] and words[0] in SUBCOMMANDS:
+            continue
+        sweep = words[:1] == ["-m"]
+        overrides = [re.sub(r"=[\w./-]+\.mat$", f"={capture_files}", o)
+                     for o in (words[1:] if sweep else words)]
+        choices = [[f"{o.split('=', 1)[0]}={v}" for v in o.split("=", 1)[1].split(",")]
+                   if sweep and "," in o else [o] for o in overrides]
+        for job in itertools.product(*choices):
+            config = compose_run_config(list(job), host)
+            assert config["model"]["name"], job
+            composed += 1
+    assert composed >= 6     # the bare run, the capture file, the sweep's four jobs

@@ -194,6 +194,33 @@ def test_expected_failures_must_name_a_check_and_run_as_strict_xfail():
     assert list(params["simulator:known_bug-check_occlusion[single_spot]"].marks) == []
 
 
+def test_a_plugin_missing_a_system_library_is_skipped_saying_what_to_install(tmp_path,
+                                                                              monkeypatch):
+    """Its ``system_check`` names what the machine lacks: every check skips with that line,
+    unless NLOSFW_REQUIRE_SYSTEM=1 (CI, which installs it), where the checks run."""
+    (tmp_path / "fake_probe.py").write_text(
+        "def lacking():\n    return 'no libfoo: apt-get install -y libfoo'\n"
+        "def broken():\n    raise OSError('probe crashed')\n"
+        "def fine():\n    return ''\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delenv("NLOSFW_REQUIRE_SYSTEM", raising=False)
+
+    def marks(check: str) -> list:
+        spec = fake_spec("simulator", f"needs_{check}", system_check=f"fake_probe:{check}")
+        params = pytest_params((spec, c) for c in check_plan(spec).applied)
+        assert params
+        return [[(m.name, m.kwargs.get("reason")) for m in p.marks] for p in params]
+
+    reason = "simulator:needs_lacking: no libfoo: apt-get install -y libfoo"
+    assert {str(m) for m in marks("lacking")} == {str([("skip", reason)])}
+    assert all(m == [("skip", "simulator:needs_broken: nlosfw-fake: simulator plugin "
+                      "'needs_broken': its system check fake_probe:broken failed: OSError: "
+                      "probe crashed")] for m in marks("broken"))
+    assert all(m == [] for m in marks("fine"))
+    monkeypatch.setenv("NLOSFW_REQUIRE_SYSTEM", "1")
+    assert all(m == [] for m in marks("lacking"))
+
+
 # ------------------------------------------------------------ declaring what it lacks fails
 LIES = [
     # (kind, factory or None, capabilities, planned check, error, message pattern)

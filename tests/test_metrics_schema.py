@@ -1,5 +1,6 @@
 """metrics.json has one definition (nlosfw.pipeline.metrics): the JSON Schema written beside it,
-the readers (report, summary, thesis comparison) and the README's outline all come from it."""
+the readers (report, summary, thesis comparison) and the reference page's outline
+(docs/reference/metrics.md) all come from it."""
 
 from __future__ import annotations
 
@@ -226,13 +227,13 @@ def test_every_layout_change_bumps_the_schema_version():
         f"and add {{{SCHEMA_VERSION + 1}: '{digest}'}} to LAYOUTS here")
 
 
-def test_readme_shows_the_schema_as_defined():
-    readme = (ROOT / "README.md").read_text()
+def test_the_reference_page_shows_the_schema_as_defined():
+    page = (ROOT / "docs" / "reference" / "metrics.md").read_text()
     block = re.search(r"<!-- metrics-outline -->\n```text\n(.*?)```\n<!-- /metrics-outline -->",
-                      readme, re.S)
-    assert block, "README.md: the metrics outline block is missing"
+                      page, re.S)
+    assert block, "docs/reference/metrics.md: the metrics outline block is missing"
     assert block.group(1) == metrics_outline(), (
-        "README.md's metrics.json outline differs from nlosfw/pipeline/metrics.py; replace it with "
-        "the output of: python -c 'from nlosfw.pipeline.metrics import metrics_outline as o; "
-        "print(o(), end=\"\")'")
-    assert f"`metrics.json` (schema version {SCHEMA_VERSION})" in readme
+        "docs/reference/metrics.md's metrics.json outline differs from "
+        "nlosfw/pipeline/metrics.py; replace it with the output of: python -c 'from "
+        "nlosfw.pipeline.metrics import metrics_outline as o; print(o(), end=\"\")'")
+    assert f"`metrics.json` (schema version {SCHEMA_VERSION})" in page

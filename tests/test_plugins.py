@@ -62,7 +62,8 @@ def test_an_unknown_registration_option_is_a_one_line_error():
         load_plugins(env={}, extra=[("dist-y", "y", plugin_module("yew", colour="red"))])
     assert str(info.value) == (
         "dist-y: simulator plugin 'yew' is registered with unknown option 'colour'; valid: "
-        "config, requires, description, test_config, expected_failures, capabilities")
+        "config, requires, description, test_config, expected_failures, capabilities, "
+        "system_check")
 
 
 def test_unknown_name_lists_valid_names():

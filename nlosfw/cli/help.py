@@ -74,7 +74,7 @@ MORE = (
     ("python -m nlosfw --hydra-help", "Hydra's own help (flags, --info, shell completion)"),
 )
 
-DOCS = "README.md, CONTRIBUTING.md (plugins), docs/architecture.md in the source repository"
+DOCS = "README.md, docs/index.md (mkdocs serve), CONTRIBUTING.md in the source repository"
 
 
 def help_text(host: PluginHost, conf: Path) -> str:

@@ -80,7 +80,7 @@ def preflight(overrides: Sequence[str], host: PluginHost, config_name: str = "co
 
         def composed(combo: list[str], with_hydra: bool = False) -> DictConfig:
             """The config of ``combo``, composed once per preflight (a copy each time:
-            a single run asks for the same composition several times, 0.6 s each)."""
+            a single run asks for the same composition several times, each slow)."""
             key = (tuple(combo), with_hydra)
             if key not in done:
                 try:

@@ -9,9 +9,8 @@ maximum (reconstructions from different fields differ in overall scale: fewer wa
 samples collect less light), with scikit-image's ``peak_signal_noise_ratio(a, b,
 data_range=1)`` and ``structural_similarity(a, b, data_range=1)`` at their defaults
 (a 7-pixel uniform window, sample covariances). Amplitudes rather than intensities,
-because squaring hides faint ghosts: imaging every 4th sample of ``letter_t`` (16x
-fewer) scores 47.8 dB and SSIM 0.94 on the intensity front view, 29.9 dB and 0.53 on
-the amplitude front view.
+because squaring hides faint ghosts that a sparse scan's image holds (measured on
+``letter_t``: ``studies/sparse_scans_simulated/README.md``).
 
 :func:`ssim` also offers Wang et al.'s 11-pixel Gaussian window (``gaussian=True``),
 the variant some papers report; the run's scores never use it.

@@ -1,6 +1,6 @@
 """One run's files: fixed names, each claimed in the run's marker, then written atomically.
 
-Names (relative to the run directory; see the README):
+Names (relative to the run directory; see docs/guide/outputs.md):
 
 ========================  ================================================
 ``config.yaml``           the resolved configuration of the run

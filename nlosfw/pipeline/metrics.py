@@ -2,8 +2,8 @@
 
 The pipeline builds a :class:`RunMetrics`; the summary, the sweep report, the comparison
 with reference numbers and the figures read one back with :meth:`RunMetrics.read`. The JSON Schema
-written beside every ``metrics.json`` (``metrics.schema.json``) and the outline in the
-README are generated from these classes (:mod:`nlosfw.common.typed_json`).
+written beside every ``metrics.json`` (``metrics.schema.json``) and the outline in
+``docs/reference/metrics.md`` are generated from these classes (:mod:`nlosfw.common.typed_json`).
 
 Every change to the layout (a key added, removed, renamed or retyped) is made here and
 bumps :data:`SCHEMA_VERSION`; ``tests/test_metrics_schema.py`` fails until it is bumped.
@@ -428,7 +428,7 @@ def metrics_schema_text() -> str:
 
 
 def metrics_outline() -> str:
-    """The compact outline of metrics.json shown in the README."""
+    """The compact outline of metrics.json shown in docs/reference/metrics.md."""
     return outline(RunMetrics)
 
 

@@ -89,6 +89,9 @@ class PluginSpec:
     declared_capabilities: tuple[str, ...] | None = None
     """What the plugin declared it can do in its ``register()`` call (``None``: nothing
     there; the class's ``capabilities`` then apply, see :attr:`capabilities`)."""
+    system_check: str | None = None
+    """``"module:function"`` of a light function: '' or what the machine lacks outside
+    Python, in one line (:func:`nlosfw.testing.system_problem` calls it)."""
 
     def __post_init__(self) -> None:
         if self.declared_capabilities is not None:
@@ -367,6 +370,8 @@ class RegistrationOptions:
     (:data:`nlosfw.plugins.capabilities.VOCABULARY`; a name outside it is a one-line
     :class:`PluginError`); ``None`` takes the kind's defaults. The conformance kit picks
     its checks from them."""
+    system_check: str | None = None
+    """``"module:function"`` returning '' or what to install outside Python, in one line."""
 
 
 class RegistrationKwargs(TypedDict, total=False):
@@ -379,6 +384,7 @@ class RegistrationKwargs(TypedDict, total=False):
     test_config: Mapping[str, object] | None
     expected_failures: Mapping[str, str] | None
     capabilities: Iterable[str | Capability] | None
+    system_check: str | None
 
 
 @dataclass
@@ -414,6 +420,7 @@ class Registrar:
                                    else _as_tuple(opts.capabilities, self.kind,
                                                   f"{self.distribution}: {self.kind.value} "
                                                   f"plugin '{name}'")),
+            system_check=opts.system_check,
         )
         if self.accept(spec):
             self.registry.add(spec)

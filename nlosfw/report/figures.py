@@ -25,13 +25,13 @@ from typing import TYPE_CHECKING, TypedDict
 import numpy as np
 from matplotlib.figure import Figure
 
+from nlosfw.common.text import plain_title
 from nlosfw.evaluation.image_scores import amplitude, normalise
 from nlosfw.evaluation.reference import REFERENCE, REFERENCE_TITLE
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.pipeline.files import RunFiles
 from nlosfw.pipeline.metrics import ImageScores, ReconstructionMetrics, RunInfo
 from nlosfw.pipeline.results import RunResults
-from nlosfw.report.plain_text import literal_text
 from nlosfw.report.titles import run_title
 from nlosfw.report.views import write_source_views, write_views
 from nlosfw.transform.field import PhasorField
@@ -105,7 +105,7 @@ def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
 
 def _saver(make: Callable[[], Figure], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        literal_text(make()).savefig(path, dpi=dpi, format="png")
+        make().savefig(path, dpi=dpi, format="png")
 
     return save
 
@@ -145,7 +145,7 @@ def field_figure(fields: Mapping[str, PhasorField], index: int, title: str,
     """
     true = fields["true"]
     sources = list(fields)
-    names = {s: (labels or {}).get(s, _SOURCE_TITLES.get(s, s)) for s in sources}
+    names = _names(sources, labels)
     amp_max = float(np.abs(true.values[index]).max()) or 1.0
     errors = {s: np.abs(fields[s].values[index] - true.values[index]) / amp_max
               for s in sources if s not in ("true", "raw")}
@@ -154,7 +154,7 @@ def field_figure(fields: Mapping[str, PhasorField], index: int, title: str,
     axes = fig.subplots(len(sources), 3, squeeze=False)
     freq = true.frequencies[index]
     fig.suptitle(f"phasor fields on the relay wall at f = {freq:.3f} cycles/m "
-                 f"(λ = {100 / freq:.1f} cm), {title}")
+                 f"(λ = {100 / freq:.1f} cm), {plain_title(title)}")
     images = {}
     for row, source in enumerate(sources):
         values = fields[source].values[index]
@@ -200,7 +200,7 @@ def reconstruction_figure(recons: Mapping[str, Reconstruction],
     colorbar; the viewpoint (:data:`VIEWPOINT`) is stated under the title.
     """
     sources = list(recons)
-    names = {s: (labels or {}).get(s, _SOURCE_TITLES.get(s, s)) for s in sources}
+    names = _names(sources, labels)
     images = {s: normalise(amplitude(recons[s].max_intensity_image())) for s in sources}
     reference = images["true"]
     errors = {s: np.abs(images[s] - reference) for s in sources if s != "true"}
@@ -237,8 +237,14 @@ def reconstruction_figure(recons: Mapping[str, Reconstruction],
     if "error" in mappable:
         fig.colorbar(mappable["error"], ax=axes[2, :], shrink=0.9,
                      label="|image - true field's image|\n(99th percentile = top)")
-    fig.suptitle(f"reconstructions from {title}\n{VIEWPOINT}")
+    fig.suptitle(f"reconstructions from {plain_title(title)}\n{VIEWPOINT}")
     return fig
+
+
+def _names(sources: Iterable[str], labels: Mapping[str, str] | None) -> dict[str, str]:
+    """How the panels name each source (its label, else its role), escaped for matplotlib
+    (labels come from the user's configuration)."""
+    return {s: plain_title((labels or {}).get(s, _SOURCE_TITLES.get(s, s))) for s in sources}
 
 
 def _score_label(scores: ImageScores | None, source: str) -> str:
@@ -281,8 +287,9 @@ def loss_figure(histories: Mapping[str, list[dict[str, float]]], title: str) -> 
     """Training (and validation) loss of each field model against the step."""
     fig = Figure(figsize=(6.5, 4.3), layout="constrained")
     ax = fig.subplots()
-    ax.set_title(f"training loss\n{title}", fontsize=10)
+    ax.set_title(f"training loss\n{plain_title(title)}", fontsize=10)
     for source, history in histories.items():
+        source = plain_title(source)
         steps = [h.get("step", i) for i, h in enumerate(history)]
         ax.plot(steps, [h.get("loss", np.nan) for h in history], label=f"{source} train")
         if any(h.get("val_loss") is not None for h in history):

@@ -24,7 +24,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from nlosfw.common.text import markdown
+from nlosfw.common.text import markdown, plain_title
 from nlosfw.pipeline.metrics import RunMetrics
 from nlosfw.report.records import RunRecord
 from nlosfw.report.tables import markdown_table
@@ -236,18 +236,18 @@ def quality_figure(points: Sequence[QualityPoint], layout: SweepLayout,
                 low = mean - np.array([min(p.values) for p in found])
                 high = np.array([max(p.values) for p in found]) - mean
                 ax.errorbar(px, mean, yerr=[low, high] if np.any(low + high) else None,
-                            label=name, capsize=3, markersize=5, **style)
+                            label=plain_title(name), capsize=3, markersize=5, **style)
             ax.set_ylabel(metric.axis_label)
-            ax.set_xlabel(layout.x_label)
+            ax.set_xlabel(plain_title(layout.x_label))
             ax.grid(alpha=0.3)
             if facet:
-                ax.set_title(facet, fontsize=9)
+                ax.set_title(plain_title(facet), fontsize=9)
             _x_axis(ax, xs, positions, numeric)
     handles, labels = unique_legend(axes)
     if handles:
         fig.legend(handles, labels, loc="outside right upper", title="field")
     repeat = f"; mean and range over {', '.join(layout.repeats)}" if layout.repeats else ""
-    fig.suptitle(f"quality against {layout.x_label} ({_n_runs(points)}{repeat})")
+    fig.suptitle(f"quality against {plain_title(layout.x_label)} ({_n_runs(points)}{repeat})")
     return fig
 
 
@@ -256,7 +256,7 @@ def _x_axis(ax: Axes, xs: Sequence[str], positions: Mapping[str, float],
     values = [positions[x] for x in xs]
     if numeric and min(values) > 0 and max(values) >= 10 * min(values):
         ax.set_xscale("log")
-    ax.set_xticks(values, list(xs), rotation=0 if numeric else 30,
+    ax.set_xticks(values, [plain_title(x) for x in xs], rotation=0 if numeric else 30,
                   ha="center" if numeric else "right")
     ax.minorticks_off()
 

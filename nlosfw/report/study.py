@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
 
 from nlosfw.common.config import Scalar
+from nlosfw.common.text import plain_title
 from nlosfw.pipeline.metrics import ImageScores, RunMetrics
 from nlosfw.report.quality import unique_legend
 from nlosfw.report.records import RunRecord
@@ -308,15 +309,13 @@ def study_figure(rows: Sequence[StudyRow], path: Path, dpi: int = 110) -> None:
             if i == len(conditions) - 1:
                 ax.set_xlabel("wall samples of the full capture per sample kept")
             if j == 0:
-                ax.set_title(condition, loc="left", fontsize=10)
+                ax.set_title(plain_title(condition), loc="left", fontsize=10)
     handles, labels = unique_legend(axes)
     columns = legend_columns(labels, fig.get_figwidth())
     legend_rows = math.ceil(len(labels) / columns) if labels else 0
     fig.legend(handles, labels, loc="upper center", ncol=columns, fontsize=9, frameon=False)
-    from nlosfw.report.plain_text import literal_text
-
     top = 0.35 + 0.25 * legend_rows  # inches the legend's rows take above the panels
-    literal_text(fig).tight_layout(rect=(0, 0, 1, 1 - top / fig.get_figheight()))
+    fig.tight_layout(rect=(0, 0, 1, 1 - top / fig.get_figheight()))
     fig.savefig(path, dpi=dpi, format="png")
 
 
@@ -349,7 +348,7 @@ def _plot_series(ax: Axes, line: Sequence[StudyRow], panel: tuple[str, float],
     high = [s.max - s.mean for _, s in stats if s.mean is not None and s.max is not None]
     if not x:
         return
-    name = first.series + (" (random)" if first.pattern == "random" else "")
+    name = plain_title(first.series) + (" (random)" if first.pattern == "random" else "")
     style = series_style(first.series, first.pattern, first.kind, colours)
     if first.kind != "model":
         if first.series == "true":

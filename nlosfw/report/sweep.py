@@ -275,9 +275,7 @@ def write_report(root: Path, x: str | None = None) -> tuple[Path, list[dict[str,
             if by_sparsity:
                 study_figure(study, tmp)
             else:
-                from nlosfw.report.plain_text import literal_text
-
-                literal_text(quality_figure(points, layout)).savefig(tmp, dpi=110, format="png")
+                quality_figure(points, layout).savefig(tmp, dpi=110, format="png")
         write_text(out / "report.html", sweep_report(root, out, records, rows,
                                                      (out / "report.png").read_bytes(), tables))
     return out, rows

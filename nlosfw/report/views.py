@@ -26,10 +26,10 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike
 
 from nlosfw.capture.data import Capture
+from nlosfw.common.text import plain_title
 from nlosfw.evaluation.image_scores import amplitude, normalise
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.pipeline.files import RunFiles
-from nlosfw.report.plain_text import literal_text
 
 #: The depth map is blank where a column's brightest voxel is below this fraction of the
 #: volume's brightest (intensity; 0.1 is about a third of the amplitude).
@@ -134,7 +134,7 @@ def write_time_profile(files: RunFiles, capture: Capture, depth_range: tuple[flo
 
 def _saver(make: Callable[[], Figure], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        literal_text(make()).savefig(path, dpi=dpi, format="png")
+        make().savefig(path, dpi=dpi, format="png")
 
     return save
 
@@ -156,8 +156,8 @@ def _range_text(recon: Reconstruction) -> str:
 
 def front_figure(recon: Reconstruction, name: str, title: str) -> Figure:
     """The front view (:func:`front_view`) of one source."""
-    return _map_figure(recon, front_view(recon), title,
-                       f"{name}: front view, max over {_range_text(recon)}",
+    return _map_figure(recon, front_view(recon), plain_title(title),
+                       f"{plain_title(name)}: front view, max over {_range_text(recon)}",
                        "amplitude (√intensity) / its maximum", ("hot", 0.0, 1.0))
 
 
@@ -168,9 +168,9 @@ def depth_figure(recon: Reconstruction, name: str, title: str,
 
     depth = masked_depth_map(recon, fraction)
     low, high = depth_scale(depth, recon.depths)
-    return _map_figure(recon, depth, title,
-                       f"{name}: depth of the brightest voxel\n(grey: below {fraction:.0%} of "
-                       "the brightest intensity, no signal)",
+    return _map_figure(recon, depth, plain_title(title),
+                       f"{plain_title(name)}: depth of the brightest voxel\n(grey: below "
+                       f"{fraction:.0%} of the brightest intensity, no signal)",
                        "depth z (m), scaled to the depths with signal",
                        (colormaps["viridis"].with_extremes(bad="0.85"), low, high))
 
@@ -178,7 +178,7 @@ def depth_figure(recon: Reconstruction, name: str, title: str,
 def _map_figure(recon: Reconstruction, values: np.ndarray, title: str, map_title: str,
                 colour_label: str, scale: tuple[str | Colormap, float, float]) -> Figure:
     """One (y, x) map over the wall's extent, with its colour bar and the run's title;
-    ``scale``: the colour map and the values at its ends."""
+    ``scale``: the colour map and the values at its ends; the texts escaped already."""
     cmap, vmin, vmax = scale
     fig = Figure(figsize=(5.4, 5.0), layout="constrained")
     ax = fig.subplots()
@@ -216,8 +216,8 @@ def slices_figure(recon: Reconstruction, name: str, title: str,
         ax.axis("off")
     if image is not None:
         fig.colorbar(image, ax=axes, shrink=0.8, label="amplitude / the volume's maximum")
-    fig.suptitle(f"{name}: {chosen.size} depth slices of {depths.size} "
-                 f"({_range_text(recon)})\n{title}", fontsize=8)
+    fig.suptitle(f"{plain_title(name)}: {chosen.size} depth slices of {depths.size} "
+                 f"({_range_text(recon)})\n{plain_title(title)}", fontsize=8)
     return fig
 
 
@@ -240,8 +240,8 @@ def time_profile_figure(capture: Capture, depth_range: tuple[float, float],
     top.set_xlabel("time (ns)")
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
-    ax.set_title(f"time profile of the capture (histograms summed over the wall)\n{title}",
-                 fontsize=9)
+    ax.set_title("time profile of the capture (histograms summed over the wall)\n"
+                 + plain_title(title), fontsize=9)
     return fig
 
 

@@ -48,6 +48,7 @@ from nlosfw.testing.kit import (
     checks_for,
     parametrize_with_checks,
     spec_of,
+    system_problem,
 )
 from nlosfw.testing.selection import (
     DEVICE_LEGS,
@@ -83,6 +84,7 @@ __all__ = [
     "heldout_error_db",
     "parametrize_with_checks",
     "spec_of",
+    "system_problem",
     "requires",
     "relative_l2",
     "rendered",

@@ -2,19 +2,24 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
 from nlosfw.common.config import Configurable, config_to_dict
 from nlosfw.common.errors import PluginError
 from nlosfw.plugins.kinds import INTERFACES, PluginKind
-from nlosfw.plugins.registry import PluginSpec, Registry
+from nlosfw.plugins.registry import PluginSpec, Registry, import_object
 from nlosfw.testing.selection import CheckPlan, PlannedCheck, plan_check
 
 if TYPE_CHECKING:
     import pytest
 
 Check = Callable[..., None]
+
+#: Set to 1 where the system libraries that plugins need must be there (CI): a plugin's
+#: checks then run, and fail, instead of skipping with what to install.
+REQUIRE_SYSTEM = "NLOSFW_REQUIRE_SYSTEM"
 
 
 def checks_for(kind: PluginKind | str) -> tuple[Check, ...]:
@@ -99,9 +104,22 @@ def check_cases(registry: Registry | None = None, kinds: Iterable[str] | None = 
     return [(spec, planned) for spec in specs for planned in check_plan(spec).checks]
 
 
+def system_problem(spec: PluginSpec) -> str:
+    """What the machine lacks for ``spec`` outside Python (a system library), in one line,
+    from the function its ``system_check`` names ('' for nothing, or no check)."""
+    try:
+        return str(spec.system_check and import_object(spec.system_check)() or "")
+    except Exception as err:  # the plugin's own check failing is its bug: say so
+        return (f"{spec.label}: its system check {spec.system_check} failed: "
+                f"{type(err).__name__}: {err}")
+
+
 def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]:
     """``pytest.param``s of (spec, check) pairs: skipped ones with their reason, plugins
-    with missing dependencies skipped with the pip command, expected failures strict."""
+    with missing dependencies skipped with the pip command, those missing a system library
+    (:func:`system_problem`) with what to install unless
+    ``NLOSFW_REQUIRE_SYSTEM=1`` (then their checks run, and fail), expected failures
+    strict."""
     import pytest
 
     params = []
@@ -110,6 +128,8 @@ def pytest_params(cases: Iterable[tuple[PluginSpec, PlannedCheck]]) -> list[Any]
         missing = spec.install_command()
         if missing:
             marks.append(pytest.mark.skip(reason=f"{spec.qualified_name} needs: {missing}"))
+        elif os.environ.get(REQUIRE_SYSTEM) != "1" and (lacking := system_problem(spec)):
+            marks.append(pytest.mark.skip(reason=f"{spec.qualified_name}: {lacking}"))
         if planned.skip_reason:
             marks.append(pytest.mark.skip(reason=planned.skip_reason))
         reason = (spec.expected_failures.get(planned.name)

@@ -49,21 +49,25 @@ def test_console_text_removes_escape_sequences():
 
 # --------------------------------------------------------------------- figures
 def test_figure_text_is_never_parsed_as_maths(tmp_path):
+    """``plain_title`` escapes what a figure would parse as maths; the figures apply it to
+    every untrusted text (tests/test_figure_text.py)."""
     from matplotlib.figure import Figure
 
-    from nlosfw.report.plain_text import literal_text
-
-    def figure() -> Figure:
+    def figure(title=lambda t: t) -> Figure:
         fig = Figure(figsize=(3, 2), layout="constrained")
         ax = fig.add_subplot()
-        ax.set_title(text.plain_title(r"scene $\frac{1}{$ " + HOSTILE))
-        fig.suptitle(r"capture a$b$c$\undefinedcommand$.hdf5")
+        ax.set_title(title(r"scene $\frac{1}{$ " + HOSTILE))
+        fig.suptitle(title(r"capture a$b$c$\undefinedcommand$.hdf5"))
         return fig
 
     with pytest.raises(ValueError):      # what matplotlib does with it by default
         figure().savefig(tmp_path / "parsed.png")
-    literal_text(figure()).savefig(tmp_path / "literal.png")
+    literal = figure(text.plain_title)
+    literal.savefig(tmp_path / "literal.png")
     assert (tmp_path / "literal.png").stat().st_size > 0
+    suptitle = literal.texts[0]             # what it draws, and not as maths
+    assert suptitle._preprocess_math(suptitle.get_text()) == (
+        r"capture a$b$c$\undefinedcommand$.hdf5", False)
 
 
 # ------------------------------------------------------------------------- HTML

@@ -14,8 +14,8 @@ with inputs scaled into [-0.9, 0.9] per axis, n_v = ||A e_v|| the operator's col
 norms, s = max_v Re(A^H P)_v / n_v (the size, in units of n_v a_v, of a one-voxel fit),
 and c such that an output of 0 gives ``albedo_start`` of it: a faint, nearly uniform
 start. (Weighting each voxel by s / n_v instead, as ``rsd_prior``'s normalised variables
-do, lit the weakly coupled lattice corners; on the tests' sparse scene the uniform gain
-found the bright voxel and fitted 7 dB better.) The network is trained by Adam on the kept
+do, lit the weakly coupled lattice corners, where the uniform gain found the bright voxel
+of the tests' sparse scene.) The network is trained by Adam on the kept
 wall samples (every training frequency, full batch) by least squares,
 
     min  sum_f ||A_f a - P_f||^2 / sum_f ||P_f||^2,
@@ -32,18 +32,11 @@ kept weighing nothing in the loss, the validation points drawn from the kept one
 The backend is the subclass's (``nlosfw-torch``: ``neural_volume_torch``, ``nlosfw-jax``:
 ``neural_volume_jax``): it finds the network class and implements :meth:`train`.
 
-Cost: every step propagates the whole volume at every training frequency. On the shared
-diffuse S at 16x (70 planes of 65 x 65 voxels, 135 frequencies) a whole fit at the defaults
-takes about 50 s on 2 CPU cores, torch or JAX (29-50 s over the three shared captures at
-16x and 64x, ``benchmarks/fit_times.py``); on one H200 GPU it took 20-46 s (18 fits at a
-time). The network learns the scene first and the noise of the kept points
-later: ``validation_fraction`` of the kept wall points are left out of the loss and the step
-with the lowest error there is kept (``patience`` ends the training). Measured on the GPU
-over the three shared captures, count-splitting seeds 0-2, grid: held-out excess -12.2, -9.9 and
--12.0 dB at 16x, -10.4, -6.5 and -7.7 dB at 64x (the diffuse S, the dot chart, the
-resolution chart), stopping after 69-144 steps; without validation, 300 steps gave
--7.7, -8.0, -10.2 dB at 16x and +0.8, -1.3, -4.1 dB at 64x (interp: -1.8, -3.3, -5.8 and
--1.3, -0.9, -3.7 dB; rsd_prior: -4.4, -7.8, -10.0 and -3.8, -5.2, -6.7 dB).
+Cost: every step propagates the whole volume at every training frequency. The network
+learns the scene first and the noise of the kept points later: ``validation_fraction`` of
+the kept wall points are left out of the loss and the step with the lowest error there is
+kept (``patience`` ends the training). Its fit times and held-out errors, with and without
+that validation: ``studies/sparse_scans_measured/README.md``.
 """
 
 from __future__ import annotations

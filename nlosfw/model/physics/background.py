@@ -28,11 +28,8 @@ at other frequencies the prediction interpolates their magnitude and unwrapped p
 linearly (the nearest end value beyond the band): a tail delayed by a path d has a phase
 -2 pi f d, which real and imaginary parts interpolated would shrink between samples.
 
-Measured on the shared diffuse S at 16x with count splitting (default options): held-out
-excess error without / with the offsets -4.60 / -4.78 dB (count-splitting seed 0), -4.27 / -4.26
-(seed 1), -4.42 / -4.57 (seed 2), 0.11 dB better on average; the offsets' RMS is 0.27-0.28
-of the field's, the largest 0.87-1.03, at the band's low end. A plane per frequency over
-the wall (three coefficients) was tried and made seed 0 worse (-4.40 dB): not offered.
+What the offsets change on the shared captures, and why a plane per frequency over the
+wall is not offered: ``studies/physics_terms_measured/README.md``.
 """
 
 from __future__ import annotations

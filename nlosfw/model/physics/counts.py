@@ -27,12 +27,11 @@ update keeps the zeros of its start, so the counts refine the albedo on that sup
 (which keeps M, one row per point and bin, to the support's columns).
 
 When to stop. Run to convergence, EM fits the counts' noise (Richardson-Lucy's known
-semi-convergence): on the shared diffuse S at 16x (count-splitting seed 0) the held-out excess
-was -7.4 dB after 10 iterations and -3.5 dB after 50 (least squares alone: -4.6 dB; the
-rule below stops after 7: -7.6 dB). So by default
-(``counts.stop``) the counts are split once more, binomially, into two independent halves:
-EM runs on one, and stops at the iteration where the other's likelihood peaks
-(:func:`stopping_iteration`); the fit on all the counts then runs that many iterations.
+semi-convergence; on the shared captures: ``studies/physics_terms_measured/README.md``).
+So by default (``counts.stop``) the counts are split once more, binomially, into two
+independent halves: EM runs on one, and stops at the iteration where the other's
+likelihood peaks (:func:`stopping_iteration`); the fit on all the counts then runs that
+many iterations.
 """
 
 from __future__ import annotations

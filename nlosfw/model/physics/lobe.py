@@ -14,10 +14,9 @@ with ``background: constant``); a bounded scalar search over [0, ``lobe.max``] t
 ``lobe.tolerance``, the Lambertian k = 0 tried too (the search never evaluates its
 bounds). The full fit then uses every kept point.
 
-Why not the training residual: on the shared measured captures (16x grid, count-splitting seed
-0) it falls as k falls below 0 (0.516, 0.492 and 0.466 for k = 0, -2 and -4 on the
-diffuse S) while the held-out excess error rises (-4.60, -4.38 and -4.15 dB): a lobe that
-brightens oblique points fits noise there. It found k = 0 where k = 2 predicts better.
+Why not the training residual: on the shared measured captures it keeps falling as k goes
+below 0 while the held-out excess error rises: a lobe that brightens oblique points fits
+noise there (``studies/physics_terms_measured/README.md``).
 """
 
 from __future__ import annotations

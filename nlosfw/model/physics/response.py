@@ -27,20 +27,15 @@ z_f = <A_f a, P_f>, e_f = ||A_f a||^2 (the per-frequency gains z_f / e_f weighte
 tau by a grid over one period of the frequency spacing then a bounded search, sigma by a
 bounded search: no phase unwrapping). But alternating it with the albedo stalls: the
 albedo absorbs most of a shift by moving in depth and most of a blur by spreading over
-planes, and what is left barely moves the least-squares values (measured on a point
-scatterer 30 mm late and blurred by 20 mm: tau 0.03 mm and sigma 0 after three rounds).
+planes, and what is left barely moves the least-squares values (a point scatterer late
+and blurred keeps tau and sigma near 0 after three rounds).
 So the least-squares values only start :func:`search_response`, which minimises the fit's
 own objective over sigma and tau, the albedo fitted again (warm started, a quarter of the
 iterations) for every value tried: ``response.rounds`` rounds of a parabola per term, the
 steps halving.
 
-Measured. A simulated point scatterer (analytic simulator, 100 ps jitter, shifted 10 bins
-of 10 ps later), planes over 0.4-0.6 m, default rounds: sigma 82.6 ps, tau 92.1 ps (the
-albedo still absorbs part of both), held-out error -33.7 dB against -25.1 dB without the
-terms; with the single plane at the point's depth, 96 ps and 97.9 ps. The shared diffuse S
-at 16x with count splitting (count-splitting seed 0, one run with ``response.rounds: 1``): sigma
-2.0 ps, tau -2.1 ps, held-out excess -4.50 dB against -4.41 dB without the terms (the same
-split: interp's -1.91 dB in both); the fit took 278 s on two loaded cores.
+What it recovers on simulated captures and finds on the shared ones:
+``studies/physics_terms_measured/README.md``.
 """
 
 from __future__ import annotations

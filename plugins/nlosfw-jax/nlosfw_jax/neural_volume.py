@@ -75,9 +75,10 @@ class JaxPlaneOperator:
 
     A confocal scan on the CPU sums over planes as one product per lattice point (an
     ``einsum`` over the spectra reordered once as (Ly Lx, F, Z), as the torch operator
-    does): on 2 cores, for 70 planes, 135 frequencies and a 125 x 125 lattice, forward and
-    backward take 0.51 s against 1.14 s for the product summed over planes. A GPU and the
-    single-spot case keep that sum.
+    does), faster on the CPU than the product summed over planes
+    (``benchmarks/bench_volume_operator.py``; its numbers:
+    ``studies/sparse_scans_measured/README.md``). A GPU and the single-spot case keep that
+    sum.
     """
 
     def __init__(self, stack: PlaneStack, device: Any = None) -> None:

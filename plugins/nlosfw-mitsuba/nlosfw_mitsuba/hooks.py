@@ -19,4 +19,5 @@ def register_simulators(register: Registrar) -> None:
         description="Mitsuba 3 + mitransient path tracing (transient_nlos_path, LLVM)",
         test_config={"spp": 1024},
         capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.DEVICE_LEGS, C.OCCLUSION, C.MESH_FILES],
+        system_check="nlosfw_mitsuba.llvm:llvm_problem",   # Dr.Jit's LLVM >= 16
     )

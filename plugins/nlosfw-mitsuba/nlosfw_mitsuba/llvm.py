@@ -89,6 +89,16 @@ def find_libllvm(env: Mapping[str, str] | None = None,
     return candidates[0][1]
 
 
+def llvm_problem() -> str:
+    """Why Dr.Jit would find no usable LLVM here, in one line ('' when it would): the
+    mitsuba plugin's system check (the conformance kit skips it with this reason)."""
+    try:
+        find_libllvm()
+    except PluginError as err:
+        return str(err)
+    return ""
+
+
 def configure_llvm(env: MutableMapping[str, str] | None = None,
                    dirs: Iterable[str] | None = None) -> str:
     """Set ``DRJIT_LIBLLVM_PATH`` (unless set) before Dr.Jit is imported; return the library.

@@ -45,10 +45,9 @@ CPU_CHUNK = 4096
 class _SpectraProduct(torch.autograd.Function):
     """S c for constant spectra S (L, F, Z) and columns c (L, Z, M), with the gradient
     S^H g computed as (g^H S)^H, which reads S as it is stored. Autograd's own backward of
-    ``bmm`` multiplies by S's conjugate transpose, about four times the forward's time:
-    the operator's forward and backward take 1.32 s with it and 0.77 s with this on 2
-    cores (``benchmarks/bench_volume_operator.py``: 70 planes, 135 frequencies, the same
-    gradient)."""
+    ``bmm`` multiplies by S's conjugate transpose, several times the forward's time
+    (``benchmarks/bench_volume_operator.py`` compares the two, with the same gradient; its
+    numbers: ``studies/sparse_scans_measured/README.md``)."""
 
     @staticmethod
     def forward(ctx: Any, spectra: torch.Tensor, columns: torch.Tensor) -> torch.Tensor:
@@ -67,18 +66,16 @@ class TorchPlaneOperator:
 
     A confocal scan on the CPU sums over planes as one batched matrix product per lattice
     point (the spectra reordered once as (Ly Lx, F, Z), a copy as large as the product the
-    other path makes in every step; its gradient by :class:`_SpectraProduct`): 2.7 times
-    faster there than the product summed over planes, before that gradient (70 planes,
-    135 frequencies, 135 x 135, forward and backward: 2.1 s against 5.6 s on 2 cores). A
-    GPU and the single-spot case keep that sum (measured on the H200; each plane's laser
-    leg makes the inputs differ per frequency there).
+    other path makes in every step; its gradient by :class:`_SpectraProduct`): faster there
+    than the product summed over planes. A GPU and the single-spot case keep that sum
+    (each plane's laser leg makes the inputs differ per frequency there).
 
     Where the confocal spectra have the symmetry of :func:`nlosfw.model.hybrid.fold_spectra`
     (``rsd_prior``'s lattices around a regular grid of kept points do), the product is one
     per orbit of up to 8 lattice points instead of one per point (``fold=False``: per
-    point): forward and backward 0.13 s against 0.61 to 0.76 s on 2 cores (two runs;
-    ``benchmarks/bench_volume_operator.py``, the diffuse S at 16x), holding 7.8 times
-    less than the reordered spectra.
+    point), holding several times less than the reordered spectra
+    (``benchmarks/bench_volume_operator.py``; its numbers:
+    ``studies/sparse_scans_measured/README.md``).
     """
 
     def __init__(self, stack: PlaneStack, device: torch.device | str = "cpu",
@@ -141,11 +138,9 @@ def volume_albedo(network: Callable[[torch.Tensor], torch.Tensor], coords: torch
     With ``chunk``, the network runs on ``chunk`` voxels at a time and keeps none of its
     activations: each piece is run again in the backward pass (``torch.utils.checkpoint``),
     so every piece's activations stay in the CPU's cache. The network must treat its
-    points independently (every registered network does). Over the 295 750 voxels of the
-    diffuse S at 16x (SIREN 64 x 64, one thread) the network's forward and backward take
-    0.35 s in pieces of 4096 against 0.67 s whole, the gradient the same to 8e-6
-    (``benchmarks/bench_volume_network.py``); the fit of that capture took 50 s against 81 s
-    whole, measured in one session on 2 cores."""
+    points independently (every registered network does). The gradient is the same;
+    the time in pieces against whole (``benchmarks/bench_volume_network.py``):
+    ``studies/sparse_scans_measured/README.md``."""
     def values(x: torch.Tensor) -> torch.Tensor:
         return torch.nn.functional.softplus(_real_output(network(x)) + shift)
 
