@@ -36,14 +36,14 @@ OPTIONAL_KEYS = ('capture',)
 
 def one(capture: Path, model: str, device: str, step: int) -> dict[str, object]:
     """Fit seconds, wall seconds and held-out excess (dB) of one model on one device."""
-    import nlosfw
+    from nlosfw import run
 
     extra = [f"model.device={device}"] if model.endswith("_torch") else []
     start = time.perf_counter()
-    out = nlosfw.run([f"capture.path={capture}", f"model={model}", "split.count_splitting=true",
-                      "split.count_splitting_seed=0", f"split.spatial_step={step}", "sampling=grid",
-                      "stop_after=predict", "figures.enabled=false", *extra],
-                     output_dir=Path(tempfile.mkdtemp()) / "run")
+    out = run([f"capture.path={capture}", f"model={model}", "split.count_splitting=true",
+               "split.count_splitting_seed=0", f"split.spatial_step={step}", "sampling=grid",
+               "stop_after=predict", "figures.enabled=false", *extra],
+              output_dir=Path(tempfile.mkdtemp()) / "run")
     metrics = json.loads((out.dir / "metrics.json").read_text())
     heldout = metrics["field"]["model" if model != "interp" else "interp"]["splits"][
         "heldout_measurement"]
