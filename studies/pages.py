@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from nlosfw.common import markdown
+
 STUDIES = Path(__file__).resolve().parent
 ROOT = STUDIES.parent
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
@@ -80,8 +82,9 @@ def replace_generated(page: Path, text: str) -> None:
 
 
 def recorded_line(results: Mapping[str, Any]) -> str:
-    """One sentence: where and when the numbers were measured."""
-    r = results["recorded"]
+    """One sentence: where and when the numbers were measured (the machine, commit and date
+    escaped for Markdown: a user's ``--ran-on`` text ends up there)."""
+    r = {k: markdown(v) for k, v in results["recorded"].items()}
     return (f"Measured on: {r['machine']}. Commit: {r['commit']}. Date: {r['date']}. "
             f"Source: {results.get('source', NOT_RECORDED)}.")
 
@@ -91,7 +94,7 @@ def render_index(studies: Path = STUDIES) -> None:
     rows = ["| study | question | date | commit | machine |", "|---|---|---|---|---|"]
     for name in NAMES:
         results = read_results(studies / name)
-        r = results["recorded"]
+        r = {k: markdown(v) for k, v in results["recorded"].items()}
         rows.append(f"| [{name}]({name}/README.md) | {results['question']} | {r['date']} | "
                     f"{r['commit']} | {r['machine']} |")
     replace_generated(studies / "README.md", "\n".join(rows))

@@ -300,7 +300,8 @@ def test_the_study_script_collects_the_study_with_its_verdicts(split_sweep, tmp_
     assert "**Reduced run**" in result.stdout
     assert "| ceiling |" in result.stdout and "| interp |" in result.stdout
     # --ran-on is the user's text: escaped for Markdown (no raw HTML, no link, no cell break)
-    assert r"on &lt;b&gt;\[a GPU\](x)&lt;/b&gt; \| y, " in result.stdout
+    assert r"on &lt;b&gt;\[a GPU\](x)&lt;/b&gt; \| y. " in result.stdout
+    assert "<b>" not in result.stdout and "[a GPU](x)" not in result.stdout
 
 
 @pytest.mark.skipif(not (REAL / "data_diffuse_s.mat").is_file(),

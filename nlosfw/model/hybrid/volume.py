@@ -35,7 +35,7 @@ The backend is the subclass's (``nlosfw-torch``: ``neural_volume_torch``, ``nlos
 Cost: every step propagates the whole volume at every training frequency. On the shared
 diffuse S at 16x (70 planes of 65 x 65 voxels, 135 frequencies) a whole fit at the defaults
 takes about 50 s on 2 CPU cores, torch or JAX (29-50 s over the three shared captures at
-16x and 64x, ``benchmarks/fit_times.py``); on one H200 GPU it took 20-46 s (18 fits at a
+16x and 64x, ``benchmarks/model/bench_fit_times.py``); on one H200 GPU it took 20-46 s (18 fits at a
 time). The network learns the scene first and the noise of the kept points
 later: ``validation_fraction`` of the kept wall points are left out of the loss and the step
 with the lowest error there is kept (``patience`` ends the training). Measured on the GPU

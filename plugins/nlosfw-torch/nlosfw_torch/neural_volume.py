@@ -47,7 +47,7 @@ class _SpectraProduct(torch.autograd.Function):
     S^H g computed as (g^H S)^H, which reads S as it is stored. Autograd's own backward of
     ``bmm`` multiplies by S's conjugate transpose, about four times the forward's time:
     the operator's forward and backward take 1.32 s with it and 0.77 s with this on 2
-    cores (``benchmarks/bench_volume_operator.py``: 70 planes, 135 frequencies, the same
+    cores (``benchmarks/model/bench_volume_operator.py``: 70 planes, 135 frequencies, the same
     gradient)."""
 
     @staticmethod
@@ -77,7 +77,7 @@ class TorchPlaneOperator:
     (``rsd_prior``'s lattices around a regular grid of kept points do), the product is one
     per orbit of up to 8 lattice points instead of one per point (``fold=False``: per
     point): forward and backward 0.13 s against 0.61 to 0.76 s on 2 cores (two runs;
-    ``benchmarks/bench_volume_operator.py``, the diffuse S at 16x), holding 7.8 times
+    ``benchmarks/model/bench_volume_operator.py``, the diffuse S at 16x), holding 7.8 times
     less than the reordered spectra.
     """
 
@@ -144,7 +144,7 @@ def volume_albedo(network: Callable[[torch.Tensor], torch.Tensor], coords: torch
     points independently (every registered network does). Over the 295 750 voxels of the
     diffuse S at 16x (SIREN 64 x 64, one thread) the network's forward and backward take
     0.35 s in pieces of 4096 against 0.67 s whole, the gradient the same to 8e-6
-    (``benchmarks/bench_volume_network.py``); the fit of that capture took 50 s against 81 s
+    (``benchmarks/model/bench_volume_network.py``); the fit of that capture took 50 s against 81 s
     whole, measured in one session on 2 cores."""
     def values(x: torch.Tensor) -> torch.Tensor:
         return torch.nn.functional.softplus(_real_output(network(x)) + shift)
