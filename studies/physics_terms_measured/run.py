@@ -17,6 +17,11 @@ approximation), ``least_squares:lobe.fit=true`` (the reflectance lobe),
 held-out excess of the model and of ``interp``, their reconstruction PSNR and SSIM against
 half B's full scan, the fit's seconds and what it fitted; ``render`` rewrites the page's
 generated section and ``figure.svg`` from ``results.json``.
+
+``run --calibration`` adds the calibration errors ``rsd_prior`` must survive, on simulated
+captures (embree, Poisson noise, 16x): ``letter_t`` and ``thesis_two_planes`` with 0, 50 and
+100 ps of timing jitter (``scene.noise.jitter_ps``), each scored against the full capture
+with the same error; ``collect`` keeps those runs' ``raw``, ``interp`` and model scores.
 """
 
 from __future__ import annotations
@@ -40,6 +45,10 @@ QUESTION = ("Do `rsd_prior`'s terms for real systems (background, response, refl
             "its least-squares fit?")
 FIGURE = "figure.svg"
 VARIANTS = "least_squares,poisson_counts"
+#: The calibration cases ``run --calibration`` runs: scenes and timing jitters (ps).
+CALIBRATION_SCENES = ("letter_t", "thesis_two_planes")
+CALIBRATION_JITTERS = (0, 50, 100)
+SCORES = ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m")
 SHORT = {"data_diffuse_s.mat": "diffuse S", "data_dot_chart_40cm.mat": "dot chart",
          "data_resolution_chart_40cm.mat": "resolution chart"}
 
@@ -59,6 +68,8 @@ def _arguments(run_parser: argparse.ArgumentParser,
                             help="comma-separated LIKELIHOOD[:OPTION=VALUE...] (model options)")
     run_parser.add_argument("--dir", type=Path, default=ROOT / "multirun" / "physics_terms",
                             help="the runs go to DIR/<n>")
+    run_parser.add_argument("--calibration", action="store_true",
+                            help="also the simulated calibration cases (timing jitter)")
     collect_parser.add_argument("dirs", type=Path, nargs="+", help="run directories")
     for parser in (run_parser, collect_parser):
         parser.add_argument("--out", type=Path, default=None,
@@ -91,6 +102,27 @@ def run(args: argparse.Namespace) -> None:
                     print(f"$ nlosfw.run {' '.join(given)}", flush=True)
                     run_nlosfw(given, output_dir=out)
                     args.dirs.append(out)
+    for scene in CALIBRATION_SCENES if args.calibration else ():
+        for jitter in CALIBRATION_JITTERS:
+            out = args.dir / str(len(args.dirs))
+            given = [f"scene={scene}", "simulator=embree", "scene.noise.model=poisson",
+                     f"scene.noise.jitter_ps={jitter}", "split.spatial_step=4",
+                     "model=rsd_prior", "figures.enabled=false",
+                     "reconstruction.single_frequency_images=0"]
+            print(f"$ nlosfw.run {' '.join(given)}", flush=True)
+            run_nlosfw(given, output_dir=out)
+            args.dirs.append(out)
+
+
+def calibration_row(metrics: dict[str, Any], given: dict[str, str]) -> dict[str, Any]:
+    """A simulated calibration run's row: its case and each source's scores."""
+    jitter = float(given.get("scene.noise.jitter_ps", 0))
+    case = f"{given.get('scene', '?')}/embree/poisson" + (f"/jitter{jitter:g}ps" if jitter else "")
+    sources = metrics["reconstruction"]["sources"]
+    return {"case": case, "step": int(given.get("split.spatial_step", 4)),
+            "scores": {name: {k: sources[source].get(k) for k in SCORES}
+                       for name, source in (("raw", "raw"), ("interp", "interp"),
+                                            ("rsd_prior", "model"))}}
 
 
 def one(run_dir: Path) -> dict[str, Any]:
@@ -100,6 +132,8 @@ def one(run_dir: Path) -> dict[str, Any]:
     metrics = json.loads((run_dir / "metrics.json").read_text(encoding="utf-8"))
     given = dict(o.split("=", 1) for o in read_run(run_dir, run_dir.parent).overrides
                  if "=" in o)
+    if "capture.path" not in given:
+        return calibration_row(metrics, given)
     options = [f"{k[len('model.'):]}={v}" for k, v in given.items()
                if k.startswith("model.") and k != "model.likelihood"]
     sources = metrics["reconstruction"]["sources"]
@@ -120,8 +154,11 @@ def one(run_dir: Path) -> dict[str, Any]:
 
 def collect(args: argparse.Namespace) -> dict[str, Any]:
     """The study's rows, one per run directory; prints the page's generated section."""
+    found = [one(d) for d in args.dirs]
     results = {"question": QUESTION, "source": "the runs' metrics.json, read by `run.py collect`",
-               "recorded": pages.recorded(), "rows": [one(d) for d in args.dirs]}
+               "recorded": pages.recorded(), "rows": [r for r in found if "case" not in r],
+               "calibration": {"recorded": pages.recorded(), "source": "the runs of "
+                               "`run --calibration`", "cases": [r for r in found if "case" in r]}}
     print(results_markdown(results))
     return results
 
@@ -171,6 +208,20 @@ def summary_table(rows: Sequence[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def calibration_table(calibration: dict[str, Any]) -> list[str]:
+    """The calibration cases: each source's PSNR / SSIM (front view) at 16x."""
+    lines = ["| case | raw: PSNR / SSIM | interp | rsd_prior | rsd_prior depth RMSE (mm) |",
+             "|---|---|---|---|---|"]
+    for case in calibration["cases"]:
+        s = case["scores"]
+        cells = [f"{s[n]['psnr']:.1f} / {s[n]['ssim']:.3f}" for n in ("raw", "interp",
+                                                                       "rsd_prior")]
+        depth = s["rsd_prior"].get("depth_rmse_m")
+        lines.append(f"| {case['case']} | {' | '.join(cells)} | "
+                     f"{'-' if depth is None else f'{1000 * depth:.1f}'} |")
+    return lines
+
+
 def results_markdown(results: dict[str, Any]) -> str:
     """The page's generated section, from the collected runs."""
     rows = results["rows"]
@@ -185,6 +236,12 @@ def results_markdown(results: dict[str, Any]) -> str:
         "`interp` is the same in every run of a cell. The held-out excess is lower-better.",
         "",
         summary_table(rows),
+        "",
+        "**Calibration errors on simulated captures** (`run --calibration`: embree, Poisson "
+        "noise, 16×; each source scored against the full capture with the same error). "
+        + pages.recorded_line(results["calibration"]),
+        "",
+        *calibration_table(results["calibration"]),
         "",
         f"![held-out excess of each variant per capture and sparsity]({FIGURE})",
     ]) + "\n"
