@@ -96,3 +96,28 @@ def test_a_page_without_its_markers_is_refused(tmp_path):
     with pytest.raises(ValueError, match="recorded"):
         pages.write_results(tmp_path, {"recorded": {"machine": "m"}})
     assert not (tmp_path / "results.json").exists()
+
+
+def test_collect_reads_the_scores_the_runs_recorded(tmp_path, monkeypatch):
+    """A study's collect copies each score from the run's metrics.json (it computes none):
+    the physics study's calibration row of a tiny jittered run holds exactly the run's
+    reconstruction scores, labelled by the run's own overrides."""
+    import nlosfw
+
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    out = nlosfw.run(["scene=tiny", "scene.noise.model=poisson", "scene.noise.jitter_ps=50",
+                      "split.spatial_step=2", "model=rsd_prior", "figures.enabled=false",
+                      "reconstruction.single_frequency_images=0"], output_dir=tmp_path / "0")
+    done = subprocess.run([sys.executable, str(STUDIES / "physics_terms_measured" / "run.py"),
+                           "collect", str(out.dir), "--out", str(tmp_path / "r.json")],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    results = json.loads((tmp_path / "r.json").read_text())
+    (case,) = results["calibration"]["cases"]
+    assert case["case"] == "tiny/analytic/poisson/jitter50ps" and case["step"] == 2
+    sources = json.loads((out.dir / "metrics.json").read_text())["reconstruction"]["sources"]
+    for name, source in (("raw", "raw"), ("interp", "interp"), ("rsd_prior", "model")):
+        for score in ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m"):
+            assert case["scores"][name][score] == sources[source][score]
+    assert results["rows"] == [] and "| tiny/analytic/poisson/jitter50ps |" in done.stdout
+    assert (STUDIES / "physics_terms_measured" / "README.md").is_file()

@@ -117,7 +117,9 @@ def run(args: argparse.Namespace) -> None:
 def calibration_row(metrics: dict[str, Any], given: dict[str, str]) -> dict[str, Any]:
     """A simulated calibration run's row: its case and each source's scores."""
     jitter = float(given.get("scene.noise.jitter_ps", 0))
-    case = f"{given.get('scene', '?')}/embree/poisson" + (f"/jitter{jitter:g}ps" if jitter else "")
+    case = "/".join([given.get("scene", "?"), str(metrics["run"].get("simulator") or "?"),
+                     given.get("scene.noise.model", "none")]) + (
+        f"/jitter{jitter:g}ps" if jitter else "")
     sources = metrics["reconstruction"]["sources"]
     return {"case": case, "step": int(given.get("split.spatial_step", 4)),
             "scores": {name: {k: sources[source].get(k) for k in SCORES}
