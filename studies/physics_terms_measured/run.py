@@ -260,9 +260,9 @@ def render(results: dict[str, Any], folder: Path) -> None:
     rows = results["rows"]
     cells = _cells(rows)
     variants = list(dict.fromkeys(r["variant"] for r in rows))
-    labels = [f"{SHORT.get(c, c)} {s * s}×" for c, s in cells]
+    labels = [f"{SHORT.get(c, c)}\n{s * s}×" for c, s in cells]
     with matplotlib.rc_context(pages.plain_figure_settings()):
-        fig, ax = plt.subplots(figsize=(8, 3.2))
+        fig, ax = plt.subplots(figsize=(9, 3.4))
         width = 0.8 / (len(variants) + 1)
         for k, variant in enumerate(variants):
             ax.bar([i + k * width for i in range(len(cells))],
