@@ -30,7 +30,7 @@ ADDED = ("null_reasons",)
 
 def comparable(data: Mapping[str, Any]) -> dict[str, Any]:
     """``data`` without the timings, ``schema_version`` and the run's own fields."""
-    from nlosfw.pipeline.metrics import without_timings
+    from nlosfw.pipeline import without_timings
 
     out = without_timings(data)
     out.pop("schema_version", None)

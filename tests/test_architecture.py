@@ -198,8 +198,14 @@ def _third_party_sources() -> list[Path]:
     return sorted(p for p in found if "build" not in p.relative_to(ROOT).parts)
 
 
-@pytest.mark.parametrize("path", _third_party_sources(), ids=lambda p: str(p.relative_to(ROOT)))
-def test_plugins_and_examples_use_only_public_names(path):
+def _script_sources() -> list[Path]:
+    """The benchmarks' and the studies' scripts: they use nlosfw as its users do."""
+    return sorted([*ROOT.glob("benchmarks/**/*.py"), *ROOT.glob("studies/**/*.py")])
+
+
+@pytest.mark.parametrize("path", _third_party_sources() + _script_sources(),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_plugins_examples_benchmarks_and_studies_use_only_public_names(path):
     private = []
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):
@@ -215,6 +221,7 @@ def test_plugins_and_examples_use_only_public_names(path):
                 private.append(f"{node.module}.{alias.name}")
     assert not private, (f"{path.relative_to(ROOT)} imports names outside the stage packages' "
                          f"and the backend APIs' __all__: {private}")
+    assert _script_sources(), "no benchmark or study scripts found"
 
 
 def test_every_public_name_exists():
@@ -238,9 +245,8 @@ def _imported_names(path: Path) -> list[str]:
 
 def test_only_the_evaluation_package_imports_skimage_metrics():
     """Reconstruction scores have one implementation, :mod:`nlosfw.evaluation.image_scores`:
-    no other module, plugin, example or benchmark imports scikit-image's metrics."""
-    sources = sorted([*CORE.rglob("*.py"), *_third_party_sources(),
-                      *ROOT.glob("benchmarks/*.py")])
+    no other module, plugin, example, benchmark or study imports scikit-image's metrics."""
+    sources = sorted([*CORE.rglob("*.py"), *_third_party_sources(), *_script_sources()])
     importers = sorted({str(path.relative_to(ROOT)) for path in sources
                         if any(n.split(".")[0] == "skimage" for n in _imported_names(path))})
     assert importers == ["nlosfw/evaluation/image_scores.py"]

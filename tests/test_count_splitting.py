@@ -279,11 +279,12 @@ def test_the_study_report_shows_the_excess_and_the_ceiling(split_sweep):
     assert "held-out excess (dB)" in text and "Count splitting" in text
 
 
-def test_the_benchmark_collects_the_study_with_its_verdicts(split_sweep, tmp_path):
-    """benchmarks/sparsity_real.py collect: the JSON holds the study's rows, the markdown its
-    table (labelled as a reduced run) and the verdict against interp."""
+def test_the_study_script_collects_the_study_with_its_verdicts(split_sweep, tmp_path):
+    """studies/sparse_scans_measured/run.py collect: the JSON holds the study's rows, the
+    markdown its table (labelled as a reduced run) and the verdict against interp."""
     out = tmp_path / "real.json"
-    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "sparsity_real.py"),
+    script = ROOT / "studies" / "sparse_scans_measured" / "run.py"
+    result = subprocess.run([sys.executable, str(script),
                              "collect", str(split_sweep), "--reduced", "--out", str(out),
                              "--ran-on", "<b>[a GPU](x)</b> | y"],
                             cwd=tmp_path, capture_output=True, text=True, timeout=600,
@@ -299,7 +300,8 @@ def test_the_benchmark_collects_the_study_with_its_verdicts(split_sweep, tmp_pat
     assert "**Reduced run**" in result.stdout
     assert "| ceiling |" in result.stdout and "| interp |" in result.stdout
     # --ran-on is the user's text: escaped for Markdown (no raw HTML, no link, no cell break)
-    assert r"on &lt;b&gt;\[a GPU\](x)&lt;/b&gt; \| y, " in result.stdout
+    assert r"on &lt;b&gt;\[a GPU\](x)&lt;/b&gt; \| y. " in result.stdout
+    assert "<b>" not in result.stdout and "[a GPU](x)" not in result.stdout
 
 
 @pytest.mark.skipif(not (REAL / "data_diffuse_s.mat").is_file(),

@@ -231,7 +231,7 @@ def test_the_run_depth_range_follows_depths_then_depth_range_then_the_signal(poi
 def test_the_diffuse_s_reference_is_where_the_authors_find_the_s(workdir):
     """The shared diffuse S, binned to 16 x 16 scan points: the histograms at 4 ps imaged by
     lct put the S's brightest voxel within 3 cm of the authors' LCT (0.504 m,
-    benchmarks/real_imagers.py)."""
+    studies/classical_imagers_measured/run.py)."""
     path = real_capture("data_diffuse_s")
     out = nlosfw.run([f"capture.path='{path}'", "model=none", "imager=lct", "capture.bin=4",
                       "figures.enabled=false", "output.keep=[]"], output_dir=workdir / "run")

@@ -7,7 +7,7 @@ published scenes are) and 8 ps bins on their side, to stay small. nlosfw's image
 their defaults on the capture as ``nlosfw.load_capture`` reads it (the authors' settings
 arrive as imaging hints), at the automatic depths: lct, fk and fbp over the measured-capture
 band, fft over the default transform's band.
-``benchmarks/real_imagers.py`` measures the same at full resolution."""
+``studies/classical_imagers_measured/run.py`` measures the same at full resolution."""
 
 from __future__ import annotations
 

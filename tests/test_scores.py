@@ -108,3 +108,20 @@ def test_ssim_is_null_below_the_window_and_shapes_must_match():
     assert scores["ssim"] is None and scores["volume_ssim"] is None
     with pytest.raises(DataError, match="differ in shape"):
         reconstruction_scores(small, _recon(np.ones((4, 6, 7))))
+
+
+def test_ncc_is_pearsons_r_of_the_pixels_and_refuses_what_has_none():
+    """The normalised cross-correlation the studies compare front views with: invariant to
+    gain and offset, -1 for a negated image, and undefined (a one-line DataError) for a
+    constant image or images of different shapes."""
+    from nlosfw.evaluation import ncc
+
+    rng = np.random.default_rng(0)
+    a, b = rng.random((8, 9)), rng.random((8, 9))
+    assert ncc(a, b) == pytest.approx(np.corrcoef(a.ravel(), b.ravel())[0, 1], abs=1e-12)
+    assert ncc(a, 3.0 * a + 2.0) == pytest.approx(1.0, abs=1e-12)
+    assert ncc(a, -a) == pytest.approx(-1.0, abs=1e-12)
+    with pytest.raises(DataError, match="constant"):
+        ncc(a, np.ones_like(a))
+    with pytest.raises(DataError, match="shape"):
+        ncc(a, b[:, :8])

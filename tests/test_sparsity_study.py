@@ -19,6 +19,7 @@ import nlosfw
 from nlosfw.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
+STUDY = ROOT / "studies" / "sparse_scans_simulated" / "run.py"
 #: The study at its smallest: the tiny scene (16 x 16 wall), two sparsities, one neural model
 #: with two seeds and few steps, few frequencies and depth planes.
 TINY_STUDY = ["experiment=sparsity", "scene=tiny", "acquisition=clean", "split.spatial_step=2,4",
@@ -110,10 +111,9 @@ def test_the_report_aggregates_seeds(tiny_study):
     assert (report / "report.png").stat().st_size > 10_000
 
 
-def test_the_benchmark_script_collects_the_study(tiny_study, tmp_path):
+def test_the_study_script_collects_the_study(tiny_study, tmp_path):
     out = tmp_path / "study.json"
-    result = _run(str(ROOT / "benchmarks" / "sparsity_study.py"), "collect", str(tiny_study),
-                  "--out", str(out), cwd=tmp_path)
+    result = _run(str(STUDY), "collect", str(tiny_study), "--out", str(out), cwd=tmp_path)
     data = json.loads(out.read_text())
     assert data["runs"] == data["completed"] == 4
     assert data["overrides"]["split.spatial_step"] == ["2", "4"]
@@ -151,7 +151,7 @@ def test_the_study_on_a_capture_file_drops_the_scene_axes(tmp_path, monkeypatch)
     made = nlosfw.run(["scene=tiny", "stop_after=capture"], output_dir=tmp_path / "made")
     capture = made.dir / "capture.hdf5"
     sweep, out = tmp_path / "sweep", tmp_path / "study.json"
-    _run(str(ROOT / "benchmarks" / "sparsity_study.py"), "run", "--dir", str(sweep),
+    _run(str(STUDY), "run", "--dir", str(sweep),
          "--capture", str(capture), "--out", str(out), "split.spatial_step=2", "model=siren_torch",
          "model.seed=0,1", "model.steps=10", "transform.n_frequencies=21",
          "reconstruction.n_depths=8", cwd=tmp_path)

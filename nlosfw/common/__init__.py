@@ -28,7 +28,7 @@ from nlosfw.common.errors import (
 from nlosfw.common.files import atomic_path, write_text
 from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.common.progress import ProgressCallback, accepts_progress
-from nlosfw.common.text import override_value
+from nlosfw.common.text import markdown, override_value
 from nlosfw.common.version import __version__
 
 __all__ = [
@@ -48,6 +48,7 @@ __all__ = [
     "moved_names",
     "NlosfwError",
     "one_line",
+    "markdown",
     "override_value",
     "PlanShape",
     "PluginError",

@@ -49,6 +49,17 @@ def rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2)))
 
 
+def ncc(reference: np.ndarray, test: np.ndarray) -> float:
+    """Normalised cross-correlation of two images of one shape: Pearson's r of their pixels
+    (1 for the same image up to gain and offset). A constant image has none: DataError."""
+    a, b = _pair(reference, test)
+    a, b = a.ravel() - a.mean(), b.ravel() - b.mean()
+    norm = float(np.linalg.norm(a) * np.linalg.norm(b))
+    if norm == 0.0:
+        raise DataError("ncc: an image is constant; its correlation is undefined")
+    return float(a @ b / norm)
+
+
 def psnr(reference: np.ndarray, test: np.ndarray, data_range: float = 1.0) -> float:
     """Peak signal-to-noise ratio 10 log10(data_range^2 / MSE) in dB (inf for identical images).
 

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING
 from nlosfw.common.lazy import lazy_exports
 
 if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.lazy)
+    from nlosfw.pipeline.budget import memory_summary, process_memory
+    from nlosfw.pipeline.cache import cache_entries, file_digest
     from nlosfw.pipeline.engine import STAGES, Pipeline, objective
     from nlosfw.pipeline.events import RunEvents
     from nlosfw.pipeline.files import PLANNED_NAMES, RunFiles
@@ -77,10 +79,14 @@ __all__ = [
     "StageResults",
     "TIMING_FIELDS",
     "TransformResult",
+    "cache_entries",
+    "file_digest",
     "make_plan",
+    "memory_summary",
     "metrics_outline",
     "metrics_schema",
     "objective",
+    "process_memory",
     "run_settings",
     "without_timings",
 ]

@@ -20,13 +20,13 @@ each field model   what it estimates itself (:meth:`~nlosfw.model.FieldModel.est
                    :mod:`nlosfw.model.neural.memory`; the neural volume's operator,
                    :mod:`nlosfw.model.hybrid.volume_memory`; nothing by default), a
                    runtime that several models load counted once
-the program        (the log's summary and ``benchmarks/bench_memory.py``): this process's
+the program        (the log's summary and ``benchmarks/pipeline/bench_memory.py``): this process's
                    resident memory now (Python, numpy, h5py, Hydra, the plugins loaded),
                    which the run keeps
 =================  ===========================================================
 
 The check against the memory available leaves the program out (the memory available is
-what is left beside it); the log's summary and ``benchmarks/bench_memory.py``, which
+what is left beside it); the log's summary and ``benchmarks/pipeline/bench_memory.py``, which
 compares the estimate with a run's measured peak resident memory, count it. The engine
 knows no plugin's options: the models' parts are theirs.
 """

@@ -152,11 +152,11 @@ def test_override_value_composes_to_the_text_itself():
                                       resolve=True)["key"] == text, repr(text)
 
 
-@pytest.mark.parametrize("script", ["sparsity_study.py", "sparsity_real.py"])
-def test_the_study_benchmarks_pass_capture_and_sweep_names_literally(tmp_path, monkeypatch,
-                                                                     script):
+@pytest.mark.parametrize("study", ["sparse_scans_simulated", "sparse_scans_measured"])
+def test_the_sparse_scan_studies_pass_capture_and_sweep_names_literally(tmp_path, monkeypatch,
+                                                                        study):
     """A capture named as the Zaragoza dataset names its files (brackets, commas), with a
-    quote and an interpolation, and a sweep folder with a comma: the command the benchmark
+    quote and an interpolation, and a sweep folder with a comma: the command the study
     runs composes both as written."""
     import importlib.util
     import sys
@@ -164,10 +164,10 @@ def test_the_study_benchmarks_pass_capture_and_sweep_names_literally(tmp_path, m
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from omegaconf import OmegaConf
 
-    benchmarks = Path(__file__).resolve().parents[2] / "benchmarks"
-    monkeypatch.syspath_prepend(str(benchmarks))   # sparsity_real imports sparsity_study
-    spec = importlib.util.spec_from_file_location(f"under_test_{script[:-3]}",
-                                                  benchmarks / script)
+    studies = Path(__file__).resolve().parents[2] / "studies"
+    monkeypatch.syspath_prepend(str(studies))   # the studies' shared helpers
+    spec = importlib.util.spec_from_file_location(f"under_test_{study}",
+                                                  studies / study / "run.py")
     module = importlib.util.module_from_spec(spec)
     monkeypatch.setitem(sys.modules, spec.name, module)
     spec.loader.exec_module(module)

@@ -1,5 +1,5 @@
 """Load: a sweep of short jobs on the joblib launcher (2 workers) sharing one cache; the
-small version of ``benchmarks/bench_sweep.py`` (200 jobs)."""
+small version of ``benchmarks/pipeline/bench_sweep.py`` (200 jobs)."""
 
 from __future__ import annotations
 

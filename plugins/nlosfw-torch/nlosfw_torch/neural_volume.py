@@ -46,7 +46,7 @@ class _SpectraProduct(torch.autograd.Function):
     """S c for constant spectra S (L, F, Z) and columns c (L, Z, M), with the gradient
     S^H g computed as (g^H S)^H, which reads S as it is stored. Autograd's own backward of
     ``bmm`` multiplies by S's conjugate transpose, several times the forward's time
-    (``benchmarks/bench_volume_operator.py`` compares the two, with the same gradient; its
+    (``benchmarks/model/bench_volume_operator.py`` compares the two, with the same gradient; its
     numbers: ``studies/sparse_scans_measured/README.md``)."""
 
     @staticmethod
@@ -74,7 +74,7 @@ class TorchPlaneOperator:
     (``rsd_prior``'s lattices around a regular grid of kept points do), the product is one
     per orbit of up to 8 lattice points instead of one per point (``fold=False``: per
     point), holding several times less than the reordered spectra
-    (``benchmarks/bench_volume_operator.py``; its numbers:
+    (``benchmarks/model/bench_volume_operator.py``; its numbers:
     ``studies/sparse_scans_measured/README.md``).
     """
 
@@ -139,7 +139,7 @@ def volume_albedo(network: Callable[[torch.Tensor], torch.Tensor], coords: torch
     activations: each piece is run again in the backward pass (``torch.utils.checkpoint``),
     so every piece's activations stay in the CPU's cache. The network must treat its
     points independently (every registered network does). The gradient is the same;
-    the time in pieces against whole (``benchmarks/bench_volume_network.py``):
+    the time in pieces against whole (``benchmarks/model/bench_volume_network.py``):
     ``studies/sparse_scans_measured/README.md``."""
     def values(x: torch.Tensor) -> torch.Tensor:
         return torch.nn.functional.softplus(_real_output(network(x)) + shift)

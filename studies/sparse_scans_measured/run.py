@@ -1,0 +1,225 @@
+"""Sparse scans of measured captures: the real-data study over the shared captures.
+
+    python studies/sparse_scans_measured/run.py run [--captures DIR] [--only NAME ...] [--dir DIR]
+                                                    [--reduced] [OVERRIDE ...]
+    python studies/sparse_scans_measured/run.py collect DIR [DIR ...] [--reduced] [--out JSON]
+    python studies/sparse_scans_measured/run.py render
+
+``run`` runs ``python -m nlosfw -m experiment=sparsity_real capture.path=FILE`` for every
+capture of ``--captures`` (default ``../shared/data/real``; ``--only`` picks some by file
+stem) into ``DIR/<stem>`` (count splitting: models train on half A's kept wall points, half
+B scores them), then collects them. With no override it runs the whole study (4x, 16x, 64x;
+grid and random; rsd_prior, siren_torch, hashgrid_torch, rsd_residual_torch,
+neural_volume_torch; three count-splitting seeds; interp in every run). ``--reduced`` runs
+the smallest useful part (``model=rsd_prior split.spatial_step=4 sampling=grid
+split.count_splitting_seed=0``: interp and rsd_prior at 16x, one seed) and labels the
+results as reduced; overrides narrow or extend either. ``collect`` reads every run's
+metrics.json (``nlosfw.report``) into ``results.json`` (``--out JSON``: elsewhere, the page
+untouched) and prints the page's generated section; ``render`` rewrites that section and
+``figure.png`` from ``results.json``. The scores are the runs' own
+(:mod:`nlosfw.evaluation`):
+
+- held-out excess: the error at the wall points not kept against half B's measured field,
+  minus the noise floor (the error of a perfect predictor), dB of B's power: lower wins;
+- PSNR / SSIM of the reconstruction against half B's full scan; ``ceiling`` is half A's
+  full scan scored the same way.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # studies/: the shared helpers
+import pages
+from sweeps import collect_study, fmt, study_rows_of
+
+from nlosfw.common import markdown, override_value
+from nlosfw.report import StudyRow, markdown_table, study_figure
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+CAPTURES = ROOT.parent / "shared" / "data" / "real"
+QUESTION = ("On measured captures, at 4×, 16× and 64× fewer wall points, which field model "
+            "predicts the unseen wall points best (count splitting), and does it image the "
+            "scene better than `interp`?")
+FIGURE = "figure.png"
+REDUCED = ("model=rsd_prior", "split.spatial_step=4", "sampling=grid",
+           "split.count_splitting_seed=0")
+#: The study's targets: the best model against interp, averaged over count-splitting seeds.
+TARGETS = {"excess_db": 3.0, "psnr_db": 1.0, "ssim": 0.02, "network_over_rsd_db": 0.5}
+NETWORK_PLUGINS = ("siren_torch", "hashgrid_torch", "rsd_residual_torch", "neural_volume_torch")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return pages.main(pages.Study(HERE, run, collect, render, _arguments,
+                                  description=__doc__.split("\n\n")[0]), argv)
+
+
+def _arguments(run_parser: argparse.ArgumentParser,
+               collect_parser: argparse.ArgumentParser) -> None:
+    run_parser.add_argument("--captures", type=Path, default=CAPTURES,
+                            help="folder of .mat captures")
+    run_parser.add_argument("--only", nargs="*", default=None, help="capture file stems to run")
+    run_parser.add_argument("--dir", type=Path, default=None,
+                            help="sweeps go to DIR/<stem> (default: multirun/sparsity-real-<date>)")
+    run_parser.add_argument("overrides", nargs="*", help="Hydra overrides for every sweep")
+    collect_parser.add_argument("dirs", type=Path, nargs="+")
+    for parser in (run_parser, collect_parser):
+        parser.add_argument("--reduced", action="store_true",
+                            help="the reduced study (run: its overrides; both: the label)")
+        parser.add_argument("--out", type=Path, default=None,
+                            help="write the results here instead of results.json")
+        parser.add_argument("--ran-on", default=None,
+                            help="where the runs ran, for the text (default: this machine's "
+                                 "CPU cores; say so when sweeps ran elsewhere, e.g. a GPU)")
+
+
+def run(args: argparse.Namespace) -> None:
+    """Run one sweep per capture (then ``collect`` reads them)."""
+    root = args.dir or ROOT / "multirun" / f"sparsity-real-{time.strftime('%Y%m%d-%H%M%S')}"
+    files = sorted(args.captures.glob("*.mat"))
+    if args.only:
+        files = [f for f in files if f.stem in args.only]
+    if not files:
+        raise SystemExit(f"{args.captures}: no capture to run (.mat files)")
+    args.dirs = []
+    for capture in files:
+        sweep = (root / capture.stem).resolve()
+        extra = [*(REDUCED if args.reduced else ()), *args.overrides]
+        command = sweep_command(sweep, capture, extra)
+        print("$ " + shlex.join(command), flush=True)
+        subprocess.run(command, check=True, cwd=ROOT)
+        args.dirs.append(sweep)
+
+
+def collect(args: argparse.Namespace) -> dict[str, Any]:
+    """The study's results from the sweeps' runs; prints the page's generated section."""
+    results: dict[str, Any] = {
+        "question": QUESTION, "source": "the runs' metrics.json, read by `run.py collect`",
+        "recorded": pages.recorded(args.ran_on or ""), **collect_study(args.dirs)}
+    results["reduced"] = bool(args.reduced)
+    results["ran_on"] = args.ran_on or f"{results['machine']['cpus']} CPU cores"
+    print(results_markdown(results))
+    return results
+
+
+def render(results: dict[str, Any], folder: Path) -> None:
+    """The page's generated section and its figure, from ``results``."""
+    pages.replace_generated(folder / "README.md", results_markdown(results))
+    study_figure(study_rows_of(results), folder / FIGURE, dpi=80)
+
+
+def sweep_command(sweep: Path, capture: Path, overrides: Sequence[str]) -> list[str]:
+    """``python -m nlosfw -m experiment=sparsity_real capture.path=FILE ...``."""
+    return [sys.executable, "-m", "nlosfw", "-m", "experiment=sparsity_real",
+            f"capture.path={override_value(str(capture.resolve()))}",
+            f"hydra.sweep.dir={override_value(str(sweep))}", *overrides]
+
+
+# ---------------------------------------------------------------------- markdown
+def _sparsity(row: StudyRow) -> str:
+    return f"{row.undersampling:.3g}×{' random' if row.pattern == 'random' else ''}"
+
+
+def quality_table(rows: Sequence[StudyRow]) -> str:
+    """Every capture, sparsity and source: held-out excess, error and floor (dB), PSNR and
+    SSIM against half B's full scan."""
+    header = ["capture", "sparsity", "source", "seeds", "held-out excess (dB)",
+              "held-out NMSE (dB)", "noise floor (dB)", "PSNR (dB)", "SSIM"]
+    lines = []
+    for r in rows:
+        if r.kind == "reference":
+            continue
+        s = r.scores
+        lines.append([r.condition, _sparsity(r), r.series,
+                      " ".join(str(x) for x in r.seeds) or "-",
+                      fmt(s["heldout_excess_db"], 1), fmt(s["heldout_nmse_db"], 1),
+                      fmt(s["heldout_floor_db"], 1), fmt(s["psnr"], 1), fmt(s["ssim"], 3)])
+    return markdown_table(header, lines)
+
+
+def verdicts(rows: Sequence[StudyRow]) -> list[dict[str, Any]]:
+    """Per capture and sparsity: the best model (lowest mean excess) against interp, and the
+    best network against rsd_prior (excess; positive gains mean better)."""
+    out = []
+    for cell in dict.fromkeys((r.condition, r.pattern, r.undersampling) for r in rows):
+        mine = [r for r in rows if (r.condition, r.pattern, r.undersampling) == cell]
+        by = {r.series: r for r in mine}
+        interp = by.get("interp")
+        models = [r for r in mine if r.kind == "model"
+                  and r.scores["heldout_excess_db"].mean is not None]
+        if interp is None or not models:
+            continue
+        best = min(models, key=lambda r: r.scores["heldout_excess_db"].mean or 1e9)
+
+        def gain(row: StudyRow, other: StudyRow | None, score: str,
+                 lower: bool = False) -> float | None:
+            a = row.scores[score].mean
+            b = None if other is None else other.scores[score].mean
+            return None if a is None or b is None else (b - a if lower else a - b)
+
+        nets = [r for r in models if r.series.split(" ")[0] in NETWORK_PLUGINS]
+        net = min(nets, key=lambda r: r.scores["heldout_excess_db"].mean or 1e9) if nets else None
+        out.append({"capture": cell[0], "pattern": cell[1], "undersampling": cell[2],
+                     "model": best.series,
+                     "excess_gain_db": gain(best, interp, "heldout_excess_db", lower=True),
+                     "psnr_gain_db": gain(best, interp, "psnr"),
+                     "ssim_gain": gain(best, interp, "ssim"),
+                     "network": None if net is None else net.series,
+                     "network_over_rsd_db": None if net is None else gain(
+                         net, by.get("rsd_prior"), "heldout_excess_db", lower=True)})
+    return out
+
+
+def _signed(value: float | None, fmt: str) -> str:
+    return "-" if value is None else f"{value:+{fmt}}"
+
+
+def verdict_table(found: Sequence[dict[str, Any]]) -> str:
+    header = ["capture", "sparsity", "best model (excess)", "excess gain vs interp (dB, "
+              f"target ≥ {TARGETS['excess_db']:g})", f"PSNR gain (dB, ≥ {TARGETS['psnr_db']:g})",
+              f"SSIM gain (≥ {TARGETS['ssim']:g})", "best network",
+              f"network vs rsd_prior (dB, ≥ {TARGETS['network_over_rsd_db']:g})"]
+    lines = [[v["capture"], f"{v['undersampling']:.3g}×"
+              f"{' random' if v['pattern'] == 'random' else ''}", v["model"],
+              _signed(v["excess_gain_db"], ".1f"), _signed(v["psnr_gain_db"], ".1f"),
+              _signed(v["ssim_gain"], ".3f"), v["network"] or "-",
+              _signed(v["network_over_rsd_db"], ".1f")] for v in found]
+    return markdown_table(header, lines)
+
+
+def results_markdown(results: dict[str, Any]) -> str:
+    """The page's generated section, from the collected study."""
+    rows = study_rows_of(results)
+    axes = "; ".join(f"`{k}`: {markdown(', '.join(v))}" for k, v in results["overrides"].items()
+                     if k not in ("capture.path", "hydra.sweep.dir"))
+    fits = ", ".join(f"{name} {t['mean']:.0f} s (max {t['max']:.0f} s)"
+                     for name, t in results["fit_seconds"].items())
+    label = ("**Reduced run** (not the whole study): " if results.get("reduced") else "")
+    return "\n".join([
+        f"{label}generated by `python studies/sparse_scans_measured/run.py render` from "
+        f"`results.json`: {results['completed']} completed runs ({results['runs']} in all) on "
+        f"{markdown(results.get('ran_on') or str(results['machine']['cpus']) + ' CPU cores')}. "
+        f"{pages.recorded_line(results)} What ran (the sweeps' overrides): "
+        f"{axes}. Mean fit time: {fits or '-'}.",
+        "",
+        quality_table(rows),
+        "",
+        "The best model (lowest held-out excess) against `interp`, and the best network "
+        "against `rsd_prior`, with the study's targets (a negative gain is a loss):",
+        "",
+        verdict_table(verdicts(rows)),
+        "",
+        f"![held-out excess, PSNR and SSIM against undersampling]({FIGURE})",
+    ]) + "\n"
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
