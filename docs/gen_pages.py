@@ -137,9 +137,8 @@ def _results(entries: Any, depth: int) -> str:
         text = entry["text"].strip()
         if where:
             text += f" ([study]({_study_link(where, depth)}))"
-        elif entry.get("archive"):
-            archive = "../" * (depth - 1) + f"results-archive.md#{entry['archive']}"
-            text += f" ([results archive]({archive}))"
+        elif entry.get("benchmarks"):
+            text += f" ([benchmarks]({'../' * depth}benchmarks/README.md))"
         lines.append(f"- {text}")
     return "\n".join(lines) + "\n"
 

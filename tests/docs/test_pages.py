@@ -66,7 +66,7 @@ def test_every_listed_plugin_has_a_page_with_its_sections():
             assert f"| `{name}` |" in options, f"{page.name}: option {name} is not shown"
         results = sections["Results"].strip()
         assert results == "Not measured." or "README.md" in results or \
-            "results-archive.md" in results, f"{page.name}: results {results!r}"
+            "benchmarks/README.md" in results, f"{page.name}: results {results!r}"
         index = (DOCS / "plugins" / "index.md").read_text()
         assert f"({spec.kind.value}/{spec.name}.md)" in index
 

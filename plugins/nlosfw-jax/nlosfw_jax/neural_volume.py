@@ -76,7 +76,7 @@ class JaxPlaneOperator:
     A confocal scan on the CPU sums over planes as one product per lattice point (an
     ``einsum`` over the spectra reordered once as (Ly Lx, F, Z), as the torch operator
     does), faster on the CPU than the product summed over planes
-    (``benchmarks/bench_volume_operator.py``; its numbers:
+    (``benchmarks/model/bench_volume_operator.py``; its numbers:
     ``studies/sparse_scans_measured/README.md``). A GPU and the single-spot case keep that
     sum.
     """
