@@ -8,6 +8,7 @@ from __future__ import annotations
 import ast
 import importlib
 import re
+import subprocess
 from pathlib import Path
 
 import pytest
@@ -271,7 +272,7 @@ def test_no_private_hydra_or_omegaconf_api():
 
 # ------------------------------------------------------------------ size and typing
 #: The most uses of the word ``Any`` (outside import lines) nlosfw/ may hold: 349 before
-#: issue 19's typed boundary; lower it when you remove more, never raise it.
+#: the plugin boundary was typed; lower it when you remove more, never raise it.
 MAX_ANY = 134
 #: A module past MAX_MODULE_LINES is reviewed: split it where it holds two responsibilities,
 #: or list it here with the one responsibility it holds (a line count alone is no reason
@@ -378,3 +379,41 @@ def test_hook_specifications_keep_their_signatures():
              for name, fn in vars(hookspecs).items()
              if callable(fn) and hasattr(fn, "nlosfw_spec")}
     assert found == expected
+
+
+# ------------------------------------------------------------------ names
+#: Where no file may name an issue by number: a comment, docstring, test or option says
+#: what the code does or guarantees, never which tracker entry asked for it.
+NO_ISSUE_NUMBERS = ("nlosfw", "plugins", "conf", "tests", "examples", ".ci",
+                    "docs/architecture.md")
+ISSUE_NUMBER = re.compile(r"\bissues?[\s_-]*#?[0-9]+", re.IGNORECASE)
+
+
+def _tracked_files(paths: tuple[str, ...]) -> list[Path]:
+    """The files git tracks under ``paths`` (every file there, less build outputs, where
+    the tree is not a git checkout)."""
+    try:
+        listed = subprocess.run(["git", "-C", str(ROOT), "ls-files", "-z", "--", *paths],
+                                capture_output=True, check=True, timeout=60).stdout
+        return [ROOT / name for name in listed.decode().split("\0") if name]
+    except (OSError, subprocess.SubprocessError):
+        skip = {".venv", "build", "__pycache__", ".git", ".pytest_cache", ".mypy_cache"}
+        found = [p for path in paths for p in ([ROOT / path] if (ROOT / path).is_file()
+                                               else (ROOT / path).rglob("*"))]
+        return [p for p in found if p.is_file()
+                and not skip & set(p.relative_to(ROOT).parts)
+                and not any(part.endswith(".egg-info") for part in p.parts)]
+
+
+def test_no_file_names_an_issue_by_number():
+    files = _tracked_files(NO_ISSUE_NUMBERS)
+    assert len(files) > 100, f"found only {len(files)} files to check under {NO_ISSUE_NUMBERS}"
+    named = [f"{path.relative_to(ROOT)}:{number}: {match.group()}"
+             for path in files if path.is_file()
+             for number, line in enumerate(
+                 path.read_bytes().decode("utf-8", "replace").splitlines(), 1)
+             for match in ISSUE_NUMBER.finditer(line)]
+    named += [f"{path.relative_to(ROOT)} (its name)" for path in files
+              if ISSUE_NUMBER.search(path.relative_to(ROOT).as_posix())]
+    assert not named, ("say what the code does or guarantees instead of which issue asked "
+                       f"for it: {named}")

@@ -1,4 +1,4 @@
-"""The automatic frequency band and depth planes follow the capture's geometry (issue 11).
+"""The automatic frequency band and depth planes follow the capture's geometry.
 
 A confocal scan doubles the path (laser and sensor legs move together), so the wall
 field oscillates twice as fast and the highest non-aliasing frequency is 1/(4Δ),

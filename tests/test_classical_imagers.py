@@ -1,4 +1,4 @@
-"""The classical confocal imagers lct, fk and fbp (issue 11).
+"""The classical confocal imagers lct, fk and fbp.
 
 They pass the conformance kit (tests/conformance); here they image a simulated
 confocal capture of a letter in the layout of the Stanford LCT captures (a square

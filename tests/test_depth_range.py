@@ -1,4 +1,4 @@
-"""The automatic depth range (issue 21): where the signal rises above the background, not
+"""The automatic depth range: where the signal rises above the background, not
 the last bin with counts; and the same range bounds rsd_prior's depth search."""
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""The even-kernel plane convolution of the ``fft`` imager (issue 11's confocal speed).
+"""The even-kernel plane convolution of the ``fft`` imager, which makes confocal
+captures fast.
 
 Its pieces against their definitions (mirror images and their inverse, the type-I DCT
 against the full FFT of the circularly placed kernel, which layouts are even), and the

@@ -1,4 +1,4 @@
-"""Every installed imager through the whole pipeline (issue 21): a tiny simulated confocal
+"""Every installed imager through the whole pipeline: a tiny simulated confocal
 capture with the default split (the ``raw`` source is the 8 x 8 sub-grid of a 16 x 16 scan),
 each source imaged, the patch found where it is."""
 

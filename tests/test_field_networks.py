@@ -1,4 +1,4 @@
-"""fourier, wire, finer and hashgrid (issue 12): their parts against closed forms and an
+"""fourier, wire, finer and hashgrid: their parts against closed forms and an
 independent brute-force grid lookup, torch against JAX, and parameter counts by hand."""
 
 from __future__ import annotations

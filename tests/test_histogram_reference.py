@@ -1,4 +1,4 @@
-"""The reference picture of a run (issue 21): the measured histograms imaged at their native
+"""The reference picture of a run: the measured histograms imaged at their native
 bin width beside the scored sources, never scored; and the capture's time profile drawn by
 runs stopped before they image.
 

@@ -1,4 +1,4 @@
-"""The built-in imagers ``rsd`` and ``fft`` (issue 4).
+"""The built-in imagers ``rsd`` and ``fft``.
 
 Generic physics (focusing, reference agreement, translation) is in the
 conformance checks; here: the whole chain from the analytic simulator, device

@@ -1,4 +1,4 @@
-"""Imaging hints (issue 21): the authors' per-capture settings travel from an LCT file to the
+"""Imaging hints: the authors' per-capture settings travel from an LCT file to the
 transient imagers, which use them unless their own options are set."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The kit's resolution check (issue 21) fails an imager that does not migrate the field."""
+"""The kit's resolution check fails an imager that does not migrate the field."""
 
 from __future__ import annotations
 

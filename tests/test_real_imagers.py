@@ -1,5 +1,5 @@
-"""lct, fk, fbp and fft on the shared Stanford LCT captures against the authors' LCT
-(issue 21): front view NCC >= 0.8 and brightest depth within 3 cm.
+"""lct, fk, fbp and fft on the shared Stanford LCT captures against the authors' LCT:
+front view NCC >= 0.8 and brightest depth within 3 cm.
 
 The authors' LCT is tests/lct_reference.py's ``authors_lct`` (their MATLAB procedure and
 per-scene settings); both sides see the scan binned 2 x 2 (32 x 32, as some of their

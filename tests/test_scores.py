@@ -1,4 +1,4 @@
-"""The scores of a run's reconstructions (issue 12), on cases worked out by hand: amplitudes
+"""The scores of a run's reconstructions, on cases worked out by hand: amplitudes
 normalised to their maximum, front view and volume, and the depth RMSE against a truth map."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The sparsity study (issue 12) in small: the preset's sweep on the tiny scene, its report
+"""The sparsity study in small: the preset's sweep on the tiny scene, its report
 and the benchmark script that collects it."""
 
 from __future__ import annotations
@@ -105,7 +105,7 @@ def test_the_report_aggregates_seeds(tiny_study):
     assert float(model["psnr_min"]) == pytest.approx(min(seeds), rel=1e-5)
     text = (report / "report.md").read_text()
     assert "## Reconstruction quality against sparsity" in text
-    # report.md escapes Markdown's link brackets in untrusted text (issue 20)
+    # report.md escapes Markdown's link brackets in untrusted text
     assert "| tiny, analytic" in text and r"siren_torch \[steps=30\]" in text
     assert (report / "report.png").stat().st_size > 10_000
 

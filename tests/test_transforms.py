@@ -1,4 +1,4 @@
-"""The built-in phasor transforms ``fft`` and ``wavelet`` (issue 4).
+"""The built-in phasor transforms ``fft`` and ``wavelet``.
 
 The generic properties (layout, brute-force DFT, linearity, point phase) are
 conformance checks run on every transform plugin; here are the options, the

@@ -1,4 +1,4 @@
-"""The cache owns only what it wrote (issue 20): a folder of the user's files is never
+"""The cache owns only what it wrote: a folder of the user's files is never
 cleaned, foreign files inside a cache are never touched, odd files in an entry's place
 (a directory, a FIFO) never hang or crash a run, and ``output.overwrite`` never removes
 a file the new run reads."""

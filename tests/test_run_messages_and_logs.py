@@ -1,5 +1,6 @@
-"""Smaller points of issue 21 on the command line: a stop_after run says after which stage it
-stopped; the conformance kit without pytest is one line."""
+"""What a run says and where its log records go: a stop_after run says after which stage it
+stopped; the conformance kit without pytest is one line; a run from Python hands its
+callers only warnings, and two runs in two threads each log to their own run.log."""
 
 from __future__ import annotations
 
