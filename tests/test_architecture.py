@@ -270,6 +270,39 @@ def test_no_private_hydra_or_omegaconf_api():
     assert not private, f"private Hydra/OmegaConf modules imported: {private}"
 
 
+
+#: The plan builder: the only modules that look a run's options up by name in the composed
+#: configuration (everything after the plan reads its typed settings).
+PLAN_BUILDER = ("nlosfw/pipeline/plan.py", "nlosfw/pipeline/plan_capture.py",
+                "nlosfw/pipeline/plan_plugins.py", "nlosfw/pipeline/settings.py")
+#: Calls that look an option up by its dotted name.
+LOOKUPS = ("select", "_option")
+
+
+def test_only_the_plan_builder_looks_options_up_by_name():
+    """No module outside the plan builder reads an option of the composed configuration by
+    its dotted name (``OmegaConf.select(cfg, "output.overwrite")``): it reads the plan's
+    typed settings, so the plan is the one place an option's meaning is decided. Hydra's own
+    keys (``hydra.run.dir``) are not the run's options."""
+    found = []
+    for path in _core_sources():
+        where = str(path.relative_to(ROOT))
+        if where in PLAN_BUILDER:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.Call):
+                continue
+            name = (node.func.attr if isinstance(node.func, ast.Attribute) else
+                    node.func.id if isinstance(node.func, ast.Name) else "")
+            if name not in LOOKUPS:
+                continue
+            keys = [a.value for a in node.args if isinstance(a, ast.Constant)
+                    and isinstance(a.value, str)]
+            if name == "_option" or any(not k.startswith("hydra.") for k in keys):
+                found.append(f"{where}:{node.lineno}: {ast.unparse(node)}")
+    assert not found, f"options looked up by name outside the plan builder: {found}"
+
+
 # ------------------------------------------------------------------ size and typing
 #: The most uses of the word ``Any`` (outside import lines) nlosfw/ may hold: 349 before
 #: the plugin boundary was typed; lower it when you remove more, never raise it.
