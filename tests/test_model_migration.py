@@ -27,6 +27,7 @@ from nlosfw.model.model_files import stored_config
 from nlosfw.model.physics import DepthOptions, PriorOptions
 from nlosfw.model.physics.config import FLAT_NAMES, GROUPED
 from nlosfw.pipeline.lifecycle import EarlierRun, verdict
+from nlosfw.pipeline.settings import RunSettings
 from nlosfw.testing import fixtures
 from tests.test_rsd_prior import _field, _point_field
 
@@ -165,7 +166,7 @@ def test_the_hybrids_stored_flat_configs_are_read_into_their_group():
 def test_the_names_nlosfw_model_exported_before_still_import_with_a_warning():
     import nlosfw.model as model
 
-    assert len(model.__all__) == 16
+    assert len(model.__all__) == 17
     for old, target in model.MOVED.items():
         module, _, name = target.partition(":")
         with pytest.warns(DeprecationWarning, match=f"nlosfw.model.{old} is deprecated.*"
@@ -226,7 +227,7 @@ def test_a_resumed_sweep_job_says_an_option_is_new_to_its_earlier_run(tmp_path):
               "config_hash": "0", "files": ["config.yaml"]}
     new = {"model": {"name": "rsd_prior", "depth": {"range": [0.4, 0.6]}}}
     with pytest.raises(ConfigError) as err:
-        verdict(job, EarlierRun(marker=marker, status="completed"), new, overwrite=False,
+        verdict(job, EarlierRun(marker=marker, status="completed"), new, RunSettings(),
                 resume=True)
     assert err.value.option == "model.depth.range"
     assert f"is an option the run in {job} did not have" in err.value.problem
