@@ -306,7 +306,7 @@ def test_only_the_plan_builder_looks_options_up_by_name():
 # ------------------------------------------------------------------ size and typing
 #: The most uses of the word ``Any`` (outside import lines) nlosfw/ may hold: 349 before
 #: the plugin boundary was typed; lower it when you remove more, never raise it.
-MAX_ANY = 134
+MAX_ANY = 131
 #: A module past MAX_MODULE_LINES is reviewed: split it where it holds two responsibilities,
 #: or list it here with the one responsibility it holds (a line count alone is no reason
 #: to split). Past MAX_LISTED_LINES a module is split whatever it holds.
