@@ -16,7 +16,7 @@ TINY = ("scene=tiny", "transform.n_frequencies=21", "reconstruction.n_depths=4",
 def planned(overrides: Sequence[str], host: PluginHost | None = None) -> RunPlan:
     """The plan of the run ``overrides`` describe (``limits.allow_large=true``: its memory is
     estimated, not checked; the tests check it against the memory they choose)."""
-    from tests.test_pipeline import compose
+    from tests.pipeline.test_pipeline import compose
 
     host = load_plugins() if host is None else host
     return make_plan(compose([*overrides, "limits.allow_large=true"], host), host)

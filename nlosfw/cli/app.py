@@ -255,7 +255,7 @@ def _run_job(cfg: DictConfig, command: _Command) -> float | None:
     reporter: ConsoleReporter | None = None
     try:
         plan = _job_plan(cfg, command)
-        reporter = ConsoleReporter(host, plan.settings)
+        reporter = ConsoleReporter(host, plan)
         host.manager.register(reporter)
         pipeline = Pipeline(plan, Path(hydra.runtime.output_dir), host,
                             resume=job is not None)

@@ -25,17 +25,6 @@ PLUGIN_GROUPS = ("simulator", "transform", "model", "imager")
 MAX_CHANGES = 12
 
 
-def choices(config: Mapping[str, Any]) -> dict[str, str]:
-    """The selected scene and plugins by group (``scene`` is the scene's name); a group the
-    config leaves out (a run from a file has no scene and no simulator) is left out."""
-    out = {}
-    for group in ("scene", *PLUGIN_GROUPS):
-        node = config.get(group)
-        if node is not None:
-            out[group] = str(node.get("name", "?"))
-    return out
-
-
 def changed_options(config: Mapping[str, Any], host: PluginHost) -> list[str]:
     """``dotted.option=value`` for every option that differs from its default."""
     out: list[str] = []
@@ -57,10 +46,10 @@ def changed_options(config: Mapping[str, Any], host: PluginHost) -> list[str]:
     return out
 
 
-def overview_lines(config: Mapping[str, Any], host: PluginHost,
-                   settings: RunSettings) -> list[str]:
-    """The lines printed before a run (rich markup): choices, changed options, the plan."""
-    picked = choices(config)
+def overview_lines(config: Mapping[str, Any], host: PluginHost, settings: RunSettings,
+                   picked: Mapping[str, str]) -> list[str]:
+    """The lines printed before a run (rich markup): the scene and plugins ``picked`` (the
+    plan's choices, by group), changed options, the plan."""
     named = dict(picked)
     if settings.capture.path is not None:
         named = {"capture": str(settings.capture.path), **picked}

@@ -20,17 +20,17 @@ from nlosfw.cli.overview import overview_lines
 from nlosfw.cli.summary import summary_table
 from nlosfw.common.files import format_bytes
 from nlosfw.common.text import console_text as escape
-from nlosfw.pipeline import Artefact, RunMetrics, RunSettings
+from nlosfw.pipeline import Artefact, RunMetrics, RunPlan
 from nlosfw.plugins import PluginHost, hookimpl
 
 
 class ConsoleReporter:
     """Draws one run on a rich console."""
 
-    def __init__(self, host: PluginHost, settings: RunSettings,
-                 console: Console | None = None) -> None:
+    def __init__(self, host: PluginHost, plan: RunPlan, console: Console | None = None) -> None:
         self.host = host
-        self.settings = settings
+        self.settings = plan.settings
+        self.choices = plan.choices
         self.console = console or app_console()
         self._progress: Progress | None = None
         self._tasks: dict[str, TaskID] = {}
@@ -38,7 +38,7 @@ class ConsoleReporter:
     @hookimpl
     def on_run_start(self, run_dir: str, config: dict[str, object]) -> None:
         self.console.print(f"[bold]nlosfw run[/] → {escape(run_dir)}", highlight=False)
-        for line in overview_lines(config, self.host, self.settings):
+        for line in overview_lines(config, self.host, self.settings, self.choices):
             self.console.print(line, highlight=False)
         self.console.print("  full configuration: config.yaml and .hydra/ in the run "
                            "directory", highlight=False)

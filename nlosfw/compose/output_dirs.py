@@ -26,6 +26,7 @@ from nlosfw.pipeline.lifecycle import (
     inspect_run_dir,
     verdict,
 )
+from nlosfw.pipeline.settings import RunSettings, run_settings
 
 if TYPE_CHECKING:  # hydra and omegaconf are imported when a check runs
     from hydra.core.override_parser.types import Override
@@ -57,20 +58,29 @@ def check_output_dirs(compose: Compose, overrides: Sequence[str], first: Sequenc
     except OmegaConfBaseException:  # resolved by Hydra at run time only: the job checks
         return
     _check_writable(where, key)
-    plain = OmegaConf.to_container(compose(list(first), False), resolve=True,
-                                   enum_to_str=True)
-    check_outside_cache(where, plain, key)  # type: ignore[arg-type]
+    plain, settings = _settings(compose(list(first), False))
+    check_outside_cache(where, settings.cache.dir, key)
     if not multirun:
-        overwrite = bool(OmegaConf.select(cfg, "output.overwrite", default=False))
         earlier = inspect_run_dir(where, (*PLANNED_NAMES, *HYDRA_FILES))  # Hydra's too
-        verdict(where, earlier, plain, overwrite=overwrite, resume=False)  # type: ignore[arg-type]
+        verdict(where, earlier, plain, settings, resume=False)
         return
     subdir = OmegaConf.to_container(cfg.hydra.sweep, resolve=False).get("subdir")  # type: ignore[union-attr]
     sweeper = OmegaConf.select(cfg, "hydra.runtime.choices", default={}).get("hydra/sweeper")
     if not where.is_dir() or subdir != _DEFAULT_SUBDIR or sweeper != "basic":
         return
-    _check_resumed_sweep(compose, where, [*sweep_params, *overrides],
-                         bool(OmegaConf.select(cfg, "output.overwrite", default=False)))
+    _check_resumed_sweep(compose, where, [*sweep_params, *overrides])
+
+
+def _settings(cfg: DictConfig) -> tuple[dict[str, object], RunSettings]:
+    """A composition (without Hydra's own config) as the plain mapping ``config.yaml`` holds,
+    and its typed settings (an option is never read from it by name)."""
+    from omegaconf import OmegaConf
+
+    plain = OmegaConf.to_container(cfg, resolve=True, enum_to_str=True)
+    if not isinstance(plain, dict):  # a composed config is a mapping
+        raise ConfigError("", "the composed configuration is not a mapping")
+    config = {str(k): v for k, v in plain.items()}
+    return config, run_settings(config)
 
 
 #: The longest name of one file or folder most file systems accept (bytes).
@@ -115,11 +125,9 @@ def sweep_jobs(overrides: Sequence[Override]) -> list[list[str]]:
     return [list(job) for job in itertools.product(*axes.values())]
 
 
-def _check_resumed_sweep(compose: Compose, sweep_dir: Path, arguments: list[str],
-                         overwrite: bool) -> None:
+def _check_resumed_sweep(compose: Compose, sweep_dir: Path, arguments: list[str]) -> None:
     """Apply the lifecycle's verdict to every job directory of the sweep that exists."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
-    from omegaconf import OmegaConf
 
     parsed = OverridesParser.create().parse_overrides(
         [a for a in arguments if not a.lstrip("+~").startswith("hydra")])
@@ -132,6 +140,5 @@ def _check_resumed_sweep(compose: Compose, sweep_dir: Path, arguments: list[str]
         earlier = inspect_run_dir(job_dir, PLANNED_NAMES)
         if earlier.marker is None and not earlier.in_the_way and earlier.live_pid is None:
             continue
-        plain = OmegaConf.to_container(compose(list(jobs[num]), False), resolve=True,
-                                       enum_to_str=True)
-        verdict(job_dir, earlier, plain, overwrite=overwrite, resume=True)  # type: ignore[arg-type]
+        plain, settings = _settings(compose(list(jobs[num]), False))
+        verdict(job_dir, earlier, plain, settings, resume=True)

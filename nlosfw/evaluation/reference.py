@@ -34,7 +34,7 @@ REFERENCE_TITLE = "reference: the measured histograms (native bins)"
 #: Arrays of the padded volume's size a time-domain imager holds at once (its spectrum,
 #: the kernel's or the Stolt interpolation's operands, temporaries): on the generous side,
 #: the peak tracemalloc measures for lct and fk is 0.5 and 0.8 of the estimate
-#: (tests/test_histogram_reference.py).
+#: (tests/evaluation/test_histogram_reference.py).
 _VOLUMES_AT_ONCE = 8
 
 

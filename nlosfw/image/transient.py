@@ -270,8 +270,8 @@ def full_band_frequencies(n_bins: int, delta_t: float) -> np.ndarray:
     return np.arange(1, n_bins // 2 + 1) / (n_bins * delta_t)
 
 
-#: [1/m] The band for imaging measured captures with the transient imagers: issue 21 found
-#: 0.4-60 cycles/m clean on the Stanford LCT captures (the wall-aliasing band 5.7-22.9 gives
+#: [1/m] The band for imaging measured captures with the transient imagers: 0.4-60 cycles/m
+#: images clean on the Stanford LCT captures (the wall-aliasing band 5.7-22.9 gives
 #: poor classical images; the full 4 ps band is noisy and needs 6-9 GB).
 MEASURED_BAND = (0.4, 60.0)
 

@@ -77,7 +77,7 @@ class TrainingStep:
     seconds: float = 0.0
 
 
-@dataclass
+@dataclass(frozen=True)
 class FitReport:
     """What happened during :meth:`FieldModel.fit`."""
 

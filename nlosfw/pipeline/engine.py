@@ -98,8 +98,8 @@ class Pipeline:
         to_file(self.plan.read_log)         # said while the plan read the capture file
         log.info("%s", memory_summary(self.plan.memory))
         with signals_raise(), lifecycle.held(
-                self.run_dir, self.plan.config, PLANNED_NAMES,
-                overwrite=settings.output.overwrite, resume=self.resume) as hold:
+                self.run_dir, self.plan.config, settings, PLANNED_NAMES,
+                resume=self.resume) as hold:
             if hold is None:
                 log.info("skipping: %s already holds a finished run of this configuration",
                          self.run_dir)

@@ -38,12 +38,15 @@ import time
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, TypedDict
+from typing import IO, TYPE_CHECKING, TypedDict
 
 from nlosfw.common import yaml_safe
 from nlosfw.common.errors import ConfigError, DataError
 from nlosfw.common.files import TEMPORARY_NAME, open_locked, output_error, write_text
 from nlosfw.common.hashing import canonical_digest
+
+if TYPE_CHECKING:
+    from nlosfw.pipeline.settings import RunSettings
 
 log = logging.getLogger(__name__)
 
@@ -56,8 +59,6 @@ RUN_CONTROL_OPTIONS = ("cache", "limits", "output.overwrite")
 HYDRA_FILES = (".hydra", "run.log")
 #: Statuses of a finished run (one a resumed sweep may skip).
 FINISHED = ("completed", "stopped")
-#: The options naming files a run reads (never replaced by ``output.overwrite``).
-INPUT_OPTIONS = ("capture.path", "capture.background", "capture.tofgrid")
 
 
 class Verdict(enum.Enum):
@@ -169,14 +170,16 @@ def inspect_run_dir(run_dir: Path, planned: Iterable[str], check_live: bool = Tr
     return EarlierRun(live_pid=live, marker=marker, status=status, in_the_way=in_the_way)
 
 
-def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object], *,
-            overwrite: bool, resume: bool) -> Verdict:
-    """What a run of ``config`` does with ``run_dir`` holding ``earlier``; a refusal is a
-    one-line :class:`ConfigError` (exit status 2) and leaves the directory as it was.
+def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object],
+            settings: RunSettings, *, resume: bool) -> Verdict:
+    """What a run of ``config`` (its typed ``settings``) does with ``run_dir`` holding
+    ``earlier``; a refusal is a one-line :class:`ConfigError` (exit status 2) and leaves the
+    directory as it was. ``config`` is compared with an earlier run's, never read.
 
     ``resume``: the run is a job of a multirun (a sweep may be resumed in its directory).
     """
-    check_outside_cache(run_dir, config)
+    overwrite = settings.output.overwrite
+    check_outside_cache(run_dir, settings.cache.dir)
     if earlier.live_pid is not None:
         raise ConfigError("", f"{run_dir}: another nlosfw run (process {earlier.live_pid}) is "
                               "writing there; wait for it to end or choose another directory")
@@ -186,7 +189,7 @@ def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object], *,
     if earlier.marker is None:
         return Verdict.start
     if overwrite:
-        _check_inputs_kept(run_dir, earlier, config)
+        _check_inputs_kept(run_dir, earlier, settings.input_files)
         return Verdict.replace
     state = earlier.status if earlier.status in FINISHED else "unfinished"
     if not resume:
@@ -199,19 +202,11 @@ def verdict(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object], *,
     return Verdict.skip if state in FINISHED else Verdict.set_aside
 
 
-def _option(config: Mapping[str, object], dotted: str) -> object:
-    node: object = config
-    for key in dotted.split("."):
-        node = node.get(key) if isinstance(node, Mapping) else None
-    return node
-
-
-def check_outside_cache(run_dir: Path, config: Mapping[str, object],
-                        option: str = "hydra.run.dir") -> None:
-    """Refuse (one-line :class:`ConfigError`) a run directory inside ``cache.dir`` (or the
-    cache directory itself): the cache's directory holds only the cache's entries."""
-    cache = _option(config, "cache.dir")
-    if not isinstance(cache, str) or not cache:
+def check_outside_cache(run_dir: Path, cache: str, option: str = "hydra.run.dir") -> None:
+    """Refuse (one-line :class:`ConfigError`) a run directory inside ``cache.dir``, the
+    directory ``cache`` (or the cache directory itself): the cache's directory holds only the
+    cache's entries."""
+    if not cache:
         return
     try:
         root = Path(cache).expanduser().resolve()
@@ -232,13 +227,11 @@ def _identity(path: Path) -> tuple[int, int] | None:
     return info.st_dev, info.st_ino
 
 
-def _check_inputs_kept(run_dir: Path, earlier: EarlierRun, config: Mapping[str, object]) -> None:
-    """Refuse ``output.overwrite=true`` when a file the run reads is one it would replace."""
+def _check_inputs_kept(run_dir: Path, earlier: EarlierRun, inputs: Mapping[str, str]) -> None:
+    """Refuse ``output.overwrite=true`` when a file the run reads (``inputs``, by option) is
+    one it would replace."""
     replaced = {_identity(run_dir / name) for name in earlier.files} - {None}
-    for option in INPUT_OPTIONS:
-        value = _option(config, option)
-        if not isinstance(value, str) or not value:
-            continue
+    for option, value in inputs.items():
         if _identity(Path(value).expanduser()) in replaced:
             raise ConfigError(option, f"{value} is a file of the earlier run in {run_dir}, "
                               "which output.overwrite=true would remove; copy it elsewhere "
@@ -278,8 +271,8 @@ class RunHold:
         self._marker = marker
 
     @classmethod
-    def acquire(cls, run_dir: Path, config: Mapping[str, object], planned: Iterable[str], *,
-                overwrite: bool, resume: bool) -> RunHold | None:
+    def acquire(cls, run_dir: Path, config: Mapping[str, object], settings: RunSettings,
+                planned: Iterable[str], *, resume: bool) -> RunHold | None:
         """Lock ``run_dir``, judge what it holds and act on it: None when the run is to be
         skipped (a finished job of a resumed sweep), else the hold. Raises the refusals of
         :func:`verdict` (the directory unchanged)."""
@@ -298,7 +291,7 @@ class RunHold:
                                   "writing there; wait for it to end or choose another directory")
         try:
             earlier = inspect_run_dir(run_dir, planned, check_live=False)
-            decision = verdict(run_dir, earlier, config, overwrite=overwrite, resume=resume)
+            decision = verdict(run_dir, earlier, config, settings, resume=resume)
             if decision is Verdict.skip:
                 _unlock(lock, lock_path, remove=not existed)
                 return None
@@ -437,10 +430,10 @@ def _remove_empty_parents(run_dir: Path, names: Iterable[str]) -> None:
 
 
 @contextlib.contextmanager
-def held(run_dir: Path, config: Mapping[str, object], planned: Iterable[str], *,
-         overwrite: bool, resume: bool) -> Iterator[RunHold | None]:
+def held(run_dir: Path, config: Mapping[str, object], settings: RunSettings,
+         planned: Iterable[str], *, resume: bool) -> Iterator[RunHold | None]:
     """:meth:`RunHold.acquire` for a block, released when it ends (None: skip the run)."""
-    hold = RunHold.acquire(run_dir, config, planned, overwrite=overwrite, resume=resume)
+    hold = RunHold.acquire(run_dir, config, settings, planned, resume=resume)
     try:
         yield hold
     finally:

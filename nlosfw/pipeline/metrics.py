@@ -6,7 +6,7 @@ written beside every ``metrics.json`` (``metrics.schema.json``) and the outline 
 ``docs/reference/metrics.md`` are generated from these classes (:mod:`nlosfw.common.typed_json`).
 
 Every change to the layout (a key added, removed, renamed or retyped) is made here and
-bumps :data:`SCHEMA_VERSION`; ``tests/test_metrics_schema.py`` fails until it is bumped.
+bumps :data:`SCHEMA_VERSION`; ``tests/pipeline/test_metrics_schema.py`` fails until it is bumped.
 
 Two runs of the same configuration and seed on the CPU write the same metrics.json except
 for the fields listed in :data:`TIMING_FIELDS` (wall-clock times and the start time); every

@@ -312,6 +312,14 @@ class RunSettings:
         """Whether ``stage`` runs given ``stop_after``."""
         return STAGES.index(stage) <= STAGES.index(self.last_stage)
 
+    @property
+    def input_files(self) -> dict[str, str]:
+        """The files the run reads besides its configuration, by option (those set)."""
+        files = {"capture.path": self.capture.path,
+                 "capture.background": self.capture.background,
+                 "capture.tofgrid": self.capture.tofgrid}
+        return {option: path for option, path in files.items() if path}
+
 
 @dataclass(frozen=True)
 class RunConfig(RunSettings):

@@ -1,4 +1,4 @@
-"""The cache owns only what it wrote (issue 20): a folder of the user's files is never
+"""The cache owns only what it wrote: a folder of the user's files is never
 cleaned, foreign files inside a cache are never touched, odd files in an entry's place
 (a directory, a FIFO) never hang or crash a run, and ``output.overwrite`` never removes
 a file the new run reads."""
@@ -222,22 +222,25 @@ def earlier_run(run_dir: Path, files: dict[str, bytes]) -> None:
          "config_hash": "", "files": sorted(files)}))
 
 
-@pytest.mark.parametrize("option", lifecycle.INPUT_OPTIONS)
+@pytest.mark.parametrize("option", ["capture.path", "capture.background", "capture.tofgrid"])
 def test_overwrite_refuses_to_remove_an_input_of_the_new_run(tmp_path, option):
+    from nlosfw.pipeline.settings import run_settings
+
     run = tmp_path / "run"
     earlier_run(run, {"capture.hdf5": b"the capture", "config.yaml": b"{}"})
     section, leaf = option.split(".")
-    config = {section: {leaf: str(run / "capture.hdf5")}, "cache": {"dir": str(tmp_path / "c")}}
+    config = {section: {leaf: str(run / "capture.hdf5")}, "cache": {"dir": str(tmp_path / "c")},
+              "output": {"overwrite": True}}
     earlier = lifecycle.inspect_run_dir(run, ())
     with pytest.raises(ConfigError) as caught:
-        lifecycle.verdict(run, earlier, config, overwrite=True, resume=False)
+        lifecycle.verdict(run, earlier, config, run_settings(config), resume=False)
     assert caught.value.option == option
     assert "output.overwrite=true would remove" in str(caught.value)
     link = tmp_path / "elsewhere.hdf5"                 # the same file by another name
     os.link(run / "capture.hdf5", link)
-    config = {section: {leaf: str(link)}}
+    config = {section: {leaf: str(link)}, "output": {"overwrite": True}}
     with pytest.raises(ConfigError):
-        lifecycle.verdict(run, earlier, config, overwrite=True, resume=False)
+        lifecycle.verdict(run, earlier, config, run_settings(config), resume=False)
     assert (run / "capture.hdf5").read_bytes() == b"the capture"
 
 

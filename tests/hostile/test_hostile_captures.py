@@ -1,4 +1,4 @@
-"""Hostile capture files (issue 20): data outside the file, declared sizes, values of the
+"""Hostile capture files: data outside the file, declared sizes, values of the
 wrong type or out of any sensible range, and paths that are not files. Each is refused in
 one line naming the file and the dataset, variable or option; nothing outside the file
 is read. The hostile files are written here."""

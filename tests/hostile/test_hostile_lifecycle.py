@@ -1,4 +1,4 @@
-"""One-line errors where tracebacks were, SIGHUP, and two threads running at once (issue 20)."""
+"""One-line errors where tracebacks were, SIGHUP, and two threads running at once."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Untrusted text at every output (issue 20): file names, scene names and directories reach
+"""Untrusted text at every output: file names, scene names and directories reach
 figure titles, the console, HTML links, CSV cells and Markdown. Each output shows them
 literally: no maths parsing, no markup, no terminal escape sequences, no script links, no
 spreadsheet formulas, no raw HTML."""

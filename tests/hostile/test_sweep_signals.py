@@ -1,7 +1,7 @@
 """A parallel sweep (Hydra's joblib launcher) interrupted: each running job ends with status
 interrupted and its stage in its own metrics.json, its lock released, no other job starts,
-and the command exits with 128 + the signal after one line (issue 20;
-:mod:`nlosfw.cli.workers`). The jobs are held at a pause point, never made slow."""
+and the command exits with 128 + the signal after one line
+(:mod:`nlosfw.cli.workers`). The jobs are held at a pause point, never made slow."""
 
 from __future__ import annotations
 

@@ -12,7 +12,7 @@ of standard deviation sigma from the fitted response; with none, all of it in th
 holding p), c = scale * count_scale / delta_t the photons per unit of the model's albedo,
 and b_j >= 0 a background per bin, the same over the wall (ambient light, dark counts).
 The temporal DFT of lambda without b is the model's phasor field, the response's gains
-included (``tests/test_rsd_counts.py`` checks it against the FFT scene operator): this is
+included (``tests/model/physics/test_counts.py`` checks it against the FFT scene operator): this is
 the time-domain forward model of the whole spectrum that the phasor fit does not have.
 
 Fit. Maximise L = sum n log lambda - lambda over the kept points and every bin from the

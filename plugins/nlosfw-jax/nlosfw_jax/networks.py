@@ -1,5 +1,6 @@
 """Equinox parts networks are built from, the thesis networks (tanh, PE, SIREN) and
-fourier, wire, finer and hashgrid (issue 12).
+the networks with an encoded input or periodic activations (fourier, wire, finer,
+hashgrid).
 
 Parts: :class:`Linear` (weights (fan_in, fan_out), the layout the numpy reference
 and the torch plugin share, so their files load across backends), :class:`Sine`,
@@ -185,7 +186,7 @@ def thesis_network(config: NeuralFieldConfig, shape: FieldShape, key: jax.Array
     return ThesisNetwork(thesis_architecture(config, shape), key)
 
 
-# --------------------------------------------------------------------------- issue 12 parts
+# ------------------------------------------------ encodings' and activations' parts
 class FourierFeatures(eqx.Module):
     """[cos 2 pi v B, sin 2 pi v B] of inputs v (N, D), B (D, features) fixed."""
 
@@ -281,7 +282,7 @@ class HashGridEncoding(eqx.Module):
         return (row if dense else jnp.bitwise_and(row, np.uint32(rows - 1))).astype(jnp.int32)
 
 
-# --------------------------------------------------------------------------- issue 12 networks
+# --------------------------------------- networks with encodings or periodic activations
 class _FromNumpy(eqx.Module):
     """A network whose initial weights are :func:`nlosfw.model.neural.field_network_state`'s."""
 

@@ -1,5 +1,6 @@
 """Torch parts networks are built from, the thesis networks (tanh, PE, SIREN) and
-fourier, wire, finer and hashgrid (issue 12).
+the networks with an encoded input or periodic activations (fourier, wire, finer,
+hashgrid).
 
 Parts: :class:`Linear` (weights (fan_in, fan_out), the layout the numpy reference
 and the JAX plugin share), :class:`Sine` (sin(omega0 z)), :class:`PositionalEncoding`
@@ -144,7 +145,7 @@ def thesis_network(config: NeuralFieldConfig, shape: FieldShape) -> ThesisNetwor
     return ThesisNetwork(thesis_architecture(config, shape))
 
 
-# --------------------------------------------------------------------------- issue 12 parts
+# ------------------------------------------------ encodings' and activations' parts
 class FourierFeatures(nn.Module):
     """[cos 2 pi v B, sin 2 pi v B] of inputs v (N, D), B (D, features) a fixed buffer."""
 
@@ -203,7 +204,7 @@ class Gabor(nn.Module):
         return torch.cat([envelope * torch.cos(phase), envelope * torch.sin(phase)], dim=-1)
 
 
-# --------------------------------------------------------------------------- issue 12 networks
+# --------------------------------------- networks with encodings or periodic activations
 class _FromNumpy:
     """A network whose initial weights are :func:`nlosfw.model.neural.field_network_state`'s."""
 

@@ -1,0 +1,85 @@
+"""The benchmarks' layout: speed and memory scripts grouped by package around one harness,
+each declaring the top-level keys of the results file it writes; every committed results
+file belongs to one script and holds exactly those keys (read from the scripts' source, so
+the test runs none of them)."""
+
+from __future__ import annotations
+
+import ast
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+BENCHMARKS = ROOT / "benchmarks"
+RESULTS = BENCHMARKS / "results"
+SCRIPTS = sorted(BENCHMARKS.glob("*/bench_*.py"))
+
+
+def _declared(script: Path) -> tuple[str, tuple[str, ...], tuple[str, ...]]:
+    """(the results file's name, or a prefix ending in ``_`` for a labelled family;
+    RESULT_KEYS; OPTIONAL_KEYS) as the script's module-level assignments give them."""
+    name, keys, optional = "", (), ()
+    for node in ast.parse(script.read_text(encoding="utf-8")).body:
+        if not (isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Name)):
+            continue
+        target = node.targets[0].id
+        if target == "RESULTS" and isinstance(node.value, ast.BinOp):
+            name = ast.literal_eval(node.value.right)
+        elif target == "RESULTS_PREFIX":
+            name = ast.literal_eval(node.value)
+        elif target == "RESULT_KEYS":
+            keys = ast.literal_eval(node.value)
+        elif target == "OPTIONAL_KEYS":
+            optional = ast.literal_eval(node.value)
+    return name, keys, optional
+
+
+def _owner(result: Path) -> Path | None:
+    for script in SCRIPTS:
+        name = _declared(script)[0]
+        if result.name == name or (name.endswith("_") and result.name.startswith(name)):
+            return script
+    return None
+
+
+def test_the_layout_is_one_harness_and_package_folders():
+    assert (BENCHMARKS / "harness.py").is_file()
+    loose = sorted(p.name for p in BENCHMARKS.glob("*.py"))
+    assert loose == ["compare_metrics.py", "harness.py"], loose
+    folders = sorted(p.name for p in BENCHMARKS.iterdir() if p.is_dir()
+                     and p.name not in ("results", "__pycache__"))
+    assert set(folders) <= {"capture", "transform", "model", "image", "pipeline", "simulate"}
+    assert SCRIPTS, "no benchmark scripts found"
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: str(p.relative_to(BENCHMARKS)))
+def test_every_script_declares_its_results_and_writes_them_through_the_harness(script):
+    name, keys, _ = _declared(script)
+    assert name.endswith((".json", "_")) and keys, f"{script.name}: RESULTS / RESULT_KEYS"
+    source = script.read_text(encoding="utf-8")
+    assert "write_results(" in source and "from harness import" in source
+    assert ".write_text(json.dumps" not in source
+
+
+@pytest.mark.parametrize("result", sorted(RESULTS.glob("*.json")), ids=lambda p: p.name)
+def test_every_results_file_holds_its_scripts_declared_keys(result):
+    script = _owner(result)
+    assert script is not None, f"{result.name}: no benchmark script declares it"
+    _, keys, optional = _declared(script)
+    found = set(json.loads(result.read_text(encoding="utf-8")))
+    assert set(keys) <= found <= set(keys) | set(optional), (
+        f"{result.name}: keys {sorted(found)}; {script.name} declares {sorted(keys)} "
+        f"(optional {sorted(optional)})")
+
+
+def test_the_harness_refuses_results_whose_keys_differ(tmp_path, monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import harness
+
+    with pytest.raises(ValueError, match="RESULT_KEYS"):
+        harness.write_results(tmp_path / "x.json", {"a": 1, "b": 2}, ("a",))
+    assert not (tmp_path / "x.json").exists()
+    written = harness.write_results(tmp_path / "x.json", {"a": 1, "b": 2}, ("a",), ("b",))
+    assert json.loads(written.read_text()) == {"a": 1, "b": 2}

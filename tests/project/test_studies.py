@@ -1,0 +1,123 @@
+"""The studies rebuild their own pages: ``render`` of every study, run on a copy of
+``studies/``, writes exactly the committed pages (each study's README.md and the index
+studies/README.md), from the committed results.json alone. Figures are redrawn too; their
+bytes are not compared (they depend on the matplotlib and font versions), only that each
+page's figure is written."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+STUDIES = ROOT / "studies"
+NAMES = ("thesis_reproduction", "sparse_scans_simulated", "sparse_scans_measured",
+         "physics_terms_measured", "classical_imagers_measured")
+
+
+def _render(copy: Path, name: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, str(copy / name / "run.py"), "render",
+                           "--into", str(copy / name)], capture_output=True, text=True,
+                          timeout=300, check=False, cwd=copy.parent)
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of studies/ without its pages' generated sections and figures, rendered."""
+    copy = tmp_path_factory.mktemp("studies") / "studies"
+    shutil.copytree(STUDIES, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    sys.path.insert(0, str(copy))
+    try:
+        import pages
+    finally:
+        sys.path.remove(str(copy))
+    for page in [copy / "README.md", *(copy / n / "README.md" for n in NAMES)]:
+        pages.replace_generated(page, "(emptied by the test)")
+    for figure in copy.glob("*/figure.*"):
+        figure.unlink()
+    for name in NAMES:
+        done = _render(copy, name)
+        assert done.returncode == 0, f"{name}: {done.stderr[-2000:]}"
+    return copy
+
+
+def test_the_study_folders_are_the_five_questions():
+    found = sorted(p.name for p in STUDIES.iterdir() if (p / "run.py").is_file())
+    assert found == sorted(NAMES)
+    for name in NAMES:
+        assert {"README.md", "run.py", "results.json"} <= {p.name for p in
+                                                           (STUDIES / name).iterdir()}
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_render_reproduces_the_committed_page_byte_for_byte(rendered, name):
+    committed = (STUDIES / name / "README.md").read_bytes()
+    assert (rendered / name / "README.md").read_bytes() == committed, (
+        f"studies/{name}/README.md differs from what `run.py render` writes: run "
+        f"`python studies/{name}/run.py render` and commit the page")
+    figures = list((rendered / name).glob("figure.*"))
+    assert len(figures) == 1 and figures[0].stat().st_size > 1000
+    assert f"]({figures[0].name})" in committed.decode("utf-8")
+
+
+def test_the_index_is_generated_from_every_studys_results(rendered):
+    index = (rendered / "README.md").read_text(encoding="utf-8")
+    assert index == (STUDIES / "README.md").read_text(encoding="utf-8")
+    for name in NAMES:
+        recorded = json.loads((STUDIES / name / "results.json").read_text())["recorded"]
+        row = next(line for line in index.splitlines() if line.startswith(f"| [{name}]"))
+        assert row.endswith(f"| {recorded['date']} | {recorded['commit']} | "
+                            f"{recorded['machine']} |")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_every_results_file_says_where_and_when_it_was_measured(name):
+    results = json.loads((STUDIES / name / "results.json").read_text(encoding="utf-8"))
+    assert results["question"] and results["source"]
+    assert all(results["recorded"][k] for k in ("machine", "commit", "date"))
+
+
+def test_a_page_without_its_markers_is_refused(tmp_path):
+    sys.path.insert(0, str(STUDIES))
+    try:
+        import pages
+    finally:
+        sys.path.remove(str(STUDIES))
+    page = tmp_path / "README.md"
+    page.write_text("# a page\n")
+    with pytest.raises(SystemExit, match="markers"):
+        pages.replace_generated(page, "text")
+    assert page.read_text() == "# a page\n"
+    with pytest.raises(ValueError, match="recorded"):
+        pages.write_results(tmp_path, {"recorded": {"machine": "m"}})
+    assert not (tmp_path / "results.json").exists()
+
+
+def test_collect_reads_the_scores_the_runs_recorded(tmp_path, monkeypatch):
+    """A study's collect copies each score from the run's metrics.json (it computes none):
+    the physics study's calibration row of a tiny jittered run holds exactly the run's
+    reconstruction scores, labelled by the run's own overrides."""
+    import nlosfw
+
+    monkeypatch.setenv("NLOSFW_CACHE_DIR", str(tmp_path / "cache"))
+    out = nlosfw.run(["scene=tiny", "scene.noise.model=poisson", "scene.noise.jitter_ps=50",
+                      "split.spatial_step=2", "model=rsd_prior", "figures.enabled=false",
+                      "reconstruction.single_frequency_images=0"], output_dir=tmp_path / "0")
+    done = subprocess.run([sys.executable, str(STUDIES / "physics_terms_measured" / "run.py"),
+                           "collect", str(out.dir), "--out", str(tmp_path / "r.json")],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    results = json.loads((tmp_path / "r.json").read_text())
+    (case,) = results["calibration"]["cases"]
+    assert case["case"] == "tiny/analytic/poisson/jitter50ps" and case["step"] == 2
+    sources = json.loads((out.dir / "metrics.json").read_text())["reconstruction"]["sources"]
+    for name, source in (("raw", "raw"), ("interp", "interp"), ("rsd_prior", "model")):
+        for score in ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m"):
+            assert case["scores"][name][score] == sources[source][score]
+    assert results["rows"] == [] and "| tiny/analytic/poisson/jitter50ps |" in done.stdout
+    assert (STUDIES / "physics_terms_measured" / "README.md").is_file()
