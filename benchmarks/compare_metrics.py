@@ -8,9 +8,10 @@ Pairs of files (before, after) in order. Left out of the comparison: the timings
 :func:`~nlosfw.pipeline.metrics.without_timings`), ``run.started``, ``run.dir``,
 ``run.config_hash`` and ``run.nlosfw_version`` (where and when and by which version the
 run ran), ``schema_version``, and the fields a newer schema adds (present in one file only
-and listed in :data:`ADDED`). Each difference is printed as its dotted path and both
-values; the exit status is 0 when every pair agrees, 1 otherwise, 2 for a file that cannot
-be read.
+and listed in :data:`ADDED`); an older file is read as the current schema reads it, its
+renamed keys (``capture.thinning``) under their new names. Each difference is printed as
+its dotted path and both values; the exit status is 0 when every pair agrees, 1 otherwise,
+2 for a file that cannot be read.
 """
 
 from __future__ import annotations
@@ -29,10 +30,11 @@ ADDED = ("null_reasons",)
 
 
 def comparable(data: Mapping[str, Any]) -> dict[str, Any]:
-    """``data`` without the timings, ``schema_version`` and the run's own fields."""
-    from nlosfw.pipeline import without_timings
+    """``data`` as the current schema reads it (an older file's renamed keys under their
+    new names), without the timings, ``schema_version`` and the run's own fields."""
+    from nlosfw.pipeline import SCHEMA_VERSION, metrics_as_current, without_timings
 
-    out = without_timings(data)
+    out = without_timings(metrics_as_current(dict(data), SCHEMA_VERSION))
     out.pop("schema_version", None)
     run = dict(out.get("run") or {})
     for name in RUN_FIELDS:

@@ -32,6 +32,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
         metrics_schema,
         without_timings,
     )
+    from nlosfw.pipeline.metrics_versions import metrics_as_current
     from nlosfw.pipeline.plan import PlainConfig, Planned, PlannedModel, RunPlan, make_plan
     from nlosfw.pipeline.results import (
         CaptureResult,
@@ -83,6 +84,7 @@ __all__ = [
     "file_digest",
     "make_plan",
     "memory_summary",
+    "metrics_as_current",
     "metrics_outline",
     "metrics_schema",
     "objective",

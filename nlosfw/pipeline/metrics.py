@@ -34,7 +34,7 @@ from nlosfw.common.typed_json import (
     to_json,
 )
 from nlosfw.model.interface import FitReport
-from nlosfw.pipeline.metrics_versions import as_current
+from nlosfw.pipeline.metrics_versions import metrics_as_current
 from nlosfw.pipeline.nulls import Number, error_values, fit_values, with_explicit_nulls
 
 SchemaVersion = Literal[9]
@@ -368,8 +368,8 @@ class RunMetrics(Document, frozen=True, kw_only=True):
     def from_json(cls, data: object, where: str = "") -> "RunMetrics":
         """Metrics from the JSON object of a metrics.json of this :data:`SCHEMA_VERSION`, or
         of an older one that still reads as it
-        (:func:`~nlosfw.pipeline.metrics_versions.as_current`)."""
-        return from_json(cls, as_current(data, SCHEMA_VERSION, where), where)
+        (:func:`~nlosfw.pipeline.metrics_versions.metrics_as_current`)."""
+        return from_json(cls, metrics_as_current(data, SCHEMA_VERSION, where), where)
 
     @classmethod
     def read(cls, path: Path) -> "RunMetrics":

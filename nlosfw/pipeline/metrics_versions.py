@@ -21,7 +21,7 @@ READABLE_VERSIONS: Final = (5, 6, 7, 8, 9)
 RENAMED_KEYS: Final = ((8, "capture", "thinning", "count_splitting"),)
 
 
-def as_current(data: object, current: int, where: str = "") -> object:
+def metrics_as_current(data: object, current: int, where: str = "") -> object:
     """The JSON object of a metrics.json (``data``) as version ``current`` reads it: an
     older version's with its renamed keys under their new names; a one-line DataError
     naming ``where`` (the file) for a version that is not readable."""

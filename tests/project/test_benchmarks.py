@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import ast
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -83,3 +85,30 @@ def test_the_harness_refuses_results_whose_keys_differ(tmp_path, monkeypatch):
     assert not (tmp_path / "x.json").exists()
     written = harness.write_results(tmp_path / "x.json", {"a": 1, "b": 2}, ("a",), ("b",))
     assert json.loads(written.read_text()) == {"a": 1, "b": 2}
+
+
+def test_compare_metrics_reads_an_older_file_as_the_current_schema(tmp_path):
+    """A count-splitting run recorded before ``capture.thinning`` was renamed compares equal
+    to the same run today; a float that changed in its last bit does not."""
+    from nlosfw.pipeline import SCHEMA_VERSION
+
+    halves = {"seed": 0, "photons": 1234.0, "halves": [617.0, 617.0]}
+    after = {"schema_version": SCHEMA_VERSION, "run": {"started": "today", "seed": 3},
+             "capture": {"count_splitting": halves, "bins": 64}}
+    before = {**after, "schema_version": 8, "run": {"started": "yesterday", "seed": 3},
+              "capture": {"thinning": halves, "bins": 64}}
+    files = []
+    for name, data in (("before.json", before), ("after.json", after)):
+        files.append(tmp_path / name)
+        files[-1].write_text(json.dumps(data))
+    compare = subprocess.run([sys.executable, str(BENCHMARKS / "compare_metrics.py"),
+                              *map(str, files)], capture_output=True, text=True, timeout=120)
+    assert compare.returncode == 0, compare.stdout + compare.stderr
+    changed = {**after, "capture": {"count_splitting": {**halves, "photons": 1234.0000000000002},
+                                    "bins": 64}}
+    files[1].write_text(json.dumps(changed))
+    compare = subprocess.run([sys.executable, str(BENCHMARKS / "compare_metrics.py"),
+                              *map(str, files)], capture_output=True, text=True, timeout=120)
+    assert compare.returncode == 1
+    assert "capture.count_splitting.photons: 1234.0 before, 1234.0000000000002 after" in \
+        compare.stdout
