@@ -202,10 +202,13 @@ class _Base:
                          why=why)
 
     def plan(self, shape: PlanShape, memory: MemoryEstimate, **more: object) -> RunPlan:
+        picked = choices(self.config)
+        if more.get("simulator") is None:   # a capture file: no scene, nothing simulated
+            picked = {k: v for k, v in picked.items() if k not in ("scene", "simulator")}
         return RunPlan(config=self.config, settings=self.settings, transform=self.transform,
                        imager=self.imager, models=self.models, formats=self.formats,
                        depths=DepthPlan.of(self.settings.reconstruction), shape=shape,
-                       memory=memory, choices=choices(self.config),
+                       memory=memory, choices=picked,
                        imager_needs=self.needs, **more)  # type: ignore[arg-type]
 
 

@@ -268,7 +268,7 @@ def test_command_prints_the_plan_and_runs_the_checks(tmp_path):
     run = subprocess.run([sys.executable, "-m", "nlosfw.testing", "model:interp", "-q"],
                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert run.returncode == 0, run.stdout[-2000:]
-    assert "12 passed, 1 skipped" in run.stdout
+    assert "13 passed, 1 skipped" in run.stdout
     assert not list(tmp_path.iterdir()), "the command must not write into the directory"
     bad = subprocess.run([sys.executable, "-m", "nlosfw.testing", "no_such_plugin"],
                          capture_output=True, text=True, timeout=120, cwd=tmp_path)
