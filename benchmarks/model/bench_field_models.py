@@ -1,4 +1,4 @@
-"""Benchmark of the field models: six neural fields and ``interp`` on the thesis split.
+"""Speed of the field models: six neural fields and ``interp`` on the thesis split.
 
 Data: the ``thesis_two_planes`` scene (two rectangles at two depths, 64 x 64
 sensors on a 2 m wall, 2048 bins of 3 mm) rendered by the ``analytic``
@@ -9,13 +9,13 @@ not installed). Protocol: :func:`nlosfw.evaluation.split_field` (every other wal
 sample, 10% of the frequencies interleaved), i.e. 32 x 32 x 135 training samples.
 
 For every model (default configs; ``--models`` to choose): training wall-clock
-time, held-out errors against the *clean* full field (the noisy variant thus
-measures denoising as well), the error curve against training time (evaluated
-at every progress report, evaluation time excluded), the time to reach 90% of
-the final error reduction, the time to predict the full 64 x 64 x 151 field,
-and parameters/data as in thesis Table 4.1. Torch vs JAX speed is reported as
-a ratio of milliseconds per step. Results go to
-``benchmarks/results/bench_field_models.json``.
+time, the training loss against training time (at every progress report), the
+time to predict the full 64 x 64 x 151 field, and parameters/data as in thesis
+Table 4.1. Torch vs JAX speed is reported as a ratio of milliseconds per step.
+Results go to ``benchmarks/results/bench_field_models.json``.
+
+How well the models predict the held-out samples of this split is a study:
+``studies/thesis_reproduction`` (``run.py run --field-models``).
 
     python benchmarks/model/bench_field_models.py [--quick] [--models siren_torch,interp]
 """
@@ -33,13 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the harness
 import numpy as np
 from harness import RESULTS_DIR, machine, write_results
 
-from nlosfw.evaluation import (
-    FieldSplit,
-    error_metrics,
-    field_metrics,
-    parameter_data_ratio,
-    split_field,
-)
+from nlosfw.evaluation import FieldSplit, parameter_data_ratio, split_field
 from nlosfw.model import TrainingStep
 from nlosfw.plugins import load_plugins
 from nlosfw.simulate import AnalyticSimulator, Scene, scene_from_config
@@ -99,64 +93,31 @@ def to_field(capture: Any, n_frequencies: int) -> PhasorField:
                            geometry=capture.geometry)
 
 
-def error_summary(metrics: dict[str, dict[str, Any]]) -> dict[str, float | None]:
-    return {name: m["relative_l2"] for name, m in metrics.items()}
-
-
 def run_model(registry: Any, name: str, options: dict[str, Any], split: FieldSplit,
-              full: PhasorField, truth: PhasorField) -> dict[str, Any]:
-    """Train one model on ``split`` and score it against ``truth``."""
+              full: PhasorField) -> dict[str, Any]:
+    """Train one model on ``split``; time its fit and its prediction of ``full``'s grid."""
     model = registry.create("model", name, options)
     xy = full.wall_xyz[..., :2]
     curve: list[dict[str, float]] = []
-    eval_seconds = 0.0
 
     def on_step(step: TrainingStep) -> None:
-        nonlocal eval_seconds
-        start = time.perf_counter()
-        pred = model.predict(xy, full.frequencies)
-        errors = error_summary(field_metrics(truth, pred, split))
-        curve.append({"step": step.step, "seconds": step.seconds, "loss": step.loss,
-                      **{k: v for k, v in errors.items() if v is not None}})
-        eval_seconds += time.perf_counter() - start
+        curve.append({"step": step.step, "seconds": step.seconds, "loss": step.loss})
 
     start = time.perf_counter()
     report = model.fit(split.train_field, on_step=None if name == "interp" else on_step)
-    fit_seconds = time.perf_counter() - start - eval_seconds
+    fit_seconds = time.perf_counter() - start
     predict_seconds = []
     for _ in range(3):
         t0 = time.perf_counter()
-        pred = model.predict(xy, full.frequencies)
+        model.predict(xy, full.frequencies)
         predict_seconds.append(time.perf_counter() - t0)
-    metrics = field_metrics(truth, pred, split)
-    final = error_summary(metrics)
     n_params = int(model.n_parameters)
     return {
         "model": name, "options": options, "fit_s": fit_seconds, "steps": report.steps,
         "ms_per_step": 1000 * fit_seconds / max(report.steps, 1),
         "predict_s": min(predict_seconds), "n_parameters": n_params,
-        "parameters_per_data_pct": parameter_data_ratio(n_params, split),
-        "errors": final, "metrics": metrics, "curve": curve,
-        "t90_s": time_to_90(curve, final.get("heldout_pixels")),
+        "parameters_per_data_pct": parameter_data_ratio(n_params, split), "curve": curve,
     }
-
-
-def time_to_90(curve: list[dict[str, float]], final: float | None) -> float | None:
-    """First training time at which the held-out pixel error has made 90% of its total drop.
-
-    The drop is measured from the first report to the final (best-kept) model.
-    """
-    points = [(c["seconds"], c["heldout_pixels"]) for c in curve if "heldout_pixels" in c]
-    if final is None or not points:
-        return None
-    start = points[0][1]
-    if start <= final:
-        return points[0][0]
-    goal = final + 0.1 * (start - final)
-    for seconds, err in points:
-        if err <= goal:
-            return seconds
-    return points[-1][0]
 
 
 def main() -> None:
@@ -180,18 +141,11 @@ def main() -> None:
         "quick": args.quick, "resolution": resolution, "n_frequencies": n_freq,
         "photons": args.photons, "targets": TARGETS, "variants": {},
     }
-    clean_field = None
     for variant in args.variants.split(","):
         scene = bench_scene(resolution, args.photons if variant == "noisy" else None)
         t0 = time.perf_counter()
         capture = AnalyticSimulator({"patch_size": 0.02}).simulate(scene)
         field = to_field(capture, n_freq)
-        if variant == "clean":
-            clean_field = field
-        truth = clean_field if clean_field is not None else to_field(
-            AnalyticSimulator({"patch_size": 0.02}).simulate(bench_scene(resolution, None)),
-            n_freq)
-        noise = error_metrics(truth.values, field.values)["relative_l2"]
         split = split_field(field, spatial_step=2, spectral="interleaved")
         rows = []
         for label in names:
@@ -201,14 +155,13 @@ def main() -> None:
                 print(f"skipping {label}: not installed")
                 continue
             options = dict(options) if name == "interp" else {**options, **quick_options}
-            rows.append(run_model(registry, name, options, split, field, truth))
+            rows.append(run_model(registry, name, options, split, field))
             r = rows[-1]
             r["model"] = label
             print(f"{variant:5s} {label:12s} fit {r['fit_s']:6.1f} s  "
-                  f"held-out px {r['errors']['heldout_pixels']:.4f}  "
-                  f"held-out f {r['errors']['heldout_frequencies']:.4f}", flush=True)
+                  f"predict {r['predict_s']:.2f} s", flush=True)
         results["variants"][variant] = {
-            "data_seconds": time.perf_counter() - t0, "relative_noise": noise,
+            "data_seconds": time.perf_counter() - t0,
             "band": [float(field.frequencies.min()), float(field.frequencies.max())],
             "train_values": split.n_train_values, "models": rows,
         }
@@ -250,21 +203,14 @@ def print_tables(results: dict[str, Any]) -> None:
 
     console = Console(width=170)
     for variant, data in results["variants"].items():
-        table = Table(title=f"field models, {variant} capture (relative noise "
-                            f"{data['relative_noise']:.3f}); errors vs the clean field")
-        for col in ("model", "params", "params/data %", "fit s", "ms/step", "t90 s",
-                    "predict s", "held-out px", "inside hull", "held-out f", "all"):
+        table = Table(title=f"field models, {variant} capture")
+        for col in ("model", "params", "params/data %", "fit s", "ms/step", "predict s"):
             table.add_column(col, justify="right")
         for r in data["models"]:
-            e = r["errors"]
             table.add_row(r["model"], str(r["n_parameters"]),
                           f"{r['parameters_per_data_pct']:.2f}", f"{r['fit_s']:.1f}",
                           "-" if r["model"].startswith("interp") else f"{r['ms_per_step']:.1f}",
-                          "-" if r["t90_s"] is None else f"{r['t90_s']:.1f}",
-                          f"{r['predict_s']:.2f}",
-                          *(f"{e[k]:.4f}" if e[k] is not None else "-"
-                            for k in ("heldout_pixels", "heldout_pixels_inside",
-                                      "heldout_frequencies", "all")))
+                          f"{r['predict_s']:.2f}")
         console.print(table)
     if results["torch_over_jax_ms_per_step"]:
         console.print("torch / JAX ms per step: " + ", ".join(

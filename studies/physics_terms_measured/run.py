@@ -22,6 +22,11 @@ generated section and ``figure.svg`` from ``results.json``.
 captures (embree, Poisson noise, 16x): ``letter_t`` and ``thesis_two_planes`` with 0, 50 and
 100 ps of timing jitter (``scene.noise.jitter_ps``), each scored against the full capture
 with the same error; ``collect`` keeps those runs' ``raw``, ``interp`` and model scores.
+``run --simulated judged,tuning`` adds ``rsd_prior`` on simulated sparse scans (16x and
+64x): the judged scenes (``letter_t`` and ``thesis_two_planes`` noise-free with the
+analytic simulator and with embree and Poisson noise, ``thesis_occluded`` with embree and
+Poisson noise) and the tuning scenes (``thesis_planes`` and ``thesis_concave``, the same
+two captures), scored and collected like the calibration cases.
 """
 
 from __future__ import annotations
@@ -48,6 +53,16 @@ VARIANTS = "least_squares,poisson_counts"
 #: The calibration cases ``run --calibration`` runs: scenes and timing jitters (ps).
 CALIBRATION_SCENES = ("letter_t", "thesis_two_planes")
 CALIBRATION_JITTERS = (0, 50, 100)
+#: The simulated sparse scans ``run --simulated`` runs, per group: (scene, simulator,
+#: noise model) at spatial steps 4 and 8 (16x and 64x).
+SIMULATED = {
+    "judged": [(scene, simulator, noise) for scene in ("letter_t", "thesis_two_planes")
+               for simulator, noise in (("analytic", "none"), ("embree", "poisson"))]
+    + [("thesis_occluded", "embree", "poisson")],
+    "tuning": [(scene, simulator, noise) for scene in ("thesis_planes", "thesis_concave")
+               for simulator, noise in (("analytic", "none"), ("embree", "poisson"))],
+}
+SIMULATED_STEPS = (4, 8)
 SCORES = ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m")
 SHORT = {"data_diffuse_s.mat": "diffuse S", "data_dot_chart_40cm.mat": "dot chart",
          "data_resolution_chart_40cm.mat": "resolution chart"}
@@ -70,6 +85,9 @@ def _arguments(run_parser: argparse.ArgumentParser,
                             help="the runs go to DIR/<n>")
     run_parser.add_argument("--calibration", action="store_true",
                             help="also the simulated calibration cases (timing jitter)")
+    run_parser.add_argument("--simulated", default="",
+                            help=f"also simulated sparse scans, comma-separated groups: "
+                                 f"{', '.join(SIMULATED)}")
     collect_parser.add_argument("dirs", type=Path, nargs="+", help="run directories")
     for parser in (run_parser, collect_parser):
         parser.add_argument("--out", type=Path, default=None,
@@ -102,20 +120,36 @@ def run(args: argparse.Namespace) -> None:
                     print(f"$ nlosfw.run {' '.join(given)}", flush=True)
                     run_nlosfw(given, output_dir=out)
                     args.dirs.append(out)
-    for scene in CALIBRATION_SCENES if args.calibration else ():
-        for jitter in CALIBRATION_JITTERS:
-            out = args.dir / str(len(args.dirs))
-            given = [f"scene={scene}", "simulator=embree", "scene.noise.model=poisson",
-                     f"scene.noise.jitter_ps={jitter}", "split.spatial_step=4",
-                     "model=rsd_prior", "figures.enabled=false",
-                     "reconstruction.single_frequency_images=0"]
-            print(f"$ nlosfw.run {' '.join(given)}", flush=True)
-            run_nlosfw(given, output_dir=out)
-            args.dirs.append(out)
+    for given in simulated_overrides(args.calibration, args.simulated):
+        out = args.dir / str(len(args.dirs))
+        print(f"$ nlosfw.run {' '.join(given)}", flush=True)
+        run_nlosfw(given, output_dir=out)
+        args.dirs.append(out)
+
+
+def simulated_overrides(calibration: bool, groups: str) -> list[list[str]]:
+    """The ``nlosfw.run`` overrides of the simulated runs: the calibration cases (timing
+    jitter, 16x), then each of ``groups``' (comma-separated :data:`SIMULATED` names) cases
+    at 16x and 64x."""
+    unknown = sorted({g for g in groups.split(",") if g} - set(SIMULATED))
+    if unknown:
+        raise SystemExit(f"--simulated: unknown group(s) {', '.join(unknown)}; valid: "
+                         f"{', '.join(SIMULATED)}")
+    every = ["model=rsd_prior", "figures.enabled=false",
+             "reconstruction.single_frequency_images=0"]
+    runs = [[f"scene={scene}", "simulator=embree", "scene.noise.model=poisson",
+             f"scene.noise.jitter_ps={jitter}", "split.spatial_step=4", *every]
+            for scene in (CALIBRATION_SCENES if calibration else ())
+            for jitter in CALIBRATION_JITTERS]
+    for group in (g for g in groups.split(",") if g):
+        runs += [[f"scene={scene}", f"simulator={simulator}", f"scene.noise.model={noise}",
+                  f"split.spatial_step={step}", *every]
+                 for scene, simulator, noise in SIMULATED[group] for step in SIMULATED_STEPS]
+    return runs
 
 
 def calibration_row(metrics: dict[str, Any], given: dict[str, str]) -> dict[str, Any]:
-    """A simulated calibration run's row: its case and each source's scores."""
+    """A simulated run's row: its case, its step and each source's scores."""
     jitter = float(given.get("scene.noise.jitter_ps", 0))
     case = "/".join([given.get("scene", "?"), str(metrics["run"].get("simulator") or "?"),
                      given.get("scene.noise.model", "none")]) + (
@@ -211,15 +245,16 @@ def summary_table(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def calibration_table(calibration: dict[str, Any]) -> list[str]:
-    """The calibration cases: each source's PSNR / SSIM (front view) at 16x."""
-    lines = ["| case | raw: PSNR / SSIM | interp | rsd_prior | rsd_prior depth RMSE (mm) |",
-             "|---|---|---|---|---|"]
+    """The simulated cases: each source's PSNR / SSIM (front view) and ``rsd_prior``'s
+    depth RMSE, at the case's sparsity."""
+    lines = ["| case | sparsity | raw: PSNR / SSIM | interp | rsd_prior | "
+             "rsd_prior depth RMSE (mm) |", "|---|---|---|---|---|---|"]
     for case in calibration["cases"]:
         s = case["scores"]
         cells = [f"{s[n]['psnr']:.1f} / {s[n]['ssim']:.3f}" for n in ("raw", "interp",
                                                                        "rsd_prior")]
         depth = s["rsd_prior"].get("depth_rmse_m")
-        lines.append(f"| {case['case']} | {' | '.join(cells)} | "
+        lines.append(f"| {case['case']} | {case['step'] ** 2}× | {' | '.join(cells)} | "
                      f"{'-' if depth is None else f'{1000 * depth:.1f}'} |")
     return lines
 
@@ -239,8 +274,9 @@ def results_markdown(results: dict[str, Any]) -> str:
         "",
         summary_table(rows),
         "",
-        "**Calibration errors on simulated captures** (`run --calibration`: embree, Poisson "
-        "noise, 16×; each source scored against the full capture with the same error). "
+        "**Simulated captures** (`run --calibration`: calibration errors, embree, Poisson "
+        "noise, 16×; `run --simulated judged,tuning`: sparse scans at 16× and 64×; each "
+        "source scored against the full capture with the same error). "
         + pages.recorded_line(results["calibration"]),
         "",
         *calibration_table(results["calibration"]),

@@ -13,6 +13,9 @@ runs the same study on a capture file: the scene and acquisition axes are droppe
 ``collect`` reads every run's metrics.json (``nlosfw.report``) into ``results.json``
 (``--out JSON``: elsewhere, the page untouched) and prints the page's generated section;
 ``render`` rewrites that section and ``figure.png`` from ``results.json``.
+``run --tuning GRID`` tunes a network's options instead (:data:`TUNING_GRIDS`): one sweep
+per candidate on the tuning scenes (noise-free, 16x, seed 0), each candidate's options a
+series of its own.
 
 Every score is the run's own (:func:`nlosfw.evaluation.reconstruction_scores`: a source's
 reconstruction against the full capture's); a field model wins where its mean over seeds
@@ -46,6 +49,20 @@ QUESTION = ("At 4×, 16× and 64× fewer wall samples of a simulated scene, does
 FIGURE = "figure.png"
 TUNING_SCENES = ("thesis_planes", "thesis_concave")
 JUDGED_SCENES = ("letter_t", "thesis_two_planes", "thesis_occluded")
+#: The networks' tuning grids (``run --tuning GRID``): per candidate, the sweep's overrides
+#: (each candidate runs on both tuning scenes, noise-free, at 16x, seed 0).
+TUNING_GRIDS: dict[str, list[list[str]]] = {
+    "baselines": [["model=siren_torch"]],
+    "fourier": [["model=fourier_torch", f"model.sigma={s}"] for s in (1.0, 2.0, 4.0)],
+    "wire": [["model=wire_torch", f"model.omega0={w}", f"model.scale0={s}"]
+             for w, s in ((5.0, 2.0), (10.0, 5.0), (20.0, 10.0))],
+    "finer": [["model=finer_torch", f"model.omega0_first={w}"] for w in (5.0, 15.0, 30.0)],
+    "hashgrid": [["model=hashgrid_torch"], ["model=hashgrid_torch", "model.finest_resolution=8"],
+                 ["model=hashgrid_torch", "model.encode_frequency=false"]],
+}
+#: The axes of a tuning sweep (the preset's other axes narrowed to them).
+TUNING_AXES = [f"scene={','.join(TUNING_SCENES)}", "acquisition=clean", "split.spatial_step=4",
+               "model.seed=0"]
 #: Margins a field model must beat the best baseline by (the study's targets, at 16x).
 TARGETS = {"noisy_psnr_db": 2.0, "noisy_ssim": 0.05, "clean_psnr_db": 10.0}
 
@@ -61,6 +78,9 @@ def _arguments(run_parser: argparse.ArgumentParser,
                             help="sweep directory (default: multirun/sparsity-<date>)")
     run_parser.add_argument("--capture", type=Path, default=None,
                             help="run the study on this capture file (no scene axis)")
+    run_parser.add_argument("--tuning", choices=sorted(TUNING_GRIDS), default=None,
+                            help="a network's tuning grid on the tuning scenes instead: one "
+                                 "sweep per candidate, into DIR/<n>")
     run_parser.add_argument("overrides", nargs="*", help="Hydra overrides for the sweep")
     collect_parser.add_argument("dirs", type=Path, nargs="+")
     for parser in (run_parser, collect_parser):
@@ -71,10 +91,21 @@ def _arguments(run_parser: argparse.ArgumentParser,
 def run(args: argparse.Namespace) -> None:
     """Run the sweep (then ``collect`` reads it)."""
     sweep = args.dir or ROOT / "multirun" / f"sparsity-{time.strftime('%Y%m%d-%H%M%S')}"
-    command = sweep_command(sweep.resolve(), args.capture, args.overrides)
-    print("$ " + shlex.join(command), flush=True)
-    subprocess.run(command, check=True, cwd=ROOT)
-    args.dirs = [sweep]
+    sweeps = [(sweep, list(args.overrides))]
+    if args.tuning is not None:
+        sweeps = [(sweep / str(n), tuning_overrides(candidate, args.overrides))
+                  for n, candidate in enumerate(TUNING_GRIDS[args.tuning])]
+    for folder, overrides in sweeps:
+        command = sweep_command(folder.resolve(), args.capture, overrides)
+        print("$ " + shlex.join(command), flush=True)
+        subprocess.run(command, check=True, cwd=ROOT)
+    args.dirs = [folder for folder, _ in sweeps]
+
+
+def tuning_overrides(candidate: Sequence[str], overrides: Sequence[str]) -> list[str]:
+    """One tuning candidate's sweep: the tuning axes, the candidate's model and options,
+    then the user's ``overrides`` (which win)."""
+    return [*TUNING_AXES, *candidate, *overrides]
 
 
 def collect(args: argparse.Namespace) -> dict[str, Any]:

@@ -14,6 +14,13 @@ parameter count and held-out NMSE (held-out pixels where the split holds pixels 
 else held-out frequencies); for the default run also the held-out frequencies' NMSE and the
 reconstructions' PSNR and SSIM. ``render`` rewrites the page's generated section and
 ``figure.svg``.
+
+``run --field-models`` also runs the field models on the thesis split of
+``thesis_two_planes`` (analytic simulator, every other wall sample, a tenth of the
+frequencies held out interleaved), noise-free and with Poisson noise, through
+``nlosfw.run`` into ``DIR/field_models/<n>``; ``collect`` reads each run's held-out relative
+L2 errors (and, noisy, the error of the whole prediction against the noise-free field). A
+``collect`` without those runs keeps the section the previous ``results.json`` holds.
 """
 
 from __future__ import annotations
@@ -46,6 +53,14 @@ PRESETS = {
     "thesis_fig5_4": "fig. 5.4 `thesis_two_planes` (embree)",
     "thesis_fig5_5": "fig. 5.5 `thesis_occluded`",
 }
+#: ``run --field-models``: the models and the two captures (the noisy one's scene overrides).
+FIELD_MODELS = (["model=interp"], ["model=interp", "model.demodulate=false"],
+                *([f"model={name}"] for name in ("siren_torch", "siren_jax", "pe_torch", "pe_jax",
+                                                 "tanh_torch", "tanh_jax")))
+FIELD_VARIANTS = {"clean": ["scene.noise.model=none"],
+                  "noisy": ["scene.noise.model=poisson", "scene.noise.photons=1000000"]}
+#: The held-out sets of the field models' table, in its order.
+FIELD_SETS = ("heldout_pixels", "heldout_pixels_inside", "heldout_frequencies", "all")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -58,6 +73,8 @@ def _arguments(run_parser: argparse.ArgumentParser,
     run_parser.add_argument("--dir", type=Path, default=None,
                             help="runs go to DIR/default and DIR/presets "
                                  "(default: multirun/thesis-<date>)")
+    run_parser.add_argument("--field-models", action="store_true",
+                            help="also the field models on the thesis split (DIR/field_models)")
     run_parser.add_argument("overrides", nargs="*", help="Hydra overrides for every run")
     collect_parser.add_argument("dir", type=Path, help="the folder `run` wrote")
     for parser in (run_parser, collect_parser):
@@ -76,7 +93,55 @@ def run(args: argparse.Namespace) -> None:
                     [*nlosfw, "report", str(root / "presets")]):
         print("$ " + shlex.join(command), flush=True)
         subprocess.run(command, check=True, cwd=ROOT)
+    if args.field_models:
+        run_field_models(root / "field_models", args.overrides)
     args.dir = root
+
+
+def field_model_overrides(variant: str, model: Sequence[str]) -> list[str]:
+    """The ``nlosfw.run`` overrides of one field model (its ``model`` overrides) on the
+    thesis split of one capture."""
+    return ["scene=thesis_two_planes", "simulator=analytic", *FIELD_VARIANTS[variant],
+            "split.spatial_step=2", "split.spectral=interleaved", *model,
+            "figures.enabled=false", "reconstruction.single_frequency_images=0"]
+
+
+def run_field_models(folder: Path, overrides: Sequence[str]) -> None:
+    """Every field model on both captures, one run at a time, into ``folder/<n>``."""
+    from nlosfw import run as run_nlosfw
+
+    n = 0
+    for variant in FIELD_VARIANTS:
+        for model in FIELD_MODELS:
+            given = [*field_model_overrides(variant, model), *overrides]
+            print(f"$ nlosfw.run {' '.join(given)}", flush=True)
+            run_nlosfw(given, output_dir=folder / str(n))
+            n += 1
+
+
+def collect_field_models(folder: Path) -> dict[str, Any]:
+    """The field models' section from the runs under ``folder``: per capture and model, the
+    held-out relative L2 errors its metrics.json recorded (against the captured field) and,
+    noisy, its whole prediction's against the noise-free field."""
+    from nlosfw.report import read_run
+
+    variants: dict[str, dict[str, Any]] = {}
+    for run_dir in sorted((p.parent for p in folder.rglob("metrics.json")),
+                          key=lambda p: int(p.name) if p.name.isdigit() else 0):
+        given = dict(o.split("=", 1) for o in read_run(run_dir, folder).overrides if "=" in o)
+        entry = _metrics(run_dir)["field"]["model"]
+        splits = entry.get("splits") or {}
+        variant = "noisy" if given.get("scene.noise.model") == "poisson" else "clean"
+        options = " ".join(f"{k[len('model.'):]}={v}" for k, v in given.items()
+                           if k.startswith("model.") and k != "model.seed")
+        name = entry.get("plugin", given.get("model", "?"))
+        variants.setdefault(variant, {"models": []})["models"].append({
+            "model": f"{name} [{options}]" if options else name,
+            "errors": {k: (splits.get(k) or {}).get("relative_l2") for k in FIELD_SETS},
+            "denoised": (entry.get("denoising") or {}).get("relative_l2")})
+    return {"recorded": pages.recorded(), "source": "the runs of `run --field-models`: "
+            "held-out errors against the captured field", "scene": "thesis_two_planes",
+            "simulator": "analytic", "variants": variants}
 
 
 def _heldout(entry: dict[str, Any]) -> tuple[str, float | None]:
@@ -123,8 +188,11 @@ def collect(args: argparse.Namespace) -> dict[str, Any]:
                             "network": entry.get("plugin", source),
                             "n_parameters": entry.get("n_parameters"), "split": split,
                             "nmse_db": value, "interp_db": interp, "note": ""})
+    fields = args.dir / "field_models"
     results = {"question": QUESTION, "source": "the runs' metrics.json, read by `run.py collect`",
-               "recorded": pages.recorded(), "default_run": default_rows, "presets": presets}
+               "recorded": pages.recorded(), "default_run": default_rows, "presets": presets,
+               "field_models": (collect_field_models(fields) if fields.is_dir() else
+                                pages.read_results(HERE).get("field_models"))}
     print(results_markdown(results))
     return results
 
@@ -132,6 +200,31 @@ def collect(args: argparse.Namespace) -> dict[str, Any]:
 # ---------------------------------------------------------------------- the page
 def _db(value: float | None) -> str:
     return "—" if value is None else f"{value:.1f} dB".replace("-", "−")
+
+
+def field_models_markdown(section: dict[str, Any] | None) -> list[str]:
+    """The field models on the thesis split: each model's held-out relative L2 errors,
+    noise-free / noisy."""
+    if not section:
+        return ["**Field models on the thesis split**: not run (`run --field-models`)."]
+    variants = [v for v in ("clean", "noisy") if v in section["variants"]]
+    models: dict[str, dict[str, dict[str, Any]]] = {}
+    for variant in variants:
+        for row in section["variants"][variant]["models"]:
+            models.setdefault(row["model"], {})[variant] = row["errors"]
+
+    def cell(model: str, key: str) -> str:
+        values = [models[model].get(v, {}).get(key) for v in variants]
+        return " / ".join("—" if x is None else f"{x:.3f}" for x in values)
+
+    lines = ["| model | " + " | ".join(k.replace("_", " ") for k in FIELD_SETS) + " |",
+             "|---|" + "---|" * len(FIELD_SETS)]
+    lines += [f"| `{m}` | " + " | ".join(cell(m, k) for k in FIELD_SETS) + " |"
+              for m in models]
+    return [f"**Field models on the thesis split** (`{section['scene']}`, "
+            f"{section['simulator']} simulator; every other wall sample, a tenth of the "
+            f"frequencies held out): relative L2 error, {' / '.join(variants)}. "
+            + pages.recorded_line(section), "", *lines]
 
 
 def results_markdown(results: dict[str, Any]) -> str:
@@ -163,6 +256,8 @@ def results_markdown(results: dict[str, Any]) -> str:
         "NMSE, thesis architectures trained with our recipe.",
         "",
         *presets,
+        "",
+        *field_models_markdown(results.get("field_models")),
         "",
         f"![held-out NMSE of each preset's network against interp]({FIGURE})",
     ]) + "\n"

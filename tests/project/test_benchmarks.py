@@ -1,12 +1,14 @@
 """The benchmarks' layout: speed and memory scripts grouped by package around one harness,
 each declaring the top-level keys of the results file it writes; every committed results
 file belongs to one script and holds exactly those keys (read from the scripts' source, so
-the test runs none of them)."""
+the test runs none of them). No script computes or records a quality score: those are the
+studies'."""
 
 from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -112,3 +114,59 @@ def test_compare_metrics_reads_an_older_file_as_the_current_schema(tmp_path):
     assert compare.returncode == 1
     assert "capture.count_splitting.photons: 1234.0 before, 1234.0000000000002 after" in \
         compare.stdout
+
+
+#: What a benchmark may take from :mod:`nlosfw.evaluation`: the split protocol (the shape
+#: of what a model is fitted to) and its size against the data, never a score.
+PROTOCOL_NAMES = {"split_field", "FieldSplit", "SpatialSampling", "parameter_data_ratio"}
+#: Names of written keys that hold a quality score: those belong in a study's results.json.
+#: (``error`` alone is not among them: ``simulate/bench_simulators.py`` times how fast a
+#: simulator reaches a given error, and ``image/bench_speed.py`` checks its fast path
+#: against the direct sum it times it against.)
+SCORE_KEY = re.compile(r"psnr|ssim|nmse|ncc|excess|floor_db|relative_l2|heldout|^errors$|^metrics$"
+                       r"|^scores$")
+
+
+def _score_uses(script: Path) -> list[str]:
+    """The evaluation names ``script`` imports (splits aside) and the score-like keys it
+    writes (string keys of dict displays and subscript assignments)."""
+    found = []
+    for node in ast.walk(ast.parse(script.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(
+                "nlosfw.evaluation"):
+            found += [f"imports {a.name}" for a in node.names if a.name not in PROTOCOL_NAMES]
+        elif isinstance(node, ast.Import):
+            found += [f"imports {a.name}" for a in node.names
+                      if a.name.startswith("nlosfw.evaluation")]
+        keys: list[ast.expr | None] = []
+        if isinstance(node, ast.Dict):
+            keys = list(node.keys)
+        elif isinstance(node, ast.Assign):
+            keys = [t.slice for t in node.targets if isinstance(t, ast.Subscript)]
+        found += [f"writes key {k.value!r}" for k in keys
+                  if isinstance(k, ast.Constant) and isinstance(k.value, str)
+                  and SCORE_KEY.search(k.value)]
+    return found
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: str(p.relative_to(BENCHMARKS)))
+def test_no_benchmark_computes_or_records_a_quality_score(script):
+    """Benchmarks measure speed and memory; a score belongs in a study (through a run's
+    metrics.json), so a script neither imports a score from nlosfw.evaluation nor writes a
+    key named like one."""
+    assert _score_uses(script) == [], f"{script.relative_to(ROOT)}: {_score_uses(script)}"
+
+
+def _keys(value: object) -> set[str]:
+    if isinstance(value, dict):
+        return {str(k) for k in value} | {k for v in value.values() for k in _keys(v)}
+    if isinstance(value, list):
+        return {k for v in value for k in _keys(v)}
+    return set()
+
+
+@pytest.mark.parametrize("result", sorted(RESULTS.glob("*.json")), ids=lambda p: p.name)
+def test_no_committed_benchmark_result_holds_a_quality_score(result):
+    scores = sorted(k for k in _keys(json.loads(result.read_text(encoding="utf-8")))
+                    if SCORE_KEY.search(k))
+    assert scores == [], f"{result.name}: {scores} belong in a study's results.json"

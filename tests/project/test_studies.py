@@ -121,3 +121,65 @@ def test_collect_reads_the_scores_the_runs_recorded(tmp_path, monkeypatch):
             assert case["scores"][name][score] == sources[source][score]
     assert results["rows"] == [] and "| tiny/analytic/poisson/jitter50ps |" in done.stdout
     assert (STUDIES / "physics_terms_measured" / "README.md").is_file()
+
+
+def _study_module(name: str):
+    """A study's run.py as a module (its folder's helpers importable)."""
+    import importlib.util
+
+    sys.path.insert(0, str(STUDIES))
+    try:
+        spec = importlib.util.spec_from_file_location(f"study_{name}", STUDIES / name / "run.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(STUDIES))
+    return module
+
+
+def _study_runs() -> list[list[str]]:
+    """Every run the studies' simulated cases, tuning grids and field models would start
+    (a tuning sweep's scene axis as one of its scenes)."""
+    physics = _study_module("physics_terms_measured")
+    thesis = _study_module("thesis_reproduction")
+    sparse = _study_module("sparse_scans_simulated")
+    runs = physics.simulated_overrides(True, ",".join(physics.SIMULATED))
+    runs += [thesis.field_model_overrides(variant, model) for variant in thesis.FIELD_VARIANTS
+             for model in thesis.FIELD_MODELS]
+    runs += [["experiment=sparsity", *(f"scene={sparse.TUNING_SCENES[0]}"
+                                       if o.startswith("scene=") else o
+                                       for o in sparse.tuning_overrides(candidate, []))]
+             for grid in sparse.TUNING_GRIDS.values() for candidate in grid]
+    return runs
+
+
+def test_every_run_a_study_would_start_is_a_valid_configuration():
+    """The runs ``run --simulated``, ``run --field-models`` and ``run --tuning`` start are
+    configurations nlosfw accepts: each composes and plans (a misspelt option, such as a
+    network's old option name, fails here rather than hours into a study)."""
+    from nlosfw.common.errors import ConfigError, PluginError
+    from nlosfw.compose import compose_run_config
+    from nlosfw.plugins import load_plugins
+
+    host = load_plugins()
+    runs = _study_runs()
+    # 6 calibration + 10 judged + 8 tuning runs, 8 field models x 2 captures, 13 candidates
+    assert len(runs) == 24 + 16 + 13
+    planned = 0
+    for overrides in runs:
+        try:
+            config = compose_run_config(overrides, host)
+        except PluginError:  # a backend that is not installed here (torch, JAX)
+            continue
+        planned += 1
+        for override in overrides:
+            key, _, value = override.partition("=")
+            if key.startswith(("model.", "scene.noise.", "split.")):
+                node: object = config
+                for part in key.split("."):
+                    node = node[part]  # type: ignore[index]
+                assert str(node).lower() == value.lower() or float(node) == float(value), (
+                    override, node)
+    assert planned >= 1
+    with pytest.raises(ConfigError, match="sigmax"):
+        compose_run_config(["model=interp", "model.sigmax=1"], host)
