@@ -44,6 +44,7 @@ import scipy.fft
 import scipy.sparse
 
 from nlosfw.common.config import require
+from nlosfw.image.data_settings import DEFAULT_SNR
 from nlosfw.image.evanescent import evanescent_noise_weights
 from nlosfw.image.transient import (
     TransientImager,
@@ -56,8 +57,6 @@ from nlosfw.transform.field import PhasorField
 
 #: Depth steps (dt/2) of margin beyond the farthest voxel.
 _MARGIN_STEPS = 4
-#: The Wiener SNR without an option or a hint (O'Toole's code: 8e-2).
-DEFAULT_SNR = 0.08
 
 
 @dataclass(frozen=True)
@@ -78,8 +77,9 @@ class LCTImagerConfig(LightConeConfig):
 
     snr: float | None = None
     """Signal-to-noise ratio of the Wiener filter conj(K^)/(|K^|^2 + 1/snr); null: the
-    capture's imaging hint (O'Toole's demo: 0.8 retroreflective, 0.08 diffuse), else
-    0.08."""
+    capture's imaging hint when it states one, else estimated from the field's evanescent
+    noise (nlosfw.image.data_settings; O'Toole's demo sets 0.8 retroreflective, 0.08
+    diffuse by hand)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -164,6 +164,7 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
 
     config_class = LCTImagerConfig
     imager_name = "lct"
+    estimates_snr = True
 
     def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
                 window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
@@ -175,7 +176,8 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
 
     def snr_for(self, field: PhasorField) -> float:
         """The Wiener SNR for ``field``: the ``snr`` option if set, else the field's imaging
-        hint, else :data:`DEFAULT_SNR`."""
+        hint (:meth:`reconstruct` puts the estimate from the data there when the capture
+        states none), else :data:`DEFAULT_SNR`."""
         if self.config.snr is not None:
             return float(self.config.snr)
         hint = field_hints(field).snr
