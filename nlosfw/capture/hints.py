@@ -29,14 +29,15 @@ HINTS_KEY = "imaging_hints"
 
 @dataclass(frozen=True)
 class ImagingHints:
-    """How a capture is best imaged; ``None`` fields: no hint (the imager's default)."""
+    """How a capture states it is imaged; ``None`` fields: no hint (the imager estimates
+    or defaults)."""
 
     falloff: str | None = None
     """``diffuse`` (1/r^4) or ``retroreflective`` (1/r^2)."""
     snr: float | None = None
     """Signal-to-noise ratio of the LCT Wiener filter."""
     depth_window: tuple[float, float] | None = None
-    """[near, far] (m) of the depths the authors show."""
+    """[near, far] (m) of the depths the capture's scene lies in."""
     origin: str = ""
     """Where the hints come from (shown in metrics and reports)."""
 

@@ -51,6 +51,8 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
     every reconstruction against the true field's (:mod:`nlosfw.evaluation`)."""
     capture = required(done.capture, "capture").capture
     imager = run.plan.imager
+    if run.plan.imager_note:
+        log.info("%s", run.plan.imager_note)
     sources: dict[str, PhasorField]
     chosen: dict[FrequencySplit, int] = {}
     if done.fields is None:  # model=none: the capture's own field, imaged alone
