@@ -66,11 +66,12 @@ def test_sparsity_and_the_binned_wall():
     one[1, 2] = 3.0
     assert sparsity(one) == pytest.approx(20.0)
     assert sparsity(np.zeros(3)) == 0.0
-    values = np.arange(2 * 17 * 16, dtype=float).reshape(2, 17, 16)
+    values = np.arange(2 * 65 * 64, dtype=float).reshape(2, 65, 64)
     binned, origin, spacing = binned_wall(values, (0.0, 1.0), (0.1, 0.2))
-    assert binned.shape == (2, 8, 8) and binned[1, 0, 0] == values[1, :2, :2].sum()
-    assert origin == pytest.approx((0.05, 1.1)) and spacing == pytest.approx((0.2, 0.4))
-    small = np.ones((1, 8, 8))
+    # 65 x 64 -> 32 x 32 -> 16 x 16: each side keeps at least 16 samples
+    assert binned.shape == (2, 16, 16) and binned[1, 0, 0] == values[1, :4, :4].sum()
+    assert origin == pytest.approx((0.15, 1.3)) and spacing == pytest.approx((0.4, 0.8))
+    small = np.ones((1, 31, 40))
     assert binned_wall(small, (0.0, 0.0), (0.1, 0.1))[0] is small
 
 

@@ -7,9 +7,9 @@
   ``fft``, ``fk`` and ``fbp`` on the shared Stanford LCT captures (a diffuse letter, two
   retroreflective charts) by the normalised cross-correlation of the front view with the
   authors' own LCT reconstruction, the brightest voxel's depth against theirs, and the
-  front view's sharpness, it is the one that is never far from the best on any of them,
-  while ``fft`` images the band the wall's sampling allows (blurrier on the charts) and
-  ``fk`` and ``fbp`` lose on one capture each;
+  front view's sharpness, it matches the authors' picture best on each capture, its
+  brightest depth within a centimetre of theirs; ``fft`` images only the band the wall's
+  sampling allows: a sparser front view, further from the authors';
 * anything else (a single laser spot, a scan off a regular grid): ``fft``, the phasor-field
   imager, which images every geometry.
 """

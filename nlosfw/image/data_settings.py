@@ -13,8 +13,10 @@ file's name, path or content hash:
   to measure gets :data:`DEFAULT_SNR`, O'Toole's default.
 * **falloff**: the candidate (:data:`FALLOFFS`) whose volume is the sharpest by the focus
   measure :func:`sparsity` (the volume's intensity normalised fourth moment), each candidate
-  imaged by the imager itself at the planes asked for, on the wall binned 2 x 2
-  (:func:`binned_wall`) to keep the estimate cheap; a tie keeps the first candidate.
+  imaged by the imager itself at the planes asked for, on the wall binned 2 x 2 as often
+  as each side keeps at least :data:`MIN_BINNED_SIDE` samples (:func:`binned_wall`: a
+  64 x 64 scan is judged on 16 x 16) to keep the estimate cheap; a tie keeps the first
+  candidate.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ DEFAULT_SNR = 0.08
 SNR_RANGE = (0.01, 10.0)
 #: The falloffs the estimate chooses from, in the order a tie keeps.
 FALLOFFS = ("diffuse", "retroreflective")
-#: Fewest wall samples along an axis for the falloff's estimate to bin it 2 x 2.
+#: Fewest wall samples along an axis that the falloff's estimate bins the wall down to.
 MIN_BINNED_SIDE = 16
 
 
@@ -70,12 +72,13 @@ def binned_wall(values: np.ndarray, origin: tuple[float, float],
                 spacing: tuple[float, float]
                 ) -> tuple[np.ndarray, tuple[float, float], tuple[float, float]]:
     """(values, origin, spacing) of a wall grid (F, Y, X) with each 2 x 2 block of samples
-    summed (a trailing odd row or column dropped); the grid as it is when a side has fewer
-    than :data:`MIN_BINNED_SIDE` samples."""
-    n_f, ny, nx = values.shape
-    if min(ny, nx) < MIN_BINNED_SIDE:
-        return values, origin, spacing
-    my, mx = ny // 2, nx // 2
-    blocks = values[:, :2 * my, :2 * mx].reshape(n_f, my, 2, mx, 2).sum(axis=(2, 4))
-    return (blocks, (origin[0] + spacing[0] / 2, origin[1] + spacing[1] / 2),
-            (2 * spacing[0], 2 * spacing[1]))
+    summed (a trailing odd row or column dropped), again while both sides keep at least
+    :data:`MIN_BINNED_SIDE` samples; the grid as it is when a side has fewer than twice
+    that."""
+    while min(values.shape[1:]) >= 2 * MIN_BINNED_SIDE:
+        n_f, ny, nx = values.shape
+        my, mx = ny // 2, nx // 2
+        values = values[:, :2 * my, :2 * mx].reshape(n_f, my, 2, mx, 2).sum(axis=(2, 4))
+        origin = (origin[0] + spacing[0] / 2, origin[1] + spacing[1] / 2)
+        spacing = (2 * spacing[0], 2 * spacing[1])
+    return values, origin, spacing

@@ -150,11 +150,13 @@ class LightConeImager(TransientImager[LightConeConfigT]):
         return out[:cone.m, :ny, :nx]
 
     def _kernel_spectrum(self, grid: WallGrid, cone: _Cone) -> np.ndarray:
-        """FFT of the light cone K on the padded grid (unit energy), cached per geometry."""
+        """FFT of the light cone K on the padded grid (unit energy), cached per geometry (the
+        last two: the falloff's estimate images a binned wall before the image's own)."""
         key = (cone.m, cone.dv, cone.shape, grid.shape, grid.spacing)
         cache: dict[tuple[object, ...], np.ndarray] = self.__dict__.setdefault("_kernel_cache", {})
         if key not in cache:
-            cache.clear()                                  # one geometry at a time
+            while len(cache) >= 2:
+                del cache[next(iter(cache))]               # the oldest geometry
             cache[key] = _light_cone_spectrum(grid, cone, self.config.workers)
         return cache[key]
 
