@@ -119,6 +119,13 @@ def test_lct_estimates_its_snr_from_the_field_unless_it_is_set(noisy_field):
     given = LCTImager(LCTImagerConfig(snr=0.5)).reconstruct(field, voxels)
     assert given.metadata["snr"] == 0.5 and "snr 0.5: the snr option" in \
         given.metadata["settings"]
+    # settings settled once (as a run does for all its sources), then imaged: said once
+    imager = LCTImager(LCTImagerConfig(snr=0.5))
+    hints = imager.settled_hints(field, voxels)
+    again = imager.reconstruct(field.replace(imaging_hints=hints), voxels)
+    assert again.metadata["settings"] == hints.origin
+    assert again.metadata["settings"].count("the snr option") == 1
+    np.testing.assert_array_equal(again.intensity, given.intensity)
     assert not np.array_equal(given.intensity, estimated.intensity)
     # fk and fbp take no snr and estimate none
     assert FKImager(TransientImagerConfig()).reconstruct(field, voxels).metadata.get(

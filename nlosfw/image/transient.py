@@ -209,6 +209,9 @@ class TransientImager(Imager[TransientConfigT]):
             said.append(why)
         elif self.config.falloff is not None:
             said.append(f"falloff {Falloff(self.config.falloff)}: the falloff option")
+        # settled hints settled again (a run's sources): each line said once
+        said = [line for i, line in enumerate(said)
+                if not any(line in earlier for earlier in said[:i])]
         return field.replace(imaging_hints=dataclasses.replace(hints, origin="; ".join(said)))
 
     def _sharpest_falloff(self, field: PhasorField, grid: WallGrid, depths: np.ndarray,
