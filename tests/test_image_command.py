@@ -21,6 +21,7 @@ from nlosfw.common import yaml_safe
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.reconstruction_io import read_reconstruction
 from nlosfw.report.views import masked_depth_map, round_trip_path, time_profile
+from tests.planned import TINY, planned
 
 POINT = np.array([0.1, -0.05, 0.6])
 BIN = 0.008
@@ -218,3 +219,19 @@ def test_image_stands_for_capture_path_model_none_keeping_the_volume(tmp_path):
     assert image_overrides([str(path), "imager=lct", "-m", "-cn", "config",
                             "output.keep=[]"]) == [
         "-m", "-cn", "config", quoted, "model=none", "imager=lct", "output.keep=[]"]
+
+
+@pytest.mark.parametrize(("capture_type", "imager", "what"), [
+    ("confocal", "lct", "a confocal scan on a regular grid"),
+    ("single_spot", "fft", "a single_spot capture")])
+def test_a_scene_run_picks_the_imager_for_its_capture_type(capture_type, imager, what):
+    plan = planned([*TINY, f"scene.capture.type={capture_type}", "imager=rsd",
+                    "reconstruction.pick_imager=true"])
+    assert plan.imager.name == imager and plan.selected("imager") == imager
+    assert plan.imager_note.startswith(f"imager {imager} picked for {what}")
+    assert plan.used_config()["imager"]["name"] == imager
+    assert plan.config["imager"]["name"] == "rsd"        # the composed one, as it was given
+    # no reference picture unless asked for, whatever the imager picked
+    assert plan.settings.reconstruction.histogram_reference is False
+    kept = planned([*TINY, f"scene.capture.type={capture_type}", "imager=rsd"])
+    assert kept.imager.name == "rsd" and kept.imager_note == ""
