@@ -217,7 +217,7 @@ class TransientImager(Imager[TransientConfigT]):
     def _sharpest_falloff(self, field: PhasorField, grid: WallGrid, depths: np.ndarray,
                           dt: float, window: tuple[float, float]) -> tuple[str, str]:
         """(the falloff whose volume is the sharpest, the line that says so): each
-        candidate imaged on the wall binned 2 x 2 (:mod:`nlosfw.image.data_settings`)."""
+        candidate imaged on the binned wall (:func:`~nlosfw.image.data_settings.binned_wall`)."""
         values, origin, spacing = binned_wall(grid.values, grid.origin, grid.spacing)
         small = WallGrid(values=values, origin=origin, spacing=spacing)
         hints = field_hints(field)
