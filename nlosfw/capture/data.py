@@ -88,7 +88,7 @@ class Capture:
     scene_info: dict[str, Any] = field(default_factory=dict)
     """Free metadata: generating config, ground truth, noise, provenance."""
     imaging_hints: ImagingHints | None = None
-    """How the capture's authors image it (:mod:`nlosfw.capture.hints`; None: no hints). Not
+    """The imaging settings the capture states (:mod:`nlosfw.capture.hints`; None: none). Not
     one of y-tal's fields: a file keeps them in ``scene_info["imaging_hints"]``, which is
     read into this attribute (and out of ``scene_info``) when a capture is made."""
 

@@ -1,18 +1,16 @@
-"""Imaging hints: how the authors of a published capture image it, attached to the capture.
+"""Imaging hints: the settings a capture states for its imaging, attached to the capture.
 
 A capture's typed ``imaging_hints`` (:class:`ImagingHints`) may say which radiometric
 falloff to undo (``diffuse`` 1/r^4 or ``retroreflective`` 1/r^2), the Wiener filter's
-signal-to-noise ratio and the depth window the authors show. The transient imagers
-(``lct``, ``fk``, ``fbp``) use them when their own options ``falloff`` and ``snr`` are not
-set; an option given explicitly always wins. The phasor-field transform copies them to
-the field's ``imaging_hints``, so an imager that gets only a field sees them too. On disk
-they stay where y-tal's layout keeps free metadata (``scene_info["imaging_hints"]``,
-:data:`HINTS_KEY`); a capture or field read from such a mapping takes them out of it.
-
-The Stanford LCT captures get their hints from the authors' ``cnlos_reconstruction.m``
-(per scene: ``isdiffuse``, ``snr``, ``z_offset``; the displayed depth window runs from
-``z_offset`` for ``2 width`` of depth): the diffuse "S" is diffuse with SNR 0.08, the
-retroreflective charts and letters use 1/r^2 and SNR 0.8.
+signal-to-noise ratio and a depth window. Nothing here looks a capture up by its file's
+name, path or content: hints come only from what a file itself states (or a caller
+attaches). The transient imagers (``lct``, ``fk``, ``fbp``) use them when their own options
+``falloff`` and ``snr`` are not set, and estimate what neither gives from the data
+(:mod:`nlosfw.image.data_settings`); an option given explicitly always wins. The
+phasor-field transform copies them to the field's ``imaging_hints``, so an imager that gets
+only a field sees them too. On disk they stay where y-tal's layout keeps free metadata
+(``scene_info["imaging_hints"]``, :data:`HINTS_KEY`); a capture or field read from such a
+mapping takes them out of it.
 """
 
 from __future__ import annotations
@@ -31,14 +29,15 @@ HINTS_KEY = "imaging_hints"
 
 @dataclass(frozen=True)
 class ImagingHints:
-    """How a capture is best imaged; ``None`` fields: no hint (the imager's default)."""
+    """How a capture states it is imaged; ``None`` fields: no hint (the imager estimates
+    or defaults)."""
 
     falloff: str | None = None
     """``diffuse`` (1/r^4) or ``retroreflective`` (1/r^2)."""
     snr: float | None = None
     """Signal-to-noise ratio of the LCT Wiener filter."""
     depth_window: tuple[float, float] | None = None
-    """[near, far] (m) of the depths the authors show."""
+    """[near, far] (m) of the depths the capture's scene lies in."""
     origin: str = ""
     """Where the hints come from (shown in metrics and reports)."""
 
@@ -72,37 +71,6 @@ class ImagingHints:
             snr=float(snr) if isinstance(snr, (int, float)) and 0 < float(snr) < 1e12 else None,
             depth_window=window,
             origin=str(mapping.get("origin", "")))
-
-
-@dataclass(frozen=True)
-class _AuthorsScene:
-    diffuse: bool
-    snr: float
-    z_offset: int           # first bin (4 ps) of the depth window shown
-
-
-#: Scenes of the LCT release, by file name (cnlos_reconstruction.m); other files of the
-#: release get no hints (the imagers' defaults: diffuse, SNR 0.08).
-LCT_SCENES: dict[str, _AuthorsScene] = {
-    "data_resolution_chart_40cm": _AuthorsScene(False, 0.8, 350),
-    "data_dot_chart_40cm": _AuthorsScene(False, 0.8, 350),
-    "data_diffuse_s": _AuthorsScene(True, 0.08, 100),
-}
-
-
-def lct_hints(stem: str, half_width: float, n_bins: int, delta_t: float) -> ImagingHints | None:
-    """The authors' settings for the LCT capture named ``stem`` (None for another name):
-    their falloff and SNR, and their depth window, ``z_offset`` bins of depth (half a bin of
-    path each) for ``2 half_width`` of depth."""
-    scene = LCT_SCENES.get(stem)
-    if scene is None:
-        return None
-    dz = delta_t / 2
-    near = scene.z_offset * dz
-    far = min(near + 2 * half_width, n_bins * dz)
-    return ImagingHints(falloff="diffuse" if scene.diffuse else "retroreflective",
-                        snr=scene.snr, depth_window=(near, far),
-                        origin=f"the authors' settings for {stem} (cnlos_reconstruction.m)")
 
 
 def capture_hints(capture: Capture) -> ImagingHints:

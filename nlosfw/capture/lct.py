@@ -31,8 +31,10 @@ Facts used here, each from the authors' ``cnlos_reconstruction.m`` of that relea
   its figures (x to the right, y up) show the scene as the authors' front view does:
   x decreases along the first axis and y along the second. ``capture.flip`` and
   ``capture.transpose`` change this for a file that follows another convention.
-* per scene (``isdiffuse``, ``snr``, ``z_offset``): attached to the capture as imaging hints
-  (:mod:`nlosfw.capture.hints`) for the files of the release it knows by name.
+* per scene (``isdiffuse``, ``snr``, ``z_offset``): the authors set them by hand for each
+  scene; nlosfw attaches none (a capture's name says nothing to the reader): the transient
+  imagers estimate their falloff and Wiener SNR from the data
+  (:mod:`nlosfw.image.data_settings`) unless their options set them.
 """
 
 from __future__ import annotations
@@ -45,7 +47,6 @@ from nlosfw.capture.data import Capture
 from nlosfw.capture.dataset_shapes import SQUARE_SCAN
 from nlosfw.capture.formats import CaptureFormat, CaptureFormatConfig
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
-from nlosfw.capture.hints import lct_hints, with_hints
 from nlosfw.capture.matfile import (
     read_mat_array,
     require_variables,
@@ -103,11 +104,9 @@ class LctFormat(CaptureFormat[CaptureFormatConfig]):
                             scene_info={"original_format": "MAT_LCT", "width": width,
                                         "bin_seconds": BIN_SECONDS})
         try:
-            capture = confocal_capture(scan)
+            return confocal_capture(scan)
         except DataError as err:
             raise DataError(f"{path}: variable 'rect_data': {err}") from None
-        hints = lct_hints(path.stem, width, capture.n_bins, capture.delta_t)
-        return capture if hints is None else with_hints(capture, hints)
 
     def transient_shape(self, path: Path) -> tuple[int, int, int] | None:
         return scan_shape(path, "rect_data")

@@ -17,8 +17,10 @@ from nlosfw.common.errors import NlosfwError
 
 IMAGE_HELP = ("Reads, preprocesses and images one capture file (capture.path=FILE model=none): "
               "writes the volume (reconstructions/true.hdf5), figures/front_true.png, "
-              "depth_true.png, slices_true.png, time_profile.png and report.html. OVERRIDEs "
-              "as for a run: imager=lct, reconstruction.depth_range=[0.3,0.8], ...")
+              "depth_true.png, slices_true.png, time_profile.png and report.html. Without "
+              "imager=NAME it picks the imager for the capture's geometry (lct for a "
+              "confocal scan on a regular grid, else fft; the log says why). OVERRIDEs as "
+              "for a run: imager=fk, reconstruction.depth_range=[0.3,0.8], ...")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -5,9 +5,12 @@ reads FILE (its format detected from its content), preprocesses it, images its p
 field and writes the volume (``reconstructions/true.hdf5``), the front view, the depth map
 and a strip of depth slices (``figures/``), the capture's time profile and
 ``report.html`` (with the run's own config.yaml, metrics.json and run.log); no split, no
-field model. Any other override applies as in a normal run (``imager=lct``,
-``reconstruction.depth_range=[0.3,0.8]``, ``output.keep=[...]``), and Hydra's flags too
-(``-m imager=fft,lct`` images the capture with both).
+field model. Without an ``imager`` option the run picks the imager for the capture's
+geometry (``reconstruction.pick_imager=true``, :mod:`nlosfw.image.choice`) and its log says
+which and why; ``imager=NAME`` (or any ``imager.*`` option) chooses. Any other override
+applies as in a normal run (``imager=lct``, ``reconstruction.depth_range=[0.3,0.8]``,
+``output.keep=[...]``), and Hydra's flags too (``-m imager=fft,lct`` images the capture
+with both).
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ _OVERRIDE = re.compile(r"[+~]*[\w.@/-]+=")
 
 #: What an image run keeps of the large files: the volume, not the capture's copy.
 KEEP = "output.keep=[reconstructions]"
+#: What an image run without an ``imager`` option adds: the imager picked for the capture.
+PICK = "reconstruction.pick_imager=true"
 
 
 def image_overrides(argv: Sequence[str]) -> list[str]:
@@ -55,10 +60,14 @@ def image_overrides(argv: Sequence[str]) -> list[str]:
                               f"{override_value(str(path))} model=NAME instead")
     flags, overrides = _hydra_flags(rest)
     keep = [] if any(a.lstrip("+~").startswith("output.keep=") for a in overrides) else [KEEP]
+    chosen = any(a.lstrip("+~").split("=", 1)[0].split(".", 1)[0] == "imager"
+                 or a.lstrip("+~").startswith("reconstruction.pick_imager=")
+                 for a in overrides)
+    pick = [] if chosen else [PICK]
     # the name is data: quoted so that neither Hydra's grammar nor an OmegaConf
     # interpolation (${oc.env:NAME}) reads anything in it
     return [*flags, f"capture.path={override_value(str(path.absolute()))}", "model=none",
-            *keep, *overrides]
+            *keep, *pick, *overrides]
 
 
 #: Hydra's flags that take a value (the next argument unless written ``--flag=value``).

@@ -44,6 +44,7 @@ import scipy.fft
 import scipy.sparse
 
 from nlosfw.common.config import require
+from nlosfw.image.data_settings import DEFAULT_SNR
 from nlosfw.image.evanescent import evanescent_noise_weights
 from nlosfw.image.transient import (
     TransientImager,
@@ -56,8 +57,6 @@ from nlosfw.transform.field import PhasorField
 
 #: Depth steps (dt/2) of margin beyond the farthest voxel.
 _MARGIN_STEPS = 4
-#: The Wiener SNR without an option or a hint (O'Toole's code: 8e-2).
-DEFAULT_SNR = 0.08
 
 
 @dataclass(frozen=True)
@@ -78,8 +77,9 @@ class LCTImagerConfig(LightConeConfig):
 
     snr: float | None = None
     """Signal-to-noise ratio of the Wiener filter conj(K^)/(|K^|^2 + 1/snr); null: the
-    capture's imaging hint (O'Toole's demo: 0.8 retroreflective, 0.08 diffuse), else
-    0.08."""
+    capture's imaging hint when it states one, else estimated from the field's evanescent
+    noise (nlosfw.image.data_settings; O'Toole's demo sets 0.8 retroreflective, 0.08
+    diffuse by hand)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -150,11 +150,13 @@ class LightConeImager(TransientImager[LightConeConfigT]):
         return out[:cone.m, :ny, :nx]
 
     def _kernel_spectrum(self, grid: WallGrid, cone: _Cone) -> np.ndarray:
-        """FFT of the light cone K on the padded grid (unit energy), cached per geometry."""
+        """FFT of the light cone K on the padded grid (unit energy), cached per geometry (the
+        last two: the falloff's estimate images a binned wall before the image's own)."""
         key = (cone.m, cone.dv, cone.shape, grid.shape, grid.spacing)
         cache: dict[tuple[object, ...], np.ndarray] = self.__dict__.setdefault("_kernel_cache", {})
         if key not in cache:
-            cache.clear()                                  # one geometry at a time
+            while len(cache) >= 2:
+                del cache[next(iter(cache))]               # the oldest geometry
             cache[key] = _light_cone_spectrum(grid, cone, self.config.workers)
         return cache[key]
 
@@ -164,6 +166,7 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
 
     config_class = LCTImagerConfig
     imager_name = "lct"
+    estimates_snr = True
 
     def _planes(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
                 window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
@@ -175,7 +178,8 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
 
     def snr_for(self, field: PhasorField) -> float:
         """The Wiener SNR for ``field``: the ``snr`` option if set, else the field's imaging
-        hint, else :data:`DEFAULT_SNR`."""
+        hint (:meth:`reconstruct` puts the estimate from the data there when the capture
+        states none), else :data:`DEFAULT_SNR`."""
         if self.config.snr is not None:
             return float(self.config.snr)
         hint = field_hints(field).snr

@@ -39,6 +39,7 @@ and interpolate it linearly in depth at the voxels' depths.
 
 from __future__ import annotations
 
+import dataclasses
 from abc import abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar, TypeVar
@@ -50,6 +51,7 @@ from nlosfw.capture.hints import ImagingHints
 from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
+from nlosfw.image.data_settings import FALLOFFS, binned_wall, estimated_snr, sparsity
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.plane_convolution import plane_layout, to_canonical, wall_layout
 from nlosfw.image.propagation import check_field, check_voxels
@@ -73,8 +75,8 @@ class TransientImagerConfig(ImagerConfig):
 
     falloff: Falloff | None = None
     """Radiometric falloff undone before imaging (diffuse 1/r^4, retroreflective 1/r^2);
-    null: the capture's imaging hint (the authors' setting for a known capture), else
-    diffuse."""
+    null: the capture's imaging hint when it states one, else the one giving the sharper
+    volume (estimated from the data: nlosfw.image.data_settings)."""
     samples_per_wavelength: float = 4.0
     """Time samples per shortest wavelength of the field's band (dt = 1/(this x f_max))."""
     workers: int = -1
@@ -129,6 +131,8 @@ class TransientImager(Imager[TransientConfigT]):
     full_grid_only: ClassVar[bool] = True
     tapers_end: ClassVar[bool] = False
     """Whether :meth:`transient` tapers the window's end (:func:`end_taper`)."""
+    estimates_snr: ClassVar[bool] = False
+    """Whether the imager takes a Wiener SNR (its ``snr`` option, the hint, the estimate)."""
 
     def reconstruct(self, field: PhasorField, voxels: np.ndarray,
                     on_progress: ProgressCallback | None = None) -> Reconstruction:
@@ -147,6 +151,7 @@ class TransientImager(Imager[TransientConfigT]):
         f_max = float(field.frequencies.max())
         dt = 1.0 / (self.config.samples_per_wavelength * f_max)
         window = time_window(field.frequencies, float(planes.depths.min()))
+        field = self._settled(field, grid, planes.depths, dt, window)
         volume, info = self._planes(field, grid, planes.depths, dt, window)   # (Z, Y, X)
         progress.advance()
         image = volume.real ** 2 + volume.imag ** 2
@@ -158,6 +163,7 @@ class TransientImager(Imager[TransientConfigT]):
             "weights_applied": False,
             "capture_kind": field.geometry.kind.value,
             "falloff": str(self.falloff_for(field)),
+            "settings": field_hints(field).origin,
             "time_step": dt,
             "time_window": list(window),
             "n_voxels": int(np.prod(planes.shape)),
@@ -171,9 +177,63 @@ class TransientImager(Imager[TransientConfigT]):
                 window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         """(complex volume (len(depths), Y, X) over the whole wall grid, metadata)."""
 
+    def settled_hints(self, field: PhasorField, voxels: np.ndarray) -> ImagingHints:
+        """The settings this imager images ``field`` with at ``voxels``: each option set,
+        else the field's hint, else estimated from the field (:mod:`~nlosfw.image.
+        data_settings`); ``origin`` says where each comes from. A run estimates them once,
+        from the capture's own field, and images every source with them."""
+        field = check_field(field)
+        grid = canonical_wall(field)
+        planes = voxel_planes(check_voxels(voxels), grid, self.imager_name)
+        dt = 1.0 / (self.config.samples_per_wavelength * float(field.frequencies.max()))
+        window = time_window(field.frequencies, float(planes.depths.min()))
+        return field_hints(self._settled(field, grid, planes.depths, dt, window))
+
+    def _settled(self, field: PhasorField, grid: WallGrid, depths: np.ndarray, dt: float,
+                 window: tuple[float, float]) -> PhasorField:
+        """``field`` carrying, as its hints, the falloff (and SNR) this imager uses: the
+        option, else the field's hint, else the estimate from the data."""
+        hints = field_hints(field)
+        said = [hints.origin] if hints.origin else []
+        snr_option = getattr(self.config, "snr", None)
+        if self.estimates_snr and snr_option is None and hints.snr is None:
+            estimate = estimated_snr(grid.values, field.frequencies, grid.spacing)
+            hints = dataclasses.replace(hints, snr=estimate.value)
+            said.append(estimate.why)
+        elif snr_option is not None:
+            said.append(f"snr {snr_option:g}: the snr option")
+        if self.config.falloff is None and hints.falloff is None:
+            choice, why = self._sharpest_falloff(field.replace(imaging_hints=hints), grid,
+                                                 depths, dt, window)
+            hints = dataclasses.replace(hints, falloff=choice)
+            said.append(why)
+        elif self.config.falloff is not None:
+            said.append(f"falloff {Falloff(self.config.falloff)}: the falloff option")
+        # settled hints settled again (a run's sources): each line said once
+        said = [line for i, line in enumerate(said)
+                if not any(line in earlier for earlier in said[:i])]
+        return field.replace(imaging_hints=dataclasses.replace(hints, origin="; ".join(said)))
+
+    def _sharpest_falloff(self, field: PhasorField, grid: WallGrid, depths: np.ndarray,
+                          dt: float, window: tuple[float, float]) -> tuple[str, str]:
+        """(the falloff whose volume is the sharpest, the line that says so): each
+        candidate imaged on the binned wall (:func:`~nlosfw.image.data_settings.binned_wall`)."""
+        values, origin, spacing = binned_wall(grid.values, grid.origin, grid.spacing)
+        small = WallGrid(values=values, origin=origin, spacing=spacing)
+        hints = field_hints(field)
+        scores = {}
+        for candidate in FALLOFFS:
+            trial = field.replace(imaging_hints=dataclasses.replace(hints, falloff=candidate))
+            volume, _ = self._planes(trial, small, depths, dt, window)
+            scores[candidate] = sparsity(volume.real ** 2 + volume.imag ** 2)
+        best = max(FALLOFFS, key=lambda c: scores[c])     # the first of equals
+        return best, (f"falloff {best} estimated from the data: the sharper volume (sparsity "
+                      + ", ".join(f"{scores[c]:.3g} {c}" for c in FALLOFFS) + ")")
+
     def falloff_for(self, field: PhasorField) -> Falloff:
         """The falloff undone for ``field``: the ``falloff`` option if set, else the field's
-        imaging hint (:mod:`nlosfw.capture.hints`), else diffuse."""
+        imaging hint (:mod:`nlosfw.capture.hints`; :meth:`reconstruct` puts the estimate
+        from the data there when the capture states none), else diffuse."""
         if self.config.falloff is not None:
             return Falloff(self.config.falloff)
         hint = field_hints(field).falloff

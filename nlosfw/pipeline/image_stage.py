@@ -12,6 +12,7 @@ from functools import partial
 import numpy as np
 
 from nlosfw.capture.data import Capture
+from nlosfw.capture.hints import ImagingHints
 from nlosfw.common.files import format_bytes
 from nlosfw.common.logs import FILE_ONLY
 from nlosfw.common.progress import accepts_progress
@@ -27,6 +28,7 @@ from nlosfw.image.interface import Imager
 from nlosfw.image.measured import histogram_field
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.reconstruction_io import write_reconstruction
+from nlosfw.image.transient import TransientImager
 from nlosfw.pipeline.context import StageContext
 from nlosfw.pipeline.measure import reconstruction_metrics, truth_depth_image
 from nlosfw.pipeline.results import (
@@ -49,6 +51,8 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
     every reconstruction against the true field's (:mod:`nlosfw.evaluation`)."""
     capture = required(done.capture, "capture").capture
     imager = run.plan.imager
+    if run.plan.imager_note:
+        log.info("%s", run.plan.imager_note)
     sources: dict[str, PhasorField]
     chosen: dict[FrequencySplit, int] = {}
     if done.fields is None:  # model=none: the capture's own field, imaged alone
@@ -66,6 +70,9 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
                                     run.plan.settings.reconstruction.single_frequency_images)
     true = sources["true"]
     voxels = run.plan.depths.voxels(capture, true)
+    hints = settled_hints(imager.plugin, true, voxels)
+    if hints is not None:
+        sources = {name: field.replace(imaging_hints=hints) for name, field in sources.items()}
     log.info("%d reconstructions with %s: %d fields (%s) from all %d frequencies%s",
              len(sources) * (1 + len(chosen)), imager.name, len(sources), ", ".join(sources),
              true.n_frequencies,
@@ -78,7 +85,7 @@ def reconstruct_stage(run: StageContext, done: StageResults) -> Reconstructions:
         by_source[source] = _image(run, imager.plugin, field, voxels, f"image {source}")
         seconds[source] = round(time.perf_counter() - start, 4)
     singles = _single_frequency_images(run, imager.plugin, sources, voxels, chosen)
-    reference = _reference(run, required(done.capture, "capture"), voxels)
+    reference = _reference(run, required(done.capture, "capture"), voxels, hints)
     written = {**by_source, **({} if reference is None else {REFERENCE: reference})}
     for source, recon in written.items():
         run.files.write(f"reconstructions/{source}.hdf5",
@@ -114,6 +121,18 @@ def with_capture_hints(field: PhasorField, capture: Capture) -> PhasorField:
     return field.replace(imaging_hints=capture.imaging_hints)
 
 
+def settled_hints(imager: Imager, field: PhasorField, voxels: np.ndarray
+                  ) -> ImagingHints | None:
+    """The settings a transient imager takes from the data (falloff, Wiener SNR), found
+    once from the capture's own field ``field`` so that every source and the reference
+    picture are imaged alike (the line the log says about them); None for another imager."""
+    if not isinstance(imager, TransientImager):
+        return None
+    hints = imager.settled_hints(field, voxels)
+    log.info("imaging settings of %s: %s", imager.imager_name, hints.origin)
+    return hints
+
+
 def zero_filled(split: FieldSplit, field: PhasorField) -> PhasorField:
     """The training samples of ``field`` on its full grid, zeros elsewhere: the ``raw``
     source for imagers that image only the full wall grid (a zero adds nothing to a
@@ -145,13 +164,15 @@ def _image(run: StageContext, imager: Imager, field: PhasorField, voxels: np.nda
     return recon
 
 
-def _reference(run: StageContext, capture: CaptureResult,
-               voxels: np.ndarray) -> Reconstruction | None:
-    """The reference picture (:mod:`nlosfw.evaluation.reference`), or None (the log says
-    why)."""
+def _reference(run: StageContext, capture: CaptureResult, voxels: np.ndarray,
+               hints: ImagingHints | None) -> Reconstruction | None:
+    """The reference picture (:mod:`nlosfw.evaluation.reference`), imaged with the sources'
+    settings ``hints`` when given, or None (the log says why)."""
     field = _reference_field(run, capture, voxels)
     if field is None:
         return None
+    if hints is not None:
+        field = field.replace(imaging_hints=hints)
     start = time.perf_counter()
     recon = _image(run, run.plan.imager.plugin, field, voxels,
                    "image the histograms (reference)")

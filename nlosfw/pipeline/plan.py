@@ -22,11 +22,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import msgspec
+
 from nlosfw.capture.data import Capture
+from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.source import FileCapture, FormatCatalogue, open_capture
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.logs import recorded
 from nlosfw.common.memory import MemoryEstimate, PlanShape
+from nlosfw.image.choice import Pick, picked_for, picked_imager
 from nlosfw.image.depths import MAX_AUTOMATIC_PLANES
 from nlosfw.image.interface import Imager, ImagerNeeds
 from nlosfw.image.transient import measured_band_frequencies
@@ -101,6 +105,11 @@ class RunPlan:
     """``distribution==version`` of each capture format, by name."""
     transform_note: str = ""
     """Why the transform used is not the configured one ('' when it is), for the log."""
+    imager_note: str = ""
+    """Which imager ``reconstruction.pick_imager`` picked and why ('' when it is off)."""
+    picked: PlainConfig | None = None
+    """The configuration's nodes the pick replaces (``imager``, ``reconstruction``) in what
+    the run says it used (:meth:`used_config`); None when nothing was picked."""
     read_log: tuple[logging.LogRecord, ...] = ()
     """What reading the capture file logged (said again in the run's log)."""
 
@@ -124,9 +133,10 @@ class RunPlan:
     def used_config(self) -> PlainConfig:
         """The configuration without what the run does not use: a run from a file has no
         scene and no simulator (their defaults would mislabel it)."""
+        config = {**self.config, **(self.picked or {})}
         if self.settings.capture.path is None:
-            return self.config
-        return {k: v for k, v in self.config.items() if k not in ("scene", "simulator")}
+            return config
+        return {k: v for k, v in config.items() if k not in ("scene", "simulator")}
 
 
 def make_plan(config: PlainConfig, host: PluginHost) -> RunPlan:
@@ -153,7 +163,7 @@ def make_plan(config: PlainConfig, host: PluginHost) -> RunPlan:
                                                            *(k.value for k in _TAKE_THE_CAPTURE))}
     base = _Base(config=config, settings=settings, transform=transform, imager=imager,
                  models=models, needs=needs, takers=takers, formats=host.capture_formats(),
-                 training=TrainingSplit.of(settings.split))
+                 training=TrainingSplit.of(settings.split), host=host)
     if settings.capture.path is None:
         plan = _scene_plan(base, planned(PluginKind.SIMULATOR))
     else:
@@ -176,6 +186,36 @@ class _Base:
     takers: Takers
     formats: FormatCatalogue
     training: TrainingSplit
+    host: PluginHost
+    imager_note: str = ""
+    picked: PlainConfig | None = None
+
+    def picking(self, pick: Pick) -> _Base:
+        """With ``reconstruction.pick_imager``: this base imaging with ``pick``'s imager at
+        its defaults (in the configuration too), making no reference picture unless
+        ``reconstruction.histogram_reference`` is true; else this base as it is."""
+        reconstruction = self.settings.reconstruction
+        if not reconstruction.pick_imager:
+            return self
+        kind = PluginKind.IMAGER
+        spec = self.host.registry.get(kind, pick.name)
+        created: Any = self.host.registry.create(kind, pick.name)
+        imager: Planned[Imager] = Planned(pick.name, created,
+                                          plugin_version(self.host, kind, pick.name))
+        reference = bool(reconstruction.histogram_reference)
+        settings = dataclasses.replace(self.settings, reconstruction=dataclasses.replace(
+            reconstruction, histogram_reference=reference))
+        options = msgspec.to_builtins(imager.plugin.config)
+        node = self.config.get("reconstruction")
+        picked = {"imager": {"name": pick.name, **options},
+                  "reconstruction": {**(dict(node) if isinstance(node, Mapping) else {}),
+                                     "histogram_reference": reference}}
+        needs = imager_needs(imager.plugin)
+        check_reference_choice(settings, pick.name, needs.time_domain)
+        return dataclasses.replace(
+            self, picked=picked, settings=settings, imager=imager, needs=needs,
+            takers={**self.takers, kind.value: (pick.name, spec.capabilities)},
+            imager_note=pick.why)
 
     @property
     def model_needs(self) -> ModelNeeds:
@@ -202,14 +242,15 @@ class _Base:
                          why=why)
 
     def plan(self, shape: PlanShape, memory: MemoryEstimate, **more: object) -> RunPlan:
-        picked = choices(self.config)
+        selected = choices({**self.config, **(self.picked or {})})
         if more.get("simulator") is None:   # a capture file: no scene, nothing simulated
-            picked = {k: v for k, v in picked.items() if k not in ("scene", "simulator")}
+            selected = {k: v for k, v in selected.items() if k not in ("scene", "simulator")}
         return RunPlan(config=self.config, settings=self.settings, transform=self.transform,
                        imager=self.imager, models=self.models, formats=self.formats,
                        depths=DepthPlan.of(self.settings.reconstruction), shape=shape,
-                       memory=memory, choices=picked,
-                       imager_needs=self.needs, **more)  # type: ignore[arg-type]
+                       memory=memory, choices=selected,
+                       imager_needs=self.needs, imager_note=self.imager_note,
+                       picked=self.picked, **more)  # type: ignore[arg-type]
 
 
 def _given_planes(settings: RunSettings) -> int | None:
@@ -220,8 +261,9 @@ def _given_planes(settings: RunSettings) -> int | None:
 def _scene_plan(base: _Base, simulator: Planned[Simulator]) -> RunPlan:
     """The plan of a simulated capture: sized from the scene before anything is allocated,
     then the scene, the simulator and the preprocessing checked on a stand-in capture."""
-    settings = base.settings
     scene = scene_from_config(base.config.get("scene"))
+    base = base.picking(picked_imager(CaptureKind(str(scene.capture.type)), True))
+    settings = base.settings
     nx, ny = (int(n) for n in scene.wall.resolution)
     bins = int(scene.time.bins)
     spacing = min(float(s) / max(int(r), 1) for s, r in
@@ -273,6 +315,7 @@ def _file_plan(base: _Base) -> RunPlan:
                           base.counts(planes, why))
         loaded = file.load()
     capture = loaded.prepared.capture
+    base = base.picking(picked_for(capture))
     check_capture_kind(capture, {k: v for k, v in base.takers.items()
                                  if k != PluginKind.SIMULATOR.value}, str(loaded.path))
     check_file_counts(loaded, settings.split.count_splitting,

@@ -118,6 +118,11 @@ class ReconstructionSettings:
     file imaged by lct, fk or fbp; true: also for a simulated capture (needs such an
     imager); false: never. Skipped, with the reason in the log, when its estimated memory
     exceeds what is available (limits.allow_large: made anyway)."""
+    pick_imager: bool = False
+    """Image with the imager picked for the capture's geometry (nlosfw.image.choice: lct for
+    a confocal scan on a regular grid, else fft) instead of ``imager``, and no reference
+    picture unless ``histogram_reference`` is true; the log says which and why.
+    ``python -m nlosfw image FILE`` sets it unless an ``imager`` option is given."""
 
     def __post_init__(self) -> None:
         require(all(d > 0 for d in self.depths), "depths", "every depth must be > 0 (in front "

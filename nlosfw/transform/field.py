@@ -133,7 +133,7 @@ class PhasorField:
     Poisson likelihood of them. Neither is written to field files.
 
     ``band`` is what the transform checked its band against (None: not recorded),
-    ``imaging_hints`` how the capture's authors image it (from the capture), ``zero_filled``
+    ``imaging_hints`` the imaging settings the capture states (from the capture), ``zero_filled``
     says the values are training samples on the full grid with zeros elsewhere (the ``raw``
     source of a time-domain imager), and ``depth_range`` [near, far] (m) the run's depths
     of the hidden scene, which bounds a model's own search for it (None: none given).

@@ -1,5 +1,5 @@
-"""Imaging hints: the authors' per-capture settings travel from an LCT file to the
-transient imagers, which use them unless their own options are set."""
+"""Imaging hints: the settings a capture states travel from it to the transient imagers,
+which use them unless their own options are set; no capture gets any from its name."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from nlosfw import load_capture
 from nlosfw.capture.hdf5 import read_capture, write_capture
-from nlosfw.capture.hints import HINTS_KEY, ImagingHints, capture_hints
+from nlosfw.capture.hints import HINTS_KEY, ImagingHints, capture_hints, with_hints
 from nlosfw.common import yaml_safe
 from nlosfw.image.lct import LCTImager, LCTImagerConfig
 from nlosfw.image.transient import Falloff
@@ -27,28 +27,20 @@ def capture():
     return AnalyticSimulator().simulate(scene_from_config(config))
 
 
-@pytest.mark.parametrize(("stem", "falloff", "snr", "near"), [
-    ("data_diffuse_s", "diffuse", 0.08, 100), ("data_dot_chart_40cm", "retroreflective", 0.8, 350),
-    ("data_resolution_chart_40cm", "retroreflective", 0.8, 350)])
-def test_known_lct_files_carry_the_authors_settings(tmp_path, capture, stem, falloff, snr, near):
+@pytest.mark.parametrize("stem", ["data_diffuse_s", "data_dot_chart_40cm",
+                                  "data_resolution_chart_40cm", "scan"])
+def test_no_capture_carries_settings_from_its_name(tmp_path, capture, stem):
+    """A capture's settings never come from its file's name: the names of the published
+    LCT scenes carry none, like any other."""
     path = layouts.write_lct(tmp_path / f"{stem}.mat", capture)
-    hints = capture_hints(load_capture(path))
-    assert (hints.falloff, hints.snr) == (falloff, snr)
-    # their window: z_offset bins of depth (half a 4 ps bin of path each), 2 width deep,
-    # within the histogram's reach
-    dz = capture.delta_t / 2
-    far = min(near * dz + 1.0, capture.n_bins * dz)
-    assert hints.depth_window == pytest.approx((near * dz, far), rel=1e-9)
-
-
-def test_other_files_carry_no_hints(tmp_path, capture):
-    path = layouts.write_lct(tmp_path / "scan.mat", capture)
     assert capture_hints(load_capture(path)) == ImagingHints()
 
 
-def test_imagers_use_the_hints_unless_set_explicitly(tmp_path, capture):
-    path = layouts.write_lct(tmp_path / "data_dot_chart_40cm.mat", capture)
-    field = FFTTransform().transform(load_capture(path))
+STATED = ImagingHints(falloff="retroreflective", snr=0.8, origin="stated by the capture")
+
+
+def test_imagers_use_the_stated_hints_unless_set_explicitly(capture):
+    field = FFTTransform().transform(with_hints(capture, STATED))
     assert field.imaging_hints.snr == 0.8 and HINTS_KEY not in field.metadata
     voxels = fixtures.aligned_voxels(field.wall_xyz, np.linspace(0.5, 0.7, 5))
     hinted = LCTImager().reconstruct(field, voxels)
@@ -57,14 +49,12 @@ def test_imagers_use_the_hints_unless_set_explicitly(tmp_path, capture):
     overridden = LCTImager(LCTImagerConfig(falloff=Falloff.diffuse, snr=0.08)
                            ).reconstruct(field, voxels)
     assert (hinted.metadata["falloff"], hinted.metadata["snr"]) == ("retroreflective", 0.8)
+    assert hinted.metadata["settings"] == "stated by the capture"
     np.testing.assert_array_equal(hinted.intensity, explicit.intensity)
     assert (overridden.metadata["falloff"], overridden.metadata["snr"]) == ("diffuse", 0.08)
+    assert "the snr option" in overridden.metadata["settings"]
     difference = np.linalg.norm(overridden.intensity - hinted.intensity)
     assert difference > 0.01 * np.linalg.norm(hinted.intensity)
-    # no hints at all: the documented defaults
-    plain = field.replace(imaging_hints=None)
-    default = LCTImager().reconstruct(plain, voxels)
-    assert (default.metadata["falloff"], default.metadata["snr"]) == ("diffuse", 0.08)
 
 
 def test_bad_hints_in_a_file_are_ignored():
@@ -74,8 +64,8 @@ def test_bad_hints_in_a_file_are_ignored():
 
 # ------------------------------------------------- typed attributes, and older files' keys
 def test_fields_and_captures_carry_typed_attributes_not_metadata_keys(tmp_path, capture):
-    path = layouts.write_lct(tmp_path / "data_dot_chart_40cm.mat", capture)
-    loaded = load_capture(path)
+    path = layouts.write_lct(tmp_path / "scan.mat", capture)
+    loaded = with_hints(load_capture(path), STATED)
     assert loaded.imaging_hints.snr == 0.8 and HINTS_KEY not in loaded.scene_info
     field = FFTTransform().transform(loaded).replace(zero_filled=True, depth_range=(0.4, 0.6))
     assert not {"band", "imaging_hints", "zero_filled", "depth_range"} & set(field.metadata)

@@ -17,9 +17,11 @@ import nlosfw
 from nlosfw.capture.hdf5 import write_capture
 from nlosfw.cli import main
 from nlosfw.cli.image_command import image_overrides
+from nlosfw.common import yaml_safe
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.image.reconstruction_io import read_reconstruction
 from nlosfw.report.views import masked_depth_map, round_trip_path, time_profile
+from tests.planned import TINY, planned
 
 POINT = np.array([0.1, -0.05, 0.6])
 BIN = 0.008
@@ -84,9 +86,35 @@ def test_image_writes_the_volume_views_and_report_and_finds_the_point(workdir, p
     assert abs(voxels[z, y, x, 1] - POINT[1]) <= 1 / 16 + 1e-9
     page = (run / "report.html").read_text()
     assert "<h2>Views</h2>" in page and "front_true.png" in page and "time_profile.png" in page
-    assert "capture point scan.hdf5 (format nlosfw) · imager fft" in page
+    # no imager given: the one picked for a confocal scan on a regular grid, and the log
+    # says so in one line
+    assert "capture point scan.hdf5 (format nlosfw) · imager lct" in page
+    assert metrics["run"]["imager"] == "lct"
+    used = yaml_safe.load((run / "config.yaml").read_text())
+    assert used["imager"]["name"] == "lct" and used["reconstruction"]["pick_imager"] is True
+    assert ("imager lct picked for a confocal scan on a regular grid"
+            in (run / "run.log").read_text())
     assert "thesis_two_planes" not in page and "simulator" not in page  # no default scene
     assert "done (completed)" in out.out
+
+
+def test_image_picks_fft_for_a_single_spot_capture_and_an_imager_given_wins(workdir, capsys):
+    single = {**SCENE, "name": "point_single_spot",
+              "capture": {**SCENE["capture"], "type": "single_spot"}}
+    path = workdir / "single.hdf5"
+    write_capture(path, nlosfw.simulate_scene(single))
+    assert main(["image", str(path), "hydra.run.dir=single", "figures.enabled=false"]) == 0
+    log = (workdir / "single" / "run.log").read_text()
+    assert "imager fft picked for a single_spot capture" in log
+    metrics = json.loads((workdir / "single" / "metrics.json").read_text())
+    assert metrics["run"]["imager"] == "fft"
+    # an imager given explicitly is used as it is, and nothing is picked
+    assert main(["image", str(path), "imager=rsd", "hydra.run.dir=given",
+                 "figures.enabled=false", "reconstruction.n_depths=4"]) == 0
+    assert "picked" not in (workdir / "given" / "run.log").read_text()
+    metrics = json.loads((workdir / "given" / "metrics.json").read_text())
+    assert metrics["run"]["imager"] == "rsd"
+    capsys.readouterr()
 
 
 def test_model_none_by_overrides_stops_after_reconstruct_with_its_figures(workdir,
@@ -181,8 +209,29 @@ def test_image_stands_for_capture_path_model_none_keeping_the_volume(tmp_path):
     path.write_bytes(b"")
     quoted = "capture.path='" + str(path.resolve()).replace("'", "\\'") + "'"
     assert image_overrides([str(path)]) == [quoted, "model=none",
-                                            "output.keep=[reconstructions]"]
+                                            "output.keep=[reconstructions]",
+                                            "reconstruction.pick_imager=true"]
+    # any imager option (or the pick's own) turns the pick off
+    for given in ("imager=fft", "+imager=fk", "imager.falloff=diffuse",
+                  "reconstruction.pick_imager=false"):
+        assert "reconstruction.pick_imager=true" not in image_overrides([str(path), given])
     # Hydra's flags go first (they must precede the overrides); output.keep given wins
     assert image_overrides([str(path), "imager=lct", "-m", "-cn", "config",
                             "output.keep=[]"]) == [
         "-m", "-cn", "config", quoted, "model=none", "imager=lct", "output.keep=[]"]
+
+
+@pytest.mark.parametrize(("capture_type", "imager", "what"), [
+    ("confocal", "lct", "a confocal scan on a regular grid"),
+    ("single_spot", "fft", "a single_spot capture")])
+def test_a_scene_run_picks_the_imager_for_its_capture_type(capture_type, imager, what):
+    plan = planned([*TINY, f"scene.capture.type={capture_type}", "imager=rsd",
+                    "reconstruction.pick_imager=true"])
+    assert plan.imager.name == imager and plan.selected("imager") == imager
+    assert plan.imager_note.startswith(f"imager {imager} picked for {what}")
+    assert plan.used_config()["imager"]["name"] == imager
+    assert plan.config["imager"]["name"] == "rsd"        # the composed one, as it was given
+    # no reference picture unless asked for, whatever the imager picked
+    assert plan.settings.reconstruction.histogram_reference is False
+    kept = planned([*TINY, f"scene.capture.type={capture_type}", "imager=rsd"])
+    assert kept.imager.name == "rsd" and kept.imager_note == ""

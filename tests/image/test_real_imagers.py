@@ -4,14 +4,17 @@ front view NCC >= 0.8 and brightest depth within 3 cm.
 The authors' LCT is tests/image/lct_reference.py's ``authors_lct`` (their MATLAB procedure and
 per-scene settings); both sides see the scan binned 2 x 2 (32 x 32, as some of their
 published scenes are) and 8 ps bins on their side, to stay small. nlosfw's imagers run with
-their defaults on the capture as ``nlosfw.load_capture`` reads it (the authors' settings
-arrive as imaging hints), at the automatic depths: lct, fk and fbp over the measured-capture
+their defaults on a copy of the capture under a neutral name (``capture_a.mat``), as
+``nlosfw.load_capture`` reads it: their falloff and Wiener SNR come from the data, never
+from the file's name. At the automatic depths: lct, fk and fbp over the measured-capture
 band, fft over the default transform's band.
 ``studies/classical_imagers_measured/run.py`` measures the same at full resolution."""
 
 from __future__ import annotations
 
 import dataclasses
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -48,18 +51,31 @@ def ncc(a: np.ndarray, b: np.ndarray) -> float:
     return float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
 
 
-@pytest.mark.parametrize(("name", "imager"), [
-    (name, imager) for name in LCT_CAPTURES for imager in ("lct", "fk", "fft", "fbp")])
-def test_imager_finds_the_object_as_the_authors_lct_does(name, imager):
-    reference, their_depth = authors_view(name)
-    capture = load_capture(real_capture(name), bin=2)
-    # the transient imagers over the measured-capture band, fft over its default band
+def neutral_copy(name: str, folder: Path) -> Path:
+    """The shared capture ``name`` copied to ``folder/capture_a.mat`` (a name that says
+    nothing about the scene)."""
+    return Path(shutil.copyfile(real_capture(name), folder / "capture_a.mat"))
+
+
+def image(path: Path, imager: str):
+    """(field, depths, reconstruction) of ``imager`` at the automatic depths, the capture
+    binned 2 x 2: the transient imagers over the measured-capture band, fft over its
+    default band."""
+    capture = load_capture(path, bin=2)
     field = FFTTransform().transform(capture) if imager == "fft" else measured_field(capture)
     depths = automatic_depths(depth_span(capture), float(field.frequencies.max()),
                               field.geometry.kind)
     voxels = np.repeat(field.wall_xyz[None], depths.size, axis=0)
     voxels[..., 2] = depths[:, None, None]
-    recon = load_plugins().registry.create("imager", imager).reconstruct(field, voxels)
+    return field, depths, load_plugins().registry.create("imager", imager).reconstruct(
+        field, voxels)
+
+
+@pytest.mark.parametrize(("name", "imager"), [
+    (name, imager) for name in LCT_CAPTURES for imager in ("lct", "fk", "fft", "fbp")])
+def test_imager_finds_the_object_as_the_authors_lct_does(tmp_path, name, imager):
+    reference, their_depth = authors_view(name)
+    field, depths, recon = image(neutral_copy(name, tmp_path), imager)
     amplitude = np.sqrt(recon.intensity)
     grid = canonical_wall(field)
     rows = np.rint((field.wall_xyz[..., 1] - grid.origin[0]) / grid.spacing[0]).astype(int)
@@ -72,3 +88,16 @@ def test_imager_finds_the_object_as_the_authors_lct_does(name, imager):
           f"(authors {their_depth:.3f} m)")
     assert score >= 0.8
     assert abs(brightest - their_depth) <= 0.03
+
+
+@pytest.mark.parametrize("name", LCT_CAPTURES)
+def test_a_capture_images_the_same_whatever_its_file_is_called(tmp_path, name):
+    """The settings lct takes from a capture (falloff, Wiener SNR) depend on its data alone:
+    the file under its published name and under a neutral one give the same image."""
+    published = shutil.copyfile(real_capture(name), tmp_path / f"{name}.mat")
+    renamed = neutral_copy(name, tmp_path)
+    _, _, first = image(Path(published), "lct")
+    _, _, second = image(renamed, "lct")
+    assert (first.metadata["falloff"], first.metadata["snr"]) == (
+        second.metadata["falloff"], second.metadata["snr"])
+    np.testing.assert_array_equal(first.intensity, second.intensity)
