@@ -44,6 +44,7 @@ import scipy.fft
 import scipy.sparse
 
 from nlosfw.common.config import require
+from nlosfw.image.arrays import ArrayOps, interpolate_depths_on
 from nlosfw.image.evanescent import evanescent_noise_weights
 from nlosfw.image.transient import (
     TransientImager,
@@ -99,11 +100,14 @@ class FBPImagerConfig(LightConeConfig):
 
 @dataclass(frozen=True, eq=False)
 class _Cone:
-    """The v grid of one reconstruction: M samples dv apart, padded FFT shape."""
+    """The v grid of one reconstruction: M samples dv apart, padded FFT shape, and the
+    transient's time step dt it is made for."""
 
     m: int
     dv: float
     shape: tuple[int, int, int]
+    dt: float
+    """The transient's time step it was made for (m of path)."""
 
 
 LightConeConfigT = TypeVar("LightConeConfigT", bound=LightConeConfig)
@@ -124,7 +128,42 @@ class LightConeImager(TransientImager[LightConeConfigT]):
         ny, nx = grid.shape
         shape = (scipy.fft.next_fast_len(2 * m), scipy.fft.next_fast_len(2 * ny) if ny > 1
                  else 1, scipy.fft.next_fast_len(2 * nx) if nx > 1 else 1)
-        return _Cone(m=m, dv=far * far / m, shape=shape)
+        return _Cone(m=m, dv=far * far / m, shape=shape, dt=dt)
+
+    def _cone_volume(self, field: PhasorField, grid: WallGrid, cone: _Cone,
+                     window: tuple[float, float], snr: float | None,
+                     positions: np.ndarray) -> np.ndarray:
+        """R_z (Wiener-inverted with ``snr``, or backprojected: None) interpolated linearly
+        at ``positions`` along v, (len(positions), Y, X); on the bound array backend's
+        device when there is one (:meth:`_cone_volume_on`)."""
+        if self.arrays is None:
+            data = self._resampled(field, grid, cone, cone.dt, window)
+            r_z = self._convolved(data, grid, cone, snr)
+            return interpolate_depths(r_z, 0.0, cone.dv, positions)
+        n_t = math.ceil(2 * math.sqrt(cone.m * cone.dv) / cone.dt) + 2
+        rows = _v_resampling(cone, cone.dt, n_t) @ self.window_coefficients(
+            field, np.arange(n_t) * cone.dt, window)                         # (M, F)
+        return self._cone_volume_on(self.arrays, np.asarray(rows), grid, cone, snr,
+                                    positions)
+
+    def _cone_volume_on(self, ops: ArrayOps, rows: np.ndarray, grid: WallGrid, cone: _Cone,
+                        snr: float | None, positions: np.ndarray) -> np.ndarray:
+        """:meth:`_cone_volume` on the device of ``ops``: the resampled transient, ``rows``
+        (M, F) (the v bins' averages of the transient's coefficient rows) times the wall's
+        values, its FFT, the product with the light cone's filter and the inverse FFT."""
+        flat = ops.asarray(grid.values.reshape(grid.values.shape[0], -1), np.complex64)
+        data = (ops.asarray(rows, np.complex64) @ flat).reshape((cone.m,) + grid.shape)
+        spectrum = ops.fftn(data, cone.shape, (0, 1, 2))
+        del data
+        k = ops.asarray(self._kernel_spectrum(grid, cone), np.complex64)
+        if snr is None:
+            spectrum = spectrum * k.conj()
+        else:
+            spectrum = spectrum * (k.conj() / (k.real * k.real + k.imag * k.imag + 1.0 / snr))
+        del k
+        ny, nx = grid.shape
+        r_z = ops.ifftn(spectrum, (0, 1, 2))[:cone.m, :ny, :nx]
+        return interpolate_depths_on(ops, r_z, 0.0, cone.dv, positions)
 
     def _resampled(self, field: PhasorField, grid: WallGrid, cone: _Cone, dt: float,
                    window: tuple[float, float]) -> np.ndarray:
@@ -169,9 +208,10 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
                 window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         cone = self._cone(grid, depths, dt)
         snr = self.snr_for(field)
-        r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone, snr)
-        volume = interpolate_depths(r_z, 0.0, cone.dv, depths**2) * depths[:, None, None]
-        return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape), "snr": snr}
+        volume = (self._cone_volume(field, grid, cone, window, snr, depths**2)
+                  * depths[:, None, None])
+        return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape), "snr": snr,
+                        **self.device_info()}
 
     def snr_for(self, field: PhasorField) -> float:
         """The Wiener SNR for ``field``: the ``snr`` option if set, else the field's imaging
@@ -200,14 +240,13 @@ class FBPImager(LightConeImager[FBPImagerConfig]):
                               "noise_power": noise.noise_power,
                               "weights": [round(float(w), 4) for w in noise.weights]}
         cone = self._cone(grid, depths, dt)
-        r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone, None)
         dz = dt / 2
         z = np.arange(float(depths.min()) - dz, float(depths.max()) + 2 * dz, dz)
-        rho = interpolate_depths(r_z, 0.0, cone.dv, z**2) * z[:, None, None]
+        rho = self._cone_volume(field, grid, cone, window, None, z**2) * z[:, None, None]
         laplacian = (2 * rho[1:-1] - rho[:-2] - rho[2:]) / (dz * dz)
         volume = interpolate_depths(laplacian, float(z[1]), dz, depths)
         return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape),
-                        "filter": "-d2/dz2", **info}
+                        "filter": "-d2/dz2", **info, **self.device_info()}
 
 
 def _v_resampling(cone: _Cone, dt: float, n_t: int) -> scipy.sparse.csr_matrix:

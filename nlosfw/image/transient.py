@@ -50,6 +50,7 @@ from nlosfw.capture.hints import ImagingHints
 from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.errors import DataError
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
+from nlosfw.image.arrays import Device, DeviceImager
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.plane_convolution import plane_layout, to_canonical, wall_layout
 from nlosfw.image.propagation import check_field, check_voxels
@@ -79,6 +80,10 @@ class TransientImagerConfig(ImagerConfig):
     """Time samples per shortest wavelength of the field's band (dt = 1/(this x f_max))."""
     workers: int = -1
     """Threads of scipy.fft (-1: all cores)."""
+    device: Device = Device.cpu
+    """``cpu``: numpy; ``cuda``: the FFTs and products on a CUDA device through an array
+    backend plugin (nlosfw-torch); ``auto``: cuda when one is seen, else cpu
+    (:mod:`nlosfw.image.arrays`)."""
 
     def __post_init__(self) -> None:
         require(self.samples_per_wavelength >= 2, "samples_per_wavelength",
@@ -121,7 +126,7 @@ class VoxelPlanes:
 TransientConfigT = TypeVar("TransientConfigT", bound=TransientImagerConfig)
 
 
-class TransientImager(Imager[TransientConfigT]):
+class TransientImager(DeviceImager, Imager[TransientConfigT]):
     """Base of the imagers that work on the field's transient (see the module docstring)."""
 
     config_class: ClassVar[type] = TransientImagerConfig
@@ -189,16 +194,34 @@ class TransientImager(Imager[TransientConfigT]):
         out = np.zeros((t.size,) + grid.shape, dtype=np.complex64)
         if not inside.any():
             return out
-        coeffs = np.exp(
-            2j * np.pi * np.outer(t[inside], field.frequencies))         # (T', F)
-        power = 4 if self.falloff_for(field) == "diffuse" else 2          # 1/r^n falloff
-        gain = (t[inside] / 2.0) ** (power - 1)
-        if self.tapers_end:
-            gain = gain * end_taper(t[inside], window)
-        coeffs *= gain[:, None]
+        coeffs = self.transient_coefficients(field, t[inside], window)   # (T', F)
         flat = grid.values.reshape(grid.values.shape[0], -1)
         out[inside] = (coeffs @ flat).reshape((-1,) + grid.shape)
         return out
+
+    def transient_coefficients(self, field: PhasorField, times: np.ndarray,
+                               window: tuple[float, float]) -> np.ndarray:
+        """(T, F) complex128: h at ``times`` (all inside ``window``) is these rows times
+        the wall grid's values (F, Y X): exp(2 pi i f t) times the falloff compensation
+        and the end taper (:meth:`transient`)."""
+        coeffs = np.exp(2j * np.pi * np.outer(times, field.frequencies))
+        power = 4 if self.falloff_for(field) == "diffuse" else 2          # 1/r^n falloff
+        gain = (times / 2.0) ** (power - 1)
+        if self.tapers_end:
+            gain = gain * end_taper(times, window)
+        coeffs *= gain[:, None]
+        return coeffs
+
+    def window_coefficients(self, field: PhasorField, times: np.ndarray,
+                            window: tuple[float, float]) -> np.ndarray:
+        """:meth:`transient_coefficients` at every one of ``times``, zero rows outside
+        ``window`` (T, F): the device code's transient is these rows times the wall."""
+        t = np.asarray(times, dtype=float)
+        inside = (t >= window[0]) & (t < window[1])
+        coeffs = np.zeros((t.size, field.frequencies.size), dtype=np.complex128)
+        if inside.any():
+            coeffs[inside] = self.transient_coefficients(field, t[inside], window)
+        return coeffs
 
 
 def end_taper(times: np.ndarray, window: tuple[float, float]) -> np.ndarray:

@@ -27,6 +27,8 @@ from nlosfw.transform.interface import PhasorTransform
 if TYPE_CHECKING:
     from typing_extensions import Unpack
 
+    from nlosfw.plugins.array_backends import ArrayBackendSpec
+
 T = TypeVar("T")
 
 #: A plugin's options: a mapping of them, a config instance, or None (the defaults).
@@ -246,6 +248,9 @@ class Registry:
 
     def __init__(self, specs: Iterable[PluginSpec] = ()) -> None:
         self._specs: dict[tuple[PluginKind, str], PluginSpec] = {}
+        self.array_backends: dict[str, ArrayBackendSpec] = {}
+        """The array backends plugins registered (:mod:`nlosfw.plugins.array_backends`):
+        an imager this registry builds is bound to the one its ``device`` selects."""
         for spec in specs:
             self.add(spec)
 
@@ -325,6 +330,11 @@ class Registry:
         if not isinstance(plugin, interface):
             raise PluginError(f"{spec.label} is not a {interface.__name__} (its factory made "
                               f"a {type(plugin).__name__})")
+        if spec.kind is PluginKind.IMAGER:
+            from nlosfw.plugins.array_backends import bind_device
+
+            bound: Configurable = bind_device(plugin, self.array_backends)  # type: ignore[assignment]
+            return bound
         return plugin
 
     def __len__(self) -> int:
