@@ -117,3 +117,19 @@ def test_run_writes_every_figure(tiny_run):
     assert names == sorted(["reconstructions.png", *(f"fields_f{i}.png" for i in singles),
                             *(f"reconstructions_f{i}.png" for i in singles), *views,
                             "time_profile.png"])
+
+
+def test_time_profile_counts_read_as_plain_numbers():
+    """The figures' text is shown literally (no maths parser), so the counts' axis must not
+    be labelled in maths markup: ``$\\mathdefault{10^{4}}$`` showed raw."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from nlosfw.report.plain_text import literal_text
+    from nlosfw.report.views import time_profile_figure
+    from nlosfw.testing.fixtures import tiny_capture
+
+    fig = literal_text(time_profile_figure(tiny_capture(), (0.3, 0.6), "a title"))
+    FigureCanvasAgg(fig).draw()
+    labels = [t.get_text() for t in fig.axes[0].get_yticklabels() if t.get_text()]
+    assert labels and not any("$" in label or "mathdefault" in label for label in labels)
+    assert all(float(label) >= 0 for label in labels)
