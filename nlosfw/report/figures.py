@@ -31,7 +31,7 @@ from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.pipeline.files import RunFiles
 from nlosfw.pipeline.metrics import ImageScores, ReconstructionMetrics, RunInfo
 from nlosfw.pipeline.results import RunResults
-from nlosfw.report.plain_text import literal_text
+from nlosfw.report.plain_text import save_literal
 from nlosfw.report.titles import run_title
 from nlosfw.report.views import write_source_views, write_views
 from nlosfw.transform.field import PhasorField
@@ -105,7 +105,7 @@ def write_figures(files: RunFiles, results: RunResults, info: RunInfo,
 
 def _saver(make: Callable[[], Figure], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        literal_text(make()).savefig(path, dpi=dpi, format="png")
+        save_literal(make, path, dpi)
 
     return save
 

@@ -4,6 +4,10 @@ untrusted, and a ``$...$`` in one would otherwise be parsed by matplotlib's math
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from pathlib import Path
+
+from matplotlib import rc_context
 from matplotlib.figure import Figure
 from matplotlib.text import Text
 
@@ -14,3 +18,11 @@ def literal_text(fig: Figure) -> Figure:
     for text in fig.findobj(Text):
         text.set_parse_math(False)
     return fig
+
+
+def save_literal(make: Callable[[], Figure], path: Path, dpi: int) -> None:
+    """Make the figure and save it as PNG at ``dpi`` with maths parsing off for every text
+    made meanwhile (as :func:`literal_text`, without walking the figure's artists: every
+    tick's label, which drawing makes anyway)."""
+    with rc_context({"text.parse_math": False}):
+        make().savefig(path, dpi=dpi, format="png")

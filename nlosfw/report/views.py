@@ -29,7 +29,7 @@ from nlosfw.capture.data import Capture
 from nlosfw.evaluation.image_scores import amplitude, normalise
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.pipeline.files import RunFiles
-from nlosfw.report.plain_text import literal_text
+from nlosfw.report.plain_text import save_literal
 
 #: The depth map is blank where a column's brightest voxel is below this fraction of the
 #: volume's brightest (intensity; 0.1 is about a third of the amplitude).
@@ -64,8 +64,8 @@ def time_profile(capture: Capture) -> tuple[np.ndarray, np.ndarray]:
     in time the capture holds light. A capture stored in frequency has none (empty arrays)."""
     if not capture.is_time_domain:
         return np.zeros(0), np.zeros(0)
-    counts = np.abs(np.asarray(capture.H)).reshape(capture.n_bins, -1).sum(axis=1,
-                                                                        dtype=np.float64)
+    h = np.abs(np.asarray(capture.H))
+    counts = h.sum(axis=tuple(range(1, h.ndim)), dtype=np.float64)    # no reshaped copy
     return np.asarray(capture.bin_centers, dtype=np.float64), counts
 
 
@@ -134,7 +134,7 @@ def write_time_profile(files: RunFiles, capture: Capture, depth_range: tuple[flo
 
 def _saver(make: Callable[[], Figure], dpi: int) -> Callable[[Path], None]:
     def save(path: Path) -> None:
-        literal_text(make()).savefig(path, dpi=dpi, format="png")
+        save_literal(make, path, dpi)
 
     return save
 
