@@ -36,6 +36,7 @@ sum to rounding.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -47,6 +48,7 @@ from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.cores import run_tasks, worker_count
 from nlosfw.common.errors import DataError
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image import even_kernel, time_slices
 from nlosfw.image.arrays import ArrayOps, Device, DeviceArray, DeviceImager
@@ -159,6 +161,28 @@ class FFTImager(DeviceImager, PropagationImager[FFTImagerConfig]):
 
     config_class = FFTImagerConfig
     imager_name = "fft"
+
+    @classmethod
+    def estimate_memory(cls, config: FFTImagerConfig, shape: PlanShape,
+                        planes: int) -> MemoryEstimate:
+        """The wall field's cached spectrum (every frequency on the padded lattice, at most
+        half of ``chunk_mb``) and the threads' blocks of a few padded planes each (about
+        :data:`_BLOCK_BYTES` for the kernels, their products and the sums), for voxel planes
+        on the wall's grid."""
+        ny, nx = shape.grid if shape.grid is not None else (
+            (max(1, math.isqrt(max(1, shape.sensors))),) * 2)
+        lattice = (scipy.fft.next_fast_len(max(1, 2 * int(ny) - 1))
+                   * scipy.fft.next_fast_len(max(1, 2 * int(nx) - 1)))
+        item = 8 if config.precision == "single" else 16
+        spectrum = min(float(shape.frequencies * lattice * item), config.chunk_mb * 2**19)
+        threads = min(worker_count(config.workers), max(1, planes))
+        blocks = threads * 3.0 * max(_BLOCK_BYTES, 2 * lattice * item)
+        return MemoryEstimate((
+            MemoryPart("the field's spectrum", f"{shape.frequencies} frequencies on the "
+                       f"padded {lattice}-point lattice, at most half of chunk_mb", spectrum),
+            MemoryPart("the kernels' blocks", f"{threads} threads' blocks of padded planes",
+                       blocks),
+        ))
 
     # ------------------------------------------------------------------ checks
     def check_voxels(self, voxels: np.ndarray, field: PhasorField) -> np.ndarray:

@@ -27,6 +27,7 @@ import math
 import numpy as np
 import scipy.fft
 
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.image.arrays import ArrayOps, interpolate_depths_on
 from nlosfw.image.transient import (
     TransientImager,
@@ -34,6 +35,8 @@ from nlosfw.image.transient import (
     WallGrid,
     interpolate_depths,
     lateral_frequencies,
+    transient_sizes,
+    wall_shape,
 )
 from nlosfw.transform.field import PhasorField
 
@@ -70,6 +73,25 @@ class FKImager(TransientImager[TransientImagerConfig]):
         del a, b, source, frac, i0, positive, spectrum
         volume = scipy.fft.ifftn(migrated, workers=workers, overwrite_x=True)[:n, :ny, :nx]
         return interpolate_depths(volume, 0.0, dz, depths), {"fft_shape": list(shape)}
+
+    @classmethod
+    def estimate_memory(cls, config: TransientImagerConfig, shape: PlanShape,
+                        planes: int) -> MemoryEstimate:
+        """About 6 times P, the padded complex64 volume of the transient's FFT (the spectrum,
+        the Stolt map's samples, indices, weights and Jacobian, the two samples read and
+        the migrated volume); P at the band's top and the depths' farthest when known, at
+        2 x 2048 time samples otherwise."""
+        wall = wall_shape(shape)
+        reach, depths, dt = transient_sizes(config, shape)
+        if depths is None or dt is None:
+            n, why = 2048, "at most 2048 time samples (the band or depths not known yet)"
+        else:
+            far = math.hypot(depths[1] + _MARGIN_STEPS * dt / 2, reach)
+            n, why = math.ceil(2 * far / dt) + 1, f"{math.ceil(2 * far / dt) + 1} time samples"
+        padded = _fft_shape(n, *wall)
+        return MemoryEstimate((MemoryPart(
+            "the f-k volumes", f"6 x the padded volume {' x '.join(map(str, padded))} "
+            f"(complex64; {why})", 6 * 8.0 * float(np.prod(padded))),))
 
     def _planes_on(self, ops: ArrayOps, field: PhasorField, grid: WallGrid, depths: np.ndarray,
                    dt: float, window: tuple[float, float]

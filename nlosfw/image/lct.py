@@ -44,6 +44,7 @@ import scipy.fft
 import scipy.sparse
 
 from nlosfw.common.config import require
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.image.arrays import ArrayOps, interpolate_depths_on
 from nlosfw.image.evanescent import evanescent_noise_weights
 from nlosfw.image.transient import (
@@ -52,6 +53,8 @@ from nlosfw.image.transient import (
     WallGrid,
     field_hints,
     interpolate_depths,
+    transient_sizes,
+    wall_shape,
 )
 from nlosfw.transform.field import PhasorField
 
@@ -119,16 +122,16 @@ class LightConeImager(TransientImager[LightConeConfigT]):
     config_class: ClassVar[type] = LightConeConfig
 
     def _cone(self, grid: WallGrid, depths: np.ndarray, dt: float) -> _Cone:
-        dz = dt / 2
-        reach = grid.lateral_reach
-        far = math.hypot(float(depths.max()) + _MARGIN_STEPS * dz, reach)   # largest distance
-        near = max(float(depths.min()), dz)
-        m = math.ceil(far * far / (2 * near * dz))
-        m = int(min(max(m, math.ceil(far / dz), 16), self.config.max_bins))
-        ny, nx = grid.shape
-        shape = (scipy.fft.next_fast_len(2 * m), scipy.fft.next_fast_len(2 * ny) if ny > 1
-                 else 1, scipy.fft.next_fast_len(2 * nx) if nx > 1 else 1)
-        return _Cone(m=m, dv=far * far / m, shape=shape, dt=dt)
+        return light_cone(grid.shape, grid.lateral_reach, (float(depths.min()),
+                                                          float(depths.max())),
+                          dt, self.config.max_bins)
+
+    @classmethod
+    def estimate_memory(cls, config: LightConeConfigT, shape: PlanShape,
+                        planes: int) -> MemoryEstimate:
+        """The padded light-cone volume (:func:`light_cone_memory`): the data's spectrum,
+        the cone's cached spectrum and, for the Wiener filter, its terms."""
+        return light_cone_memory(config, shape, wiener=isinstance(config, LCTImagerConfig))
 
     def _cone_volume(self, field: PhasorField, grid: WallGrid, cone: _Cone,
                      window: tuple[float, float], snr: float | None,
@@ -247,6 +250,51 @@ class FBPImager(LightConeImager[FBPImagerConfig]):
         volume = interpolate_depths(laplacian, float(z[1]), dz, depths)
         return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape),
                         "filter": "-d2/dz2", **info, **self.device_info()}
+
+
+def light_cone(wall: tuple[int, int], reach: float, depths: tuple[float, float], dt: float,
+               max_bins: int) -> _Cone:
+    """The v grid of planes at ``depths`` (nearest, farthest; m) behind a ``wall`` (ny, nx)
+    whose samples lie at most ``reach`` (m) apart laterally, for a transient of time step
+    ``dt``: M samples (at most ``max_bins``) and the padded FFT shape."""
+    dz = dt / 2
+    far = math.hypot(depths[1] + _MARGIN_STEPS * dz, reach)          # largest distance
+    near = max(depths[0], dz)
+    m = math.ceil(far * far / (2 * near * dz))
+    m = int(min(max(m, math.ceil(far / dz), 16), max_bins))
+    ny, nx = wall
+    shape = (scipy.fft.next_fast_len(2 * m), scipy.fft.next_fast_len(2 * ny) if ny > 1
+             else 1, scipy.fft.next_fast_len(2 * nx) if nx > 1 else 1)
+    return _Cone(m=m, dv=far * far / m, shape=shape, dt=dt)
+
+
+def light_cone_memory(config: LightConeConfig, shape: PlanShape,
+                      wiener: bool) -> MemoryEstimate:
+    """What ``lct`` (``wiener``) or ``fbp`` holds at its peak for a run of ``shape``: P, the
+    padded complex64 volume, about 4.5 times (the data's spectrum, the cone's cached
+    spectrum, its conjugate, the filter's denominator and quotient) for the Wiener filter,
+    3 times for the adjoint; and the transient and its resampling. The v samples at their
+    most (``max_bins``) when the band or the depths are not known yet."""
+    wall = wall_shape(shape)
+    reach, depths, dt = transient_sizes(config, shape)
+    if depths is None or dt is None:
+        m = config.max_bins
+        padded = (scipy.fft.next_fast_len(2 * m),) + tuple(
+            scipy.fft.next_fast_len(2 * n) if n > 1 else 1 for n in wall)
+        why = f"at most {m} v samples (max_bins)"
+    else:
+        cone = light_cone(wall, reach, depths, dt, config.max_bins)
+        m, padded = cone.m, cone.shape
+        why = f"{m} v samples"
+    volume = 8.0 * float(np.prod(padded))
+    samples = 8.0 * wall[0] * wall[1]
+    factor = 4.5 if wiener else 3.0
+    return MemoryEstimate((
+        MemoryPart("the light-cone volumes", f"{factor:g} x the padded volume "
+                   f"{' x '.join(map(str, padded))} (complex64; {why})", factor * volume),
+        MemoryPart("the transient resampled", f"{m} v samples and the transient on "
+                   f"{wall[0]} x {wall[1]} wall points", 4.0 * m * samples),
+    ))
 
 
 def _v_resampling(cone: _Cone, dt: float, n_t: int) -> scipy.sparse.csr_matrix:

@@ -39,6 +39,7 @@ and interpolate it linearly in depth at the voxels' depths.
 
 from __future__ import annotations
 
+import math
 from abc import abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar, TypeVar
@@ -49,6 +50,7 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.hints import ImagingHints
 from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.errors import DataError
+from nlosfw.common.memory import PlanShape
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image.arrays import Device, DeviceImager
 from nlosfw.image.interface import Imager, ImagerConfig
@@ -326,3 +328,26 @@ def interpolate_depths(volume: np.ndarray, z0: float, dz: float,
     a = np.where(((i0 >= 0) & (i0 < n))[:, None, None], volume[lo], 0)
     b = np.where(((i0 + 1 >= 0) & (i0 + 1 < n))[:, None, None], volume[hi], 0)
     return a * (1 - frac) + b * frac
+
+
+def wall_shape(shape: PlanShape) -> tuple[int, int]:
+    """The wall grid (ny, nx) of a run of ``shape`` (a square of its sensors when the grid
+    is not known yet)."""
+    if shape.grid is not None:
+        return int(shape.grid[0]), int(shape.grid[1])
+    side = max(1, math.isqrt(max(1, int(shape.sensors))))
+    return side, side
+
+
+def transient_sizes(config: TransientImagerConfig, shape: PlanShape
+                    ) -> tuple[float, tuple[float, float] | None, float | None]:
+    """(lateral reach of the wall (m), the depths imaged (nearest, farthest; m), the time
+    step dt (m)) of a run of ``shape``, as the imagers derive them; None where the shape
+    does not know them yet (the band's top, the depth range)."""
+    ny, nx = wall_shape(shape)
+    spacing = float(shape.spacing or 0.0)
+    reach = math.hypot((ny - 1) * spacing, (nx - 1) * spacing)
+    dt = (None if not shape.f_max else 1.0 / (config.samples_per_wavelength * shape.f_max))
+    depths = None if shape.depth_range is None else (float(shape.depth_range[0]),
+                                                     float(shape.depth_range[1]))
+    return reach, depths, dt
