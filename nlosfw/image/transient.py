@@ -204,7 +204,7 @@ class TransientImager(DeviceImager, Imager[TransientConfigT]):
     def transient_coefficients(self, field: PhasorField, times: np.ndarray,
                                window: tuple[float, float]) -> np.ndarray:
         """(T, F) complex128: h at ``times`` (all inside ``window``) is these rows times
-        the wall grid's values (F, Y X): exp(2 pi i f t) times the falloff compensation
+        the wall grid's values (F, Y·X): exp(2 pi i f t) times the falloff compensation
         and the end taper (:meth:`transient`)."""
         coeffs = np.exp(2j * np.pi * np.outer(times, field.frequencies))
         power = 4 if self.falloff_for(field) == "diffuse" else 2          # 1/r^n falloff

@@ -22,12 +22,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from nlosfw.capture.data import Capture
 from nlosfw.capture.source import FileCapture, FormatCatalogue, open_capture
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.logs import recorded
 from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
-from nlosfw.evaluation.reference import reference_reason
+from nlosfw.evaluation.reference import memory_reason, reference_bytes, reference_reason
 from nlosfw.image.depths import MAX_AUTOMATIC_PLANES
 from nlosfw.image.interface import Imager, ImagerNeeds
 from nlosfw.image.transient import full_band_frequencies, measured_band_frequencies
@@ -312,10 +314,17 @@ def _file_plan(base: _Base) -> RunPlan:
 
 def _reference_shape(base: _Base, capture: Capture, shape: PlanShape) -> PlanShape | None:
     """The shape of the reference picture's field (every DFT bin of the histograms) when the
-    run will make one (:func:`~nlosfw.evaluation.reference.reference_reason`), else None."""
-    reason = reference_reason(base.settings.reconstruction.histogram_reference,
+    run will make one (:func:`~nlosfw.evaluation.reference.reference_reason`, and the memory
+    it needs available, :func:`~nlosfw.evaluation.reference.memory_reason`: else the run
+    skips it), else None."""
+    settings = base.settings
+    reason = reference_reason(settings.reconstruction.histogram_reference,
                               base.imager.name, base.needs.time_domain, True, capture)
-    if reason is not None:
+    if reason is not None or shape.depth_range is None:
+        return None
+    needed = reference_bytes(capture, np.asarray(shape.depth_range, dtype=float),
+                             base.imager.plugin.config)
+    if memory_reason(needed, settings.limits.allow_large) is not None:
         return None
     freqs = full_band_frequencies(capture.n_bins, capture.delta_t)
     return dataclasses.replace(shape, frequencies=int(freqs.size), f_min=float(freqs[0]),
