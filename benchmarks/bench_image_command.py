@@ -17,6 +17,9 @@ commit measured.
 
     python benchmarks/bench_image_command.py [--repeat N] [--full] [--only NAME ...]
 
+``--only`` runs the captures named (``--only`` alone: none, with ``--full`` the default run
+alone) and keeps the other rows of the results file as they were.
+
 The captures are read from ``$NLOSFW_REAL_DATA``, else ``../shared/data/real`` beside the
 repository; without them there is nothing to measure (the default run still runs with
 ``--full``).
@@ -122,6 +125,8 @@ def main() -> None:
     print_table(rows)
     if args.no_save or not rows:
         return
+    if args.only is not None and RESULTS.exists():      # the rows not run this time stay
+        rows = {**json.loads(RESULTS.read_text())["runs"], **rows}
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({
         "benchmark": "bench_image_command",
