@@ -84,7 +84,7 @@ def run_command(args: list[str]) -> dict[str, Any]:
 def captures(only: list[str] | None) -> list[Path]:
     """The shared captures (``*.mat``), those named by ``only`` when given."""
     found = sorted(REAL_DIR.glob("*.mat")) if REAL_DIR.is_dir() else []
-    return [p for p in found if not only or p.stem in only]
+    return [p for p in found if only is None or p.stem in only]
 
 
 def best_run(args: list[str], repeat: int) -> dict[str, Any]:
