@@ -50,8 +50,13 @@ RSD_PRIOR = ("model=rsd_prior", "split.spatial_step=4", "imager=fft", "figures.e
 NEURAL_VOLUME = ("model=neural_volume_torch", "split.spatial_step=4",
                  "split.count_splitting=true", "imager=fft", "figures.enabled=false")
 
+#: ``image FILE imager=NAME`` of the real capture: each imager's own arrays on top.
+IMAGE = ("model=none", "output.keep=[reconstructions]", "figures.enabled=false")
+
 #: name -> (overrides, needs the real capture)
 CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
+    **{f"real-64x64x2048-image-{imager}": ((f"capture.path={REAL}", *IMAGE, f"imager={imager}"),
+                                          True) for imager in ("fft", "lct", "fk", "fbp")},
     "real-64x64x2048": ((f"capture.path={REAL}", *FAST), True),
     "simulated-default": (FAST, False),
     "simulated-32x32x1024": (("scene.wall.resolution=[32,32]", "scene.time.bins=1024",

@@ -30,8 +30,11 @@ _EDGE_SHARE = 0.15
 
 
 def time_profile(capture: Capture) -> np.ndarray:
-    """The histograms summed over every wall point, one value per bin (float64)."""
-    return np.asarray(capture.H, dtype=np.float64).reshape(capture.n_bins, -1).sum(axis=1)
+    """The histograms summed over every wall point, one value per bin (float64), summed in
+    place: a preprocessed capture's histograms are a strided view, which a reshape would
+    copy whole."""
+    h = np.asarray(capture.H)
+    return h.sum(axis=tuple(range(1, h.ndim)), dtype=np.float64)
 
 
 def signal_bins(profile: np.ndarray, fraction: float = SIGNAL_FRACTION,

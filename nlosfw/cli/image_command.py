@@ -7,7 +7,7 @@ and a strip of depth slices (``figures/``), the capture's time profile and
 ``report.html`` (with the run's own config.yaml, metrics.json and run.log); no split, no
 field model. Without an ``imager`` option the run picks the imager for the capture's
 geometry (``reconstruction.pick_imager=true``, :mod:`nlosfw.image.choice`) and its log says
-which and why; ``imager=NAME`` (or any ``imager.*`` option) chooses. Any other override
+which and why; ``imager=NAME`` (or any ``imager.*`` option) chooses. Every other override
 applies as in a normal run (``imager=lct``, ``reconstruction.depth_range=[0.3,0.8]``,
 ``output.keep=[...]``), and Hydra's flags too (``-m imager=fft,lct`` images the capture
 with both).

@@ -36,6 +36,7 @@ sum to rounding.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
@@ -47,8 +48,10 @@ from nlosfw.capture.geometry import CaptureGeometry
 from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.cores import run_tasks, worker_count
 from nlosfw.common.errors import DataError
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
 from nlosfw.image import even_kernel, time_slices
+from nlosfw.image.arrays import ArrayOps, Device, DeviceArray, DeviceImager
 from nlosfw.image.plane_convolution import (
     GridLayout,
     GridOrder,
@@ -94,6 +97,11 @@ class FFTImagerConfig(PropagationConfig):
     """[MiB] Memory budget: the field's spectrum (on frequencies or time slices) is cached
     when it fits in half of this; the threads' blocks of kernels stay within the other
     half."""
+    device: Device = Device.cpu
+    """``cpu``: numpy; ``cuda``: the kernels, FFTs, products and sums over frequencies on
+    a CUDA device through an array backend plugin (nlosfw-torch), every frequency's
+    kernel transformed (no time slices); ``auto``: cuda when one is seen, else cpu
+    (:mod:`nlosfw.image.arrays`)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -148,11 +156,33 @@ class _Volume:
     threads: int
 
 
-class FFTImager(PropagationImager[FFTImagerConfig]):
+class FFTImager(DeviceImager, PropagationImager[FFTImagerConfig]):
     """Fast RSD for planes parallel to the wall on a regular grid (both capture kinds)."""
 
     config_class = FFTImagerConfig
     imager_name = "fft"
+
+    @classmethod
+    def estimate_memory(cls, config: FFTImagerConfig, shape: PlanShape,
+                        planes: int) -> MemoryEstimate:
+        """The wall field's cached spectrum (every frequency on the padded lattice, at most
+        half of ``chunk_mb``) and the threads' blocks of a few padded planes each (about
+        :data:`_BLOCK_BYTES` for the kernels, their products and the sums), for voxel planes
+        on the wall's grid."""
+        ny, nx = shape.grid if shape.grid is not None else (
+            (max(1, math.isqrt(max(1, shape.sensors))),) * 2)
+        lattice = (scipy.fft.next_fast_len(max(1, 2 * int(ny) - 1))
+                   * scipy.fft.next_fast_len(max(1, 2 * int(nx) - 1)))
+        item = 8 if config.precision == "single" else 16
+        spectrum = min(float(shape.frequencies * lattice * item), config.chunk_mb * 2**19)
+        threads = min(worker_count(config.workers), max(1, planes))
+        blocks = threads * 3.0 * max(_BLOCK_BYTES, 2 * lattice * item)
+        return MemoryEstimate((
+            MemoryPart("the field's spectrum", f"{shape.frequencies} frequencies on the "
+                       f"padded {lattice}-point lattice, at most half of chunk_mb", spectrum),
+            MemoryPart("the kernels' blocks", f"{threads} threads' blocks of padded planes",
+                       blocks),
+        ))
 
     # ------------------------------------------------------------------ checks
     def check_voxels(self, voxels: np.ndarray, field: PhasorField) -> np.ndarray:
@@ -167,6 +197,8 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
     # ------------------------------------------------------------------ imaging
     def _intensity(self, field: PhasorField, voxels: np.ndarray, coeffs: np.ndarray,
                    on_progress: ProgressCallback | None = None) -> np.ndarray:
+        if self.arrays is not None:
+            return self._intensity_on(self.arrays, field, voxels, coeffs, on_progress)
         cfg = self.config
         cdtype = np.complex64 if cfg.precision == "single" else np.complex128
         wall = wall_layout(field)
@@ -199,6 +231,47 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
 
         run_tasks(image, range(len(planes)), threads)
         return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
+
+    def _intensity_on(self, ops: ArrayOps, field: PhasorField, voxels: np.ndarray,
+                      coeffs: np.ndarray, on_progress: ProgressCallback | None = None
+                      ) -> np.ndarray:
+        """:meth:`_intensity` on the device of ``ops``, plane by plane: every frequency's
+        kernel on the plane's padded lattice, its FFT, the product with the wall field's
+        spectrum and the sum over frequencies (before one inverse FFT for coherent
+        confocal images, else after each frequency's, times the laser leg's phase)."""
+        cdtype = np.complex64 if self.config.precision == "single" else np.complex128
+        wall = wall_layout(field)
+        values = to_canonical(wall_field(field, cdtype), wall.order, axes=(1, 2))
+        planes = voxels.reshape((-1,) + voxels.shape[-3:])
+        coherent = self.config.combine == "coherent"
+        real = values.real.dtype.type
+        volume = _DeviceVolume(ops, field.frequencies, path_multiplier(field.geometry),
+                               ops.asarray(coeffs if coherent else np.abs(coeffs) ** 2,
+                                           cdtype if coherent else real),
+                               coherent, cdtype, self.config.chunk_mb)
+        out = np.empty((coeffs.shape[0],) + planes.shape[:-1], dtype=np.float64)
+        progress = ProgressCounter(len(planes), on_progress)
+        spectra: dict[tuple[int, ...], DeviceArray] = {}
+        for i, (plane, (grid, z)) in enumerate(zip(planes, plane_layouts(planes),
+                                                   strict=True)):
+            conv = PlaneConvolution(
+                _axis(wall.shape[0], wall.spacing[0], grid.shape[0], grid.spacing[0],
+                      grid.origin[0] - wall.origin[0], "y"),
+                _axis(wall.shape[1], wall.spacing[1], grid.shape[1], grid.spacing[1],
+                      grid.origin[1] - wall.origin[1], "x"), 1)
+            if conv.input_key not in spectra:
+                work = ops.zeros((values.shape[0],) + conv.shape, cdtype)
+                work[(slice(None),) + conv.input_region] = ops.asarray(values)
+                spectra[conv.input_key] = ops.fftn(work, conv.shape, (1, 2))
+            r_l = laser_distances(to_canonical(plane, grid.order, axes=(0, 1)),
+                                  field.geometry)
+            image = _plane_on(volume, conv, spectra[conv.input_key], z, r_l)
+            out[:, i] = from_canonical(image, grid.order, axes=(1, 2))
+            progress.advance()
+        return out.reshape((coeffs.shape[0],) + voxels.shape[:-1])
+
+    def _metadata(self, field: PhasorField, voxels: np.ndarray) -> dict[str, object]:
+        return {**super()._metadata(field, voxels), **self.device_info()}
 
     def _folds(self, geometry: CaptureGeometry) -> bool:
         """Whether frequencies are summed before a single inverse FFT per plane (coherent
@@ -361,6 +434,67 @@ class FFTImager(PropagationImager[FFTImagerConfig]):
         return acc.intensity()
 
 
+@dataclass(frozen=True, eq=False)
+class _DeviceVolume:
+    """What every plane imaged on a device shares: the array backend, the frequencies, the
+    path multiplier, the coefficient rows c[t, f] on the device (|c|^2 for incoherent
+    images), the combination, the complex dtype and the memory budget (MiB)."""
+
+    ops: ArrayOps
+    freqs: np.ndarray
+    m: int
+    rows: DeviceArray
+    coherent: bool
+    cdtype: type
+    chunk_mb: float
+
+    def block(self, conv: PlaneConvolution) -> int:
+        """Frequencies per block: four padded planes each (kernel, spectrum, product,
+        inverse) within ``chunk_mb``."""
+        plane_bytes = conv.shape[0] * conv.shape[1] * np.dtype(self.cdtype).itemsize
+        return max(1, int(self.chunk_mb * 2**20 // (4 * plane_bytes)))
+
+
+def _plane_on(volume: _DeviceVolume, conv: PlaneConvolution, spectrum: DeviceArray, z: float,
+              r_l: np.ndarray | None) -> np.ndarray:
+    """Intensities (n_t, Y, X) of the plane at depth ``z`` in canonical order, on the
+    volume's device: ``spectrum`` the wall field's (F, L_y, L_x) there, ``r_l`` the
+    voxels' laser distances (None: confocal, whose coherent images sum the frequencies
+    before one inverse FFT)."""
+    ops, cdtype, freqs = volume.ops, volume.cdtype, volume.freqs
+    r = conv.distances(z)
+    path = ops.asarray(volume.m * r, np.float64)
+    scale = ops.asarray(1.0 / r, cdtype)
+    laser = None if r_l is None else ops.asarray(r_l, np.float64)
+    outputs = (slice(None),) + conv.output_region
+    fold = volume.coherent and r_l is None
+    rows = volume.rows
+    acc = ops.zeros((rows.shape[0],) + (conv.shape if fold else (conv.ay.n_out, conv.ax.n_out)),
+                    cdtype if volume.coherent else _REAL[cdtype])
+    block = volume.block(conv)
+    for start in range(0, freqs.size, block):
+        sel = slice(start, min(freqs.size, start + block))
+        f = ops.asarray(freqs[sel], np.float64)[:, None, None]
+        kernels = ops.zeros((sel.stop - start,) + conv.shape, cdtype)
+        kernels[(slice(None),) + conv.kernel_region] = ops.phasor(f * path, cdtype) * scale
+        product = ops.fftn(kernels, conv.shape, (1, 2)) * spectrum[sel]
+        del kernels
+        if fold:
+            acc += ops.einsum("tf,fyx->tyx", rows[:, sel], product)
+            continue
+        fields = ops.ifftn(product, (1, 2))[outputs]
+        if laser is not None:
+            fields = fields * ops.phasor(f * laser, cdtype)
+        if volume.coherent:
+            acc += ops.einsum("tf,fyx->tyx", rows[:, sel], fields)
+        else:
+            acc += ops.einsum("tf,fyx->tyx", rows[:, sel], fields.real ** 2 + fields.imag ** 2)
+    if fold:
+        acc = ops.ifftn(acc, (1, 2))[outputs]
+    image = acc.real ** 2 + acc.imag ** 2 if volume.coherent else acc
+    return ops.numpy(image).astype(np.float64)
+
+
 def _kernel_blocks(volume: _Volume, layout: _Plane, kernels: np.ndarray
                    ) -> Iterator[slice | np.ndarray]:
     """The plane's kernels into ``kernels`` block by block: per frequency
@@ -434,6 +568,8 @@ def _same_blocks(first: Iterator[slice], second: Iterator[slice]) -> Iterator[sl
         yield a
 
 
+#: The real dtype of each complex dtype.
+_REAL: dict[type, type] = {np.complex64: np.float32, np.complex128: np.float64}
 #: Target bytes of one block of padded frequency planes (per thread).
 _BLOCK_BYTES = 2**19
 #: Time slices are used when the planes have on average at most this many per frequency.

@@ -9,6 +9,7 @@ from typing import ClassVar, TypeVar
 import numpy as np
 
 from nlosfw.common.config import Configurable
+from nlosfw.common.memory import MemoryEstimate, PlanShape
 from nlosfw.common.progress import ProgressCallback
 from nlosfw.image.reconstruction import Reconstruction
 from nlosfw.transform.field import PhasorField
@@ -31,6 +32,16 @@ class Imager(Configurable[ImagerConfigT], ABC):
     #: full grid with zeros elsewhere, and does not warn about band aliasing for them. A
     #: declaration: the run's plan reads it (:class:`ImagerNeeds`), nothing else does.
     full_grid_only: ClassVar[bool] = False
+
+    @classmethod
+    def estimate_memory(cls, config: ImagerConfigT, shape: PlanShape,
+                        planes: int) -> MemoryEstimate:
+        """The memory one reconstruction with ``config`` holds beyond the field and the
+        voxels and images the run counts itself, for a run of ``shape`` imaging ``planes``
+        depth planes: its own work arrays (padded volumes, spectra, kernels). From the
+        options and the sizes alone, nothing allocated or imported; a part the shape does
+        not know yet (None) is bounded or left out. Default: nothing."""
+        return MemoryEstimate()
 
     @abstractmethod
     def reconstruct(self, field: PhasorField, voxels: np.ndarray,

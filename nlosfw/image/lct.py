@@ -44,6 +44,8 @@ import scipy.fft
 import scipy.sparse
 
 from nlosfw.common.config import require
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
+from nlosfw.image.arrays import ArrayOps, interpolate_depths_on
 from nlosfw.image.data_settings import DEFAULT_SNR
 from nlosfw.image.evanescent import evanescent_noise_weights
 from nlosfw.image.transient import (
@@ -52,6 +54,8 @@ from nlosfw.image.transient import (
     WallGrid,
     field_hints,
     interpolate_depths,
+    transient_sizes,
+    wall_shape,
 )
 from nlosfw.transform.field import PhasorField
 
@@ -99,11 +103,14 @@ class FBPImagerConfig(LightConeConfig):
 
 @dataclass(frozen=True, eq=False)
 class _Cone:
-    """The v grid of one reconstruction: M samples dv apart, padded FFT shape."""
+    """The v grid of one reconstruction: M samples dv apart, padded FFT shape, and the
+    transient's time step dt it is made for."""
 
     m: int
     dv: float
     shape: tuple[int, int, int]
+    dt: float
+    """The transient's time step it was made for (m of path)."""
 
 
 LightConeConfigT = TypeVar("LightConeConfigT", bound=LightConeConfig)
@@ -115,16 +122,51 @@ class LightConeImager(TransientImager[LightConeConfigT]):
     config_class: ClassVar[type] = LightConeConfig
 
     def _cone(self, grid: WallGrid, depths: np.ndarray, dt: float) -> _Cone:
-        dz = dt / 2
-        reach = grid.lateral_reach
-        far = math.hypot(float(depths.max()) + _MARGIN_STEPS * dz, reach)   # largest distance
-        near = max(float(depths.min()), dz)
-        m = math.ceil(far * far / (2 * near * dz))
-        m = int(min(max(m, math.ceil(far / dz), 16), self.config.max_bins))
+        return light_cone(grid.shape, grid.lateral_reach, (float(depths.min()),
+                                                          float(depths.max())),
+                          dt, self.config.max_bins)
+
+    @classmethod
+    def estimate_memory(cls, config: LightConeConfigT, shape: PlanShape,
+                        planes: int) -> MemoryEstimate:
+        """The padded light-cone volume (:func:`light_cone_memory`): the data's spectrum,
+        the cone's cached spectrum and, for the Wiener filter, its terms."""
+        return light_cone_memory(config, shape, wiener=isinstance(config, LCTImagerConfig))
+
+    def _cone_volume(self, field: PhasorField, grid: WallGrid, cone: _Cone,
+                     window: tuple[float, float], snr: float | None,
+                     positions: np.ndarray) -> np.ndarray:
+        """R_z (Wiener-inverted with ``snr``, or backprojected: None) interpolated linearly
+        at ``positions`` along v, (len(positions), Y, X); on the bound array backend's
+        device when there is one (:meth:`_cone_volume_on`)."""
+        if self.arrays is None:
+            data = self._resampled(field, grid, cone, cone.dt, window)
+            r_z = self._convolved(data, grid, cone, snr)
+            return interpolate_depths(r_z, 0.0, cone.dv, positions)
+        n_t = math.ceil(2 * math.sqrt(cone.m * cone.dv) / cone.dt) + 2
+        rows = _v_resampling(cone, cone.dt, n_t) @ self.window_coefficients(
+            field, np.arange(n_t) * cone.dt, window)                         # (M, F)
+        return self._cone_volume_on(self.arrays, np.asarray(rows), grid, cone, snr,
+                                    positions)
+
+    def _cone_volume_on(self, ops: ArrayOps, rows: np.ndarray, grid: WallGrid, cone: _Cone,
+                        snr: float | None, positions: np.ndarray) -> np.ndarray:
+        """:meth:`_cone_volume` on the device of ``ops``: the resampled transient, ``rows``
+        (M, F) (the v bins' averages of the transient's coefficient rows) times the wall's
+        values, its FFT, the product with the light cone's filter and the inverse FFT."""
+        flat = ops.asarray(grid.values.reshape(grid.values.shape[0], -1), np.complex64)
+        data = (ops.asarray(rows, np.complex64) @ flat).reshape((cone.m,) + grid.shape)
+        spectrum = ops.fftn(data, cone.shape, (0, 1, 2))
+        del data
+        k = ops.asarray(self._kernel_spectrum(grid, cone), np.complex64)
+        if snr is None:
+            spectrum = spectrum * k.conj()
+        else:
+            spectrum = spectrum * (k.conj() / (k.real * k.real + k.imag * k.imag + 1.0 / snr))
+        del k
         ny, nx = grid.shape
-        shape = (scipy.fft.next_fast_len(2 * m), scipy.fft.next_fast_len(2 * ny) if ny > 1
-                 else 1, scipy.fft.next_fast_len(2 * nx) if nx > 1 else 1)
-        return _Cone(m=m, dv=far * far / m, shape=shape)
+        r_z = ops.ifftn(spectrum, (0, 1, 2))[:cone.m, :ny, :nx]
+        return interpolate_depths_on(ops, r_z, 0.0, cone.dv, positions)
 
     def _resampled(self, field: PhasorField, grid: WallGrid, cone: _Cone, dt: float,
                    window: tuple[float, float]) -> np.ndarray:
@@ -172,9 +214,10 @@ class LCTImager(LightConeImager[LCTImagerConfig]):
                 window: tuple[float, float]) -> tuple[np.ndarray, dict[str, object]]:
         cone = self._cone(grid, depths, dt)
         snr = self.snr_for(field)
-        r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone, snr)
-        volume = interpolate_depths(r_z, 0.0, cone.dv, depths**2) * depths[:, None, None]
-        return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape), "snr": snr}
+        volume = (self._cone_volume(field, grid, cone, window, snr, depths**2)
+                  * depths[:, None, None])
+        return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape), "snr": snr,
+                        **self.device_info()}
 
     def snr_for(self, field: PhasorField) -> float:
         """The Wiener SNR for ``field``: the ``snr`` option if set, else the field's imaging
@@ -204,14 +247,58 @@ class FBPImager(LightConeImager[FBPImagerConfig]):
                               "noise_power": noise.noise_power,
                               "weights": [round(float(w), 4) for w in noise.weights]}
         cone = self._cone(grid, depths, dt)
-        r_z = self._convolved(self._resampled(field, grid, cone, dt, window), grid, cone, None)
         dz = dt / 2
         z = np.arange(float(depths.min()) - dz, float(depths.max()) + 2 * dz, dz)
-        rho = interpolate_depths(r_z, 0.0, cone.dv, z**2) * z[:, None, None]
+        rho = self._cone_volume(field, grid, cone, window, None, z**2) * z[:, None, None]
         laplacian = (2 * rho[1:-1] - rho[:-2] - rho[2:]) / (dz * dz)
         volume = interpolate_depths(laplacian, float(z[1]), dz, depths)
         return volume, {"v_samples": cone.m, "fft_shape": list(cone.shape),
-                        "filter": "-d2/dz2", **info}
+                        "filter": "-d2/dz2", **info, **self.device_info()}
+
+
+def light_cone(wall: tuple[int, int], reach: float, depths: tuple[float, float], dt: float,
+               max_bins: int) -> _Cone:
+    """The v grid of planes at ``depths`` (nearest, farthest; m) behind a ``wall`` (ny, nx)
+    whose samples lie at most ``reach`` (m) apart laterally, for a transient of time step
+    ``dt``: M samples (at most ``max_bins``) and the padded FFT shape."""
+    dz = dt / 2
+    far = math.hypot(depths[1] + _MARGIN_STEPS * dz, reach)          # largest distance
+    near = max(depths[0], dz)
+    m = math.ceil(far * far / (2 * near * dz))
+    m = int(min(max(m, math.ceil(far / dz), 16), max_bins))
+    ny, nx = wall
+    shape = (scipy.fft.next_fast_len(2 * m), scipy.fft.next_fast_len(2 * ny) if ny > 1
+             else 1, scipy.fft.next_fast_len(2 * nx) if nx > 1 else 1)
+    return _Cone(m=m, dv=far * far / m, shape=shape, dt=dt)
+
+
+def light_cone_memory(config: LightConeConfig, shape: PlanShape,
+                      wiener: bool) -> MemoryEstimate:
+    """What ``lct`` (``wiener``) or ``fbp`` holds at its peak for a run of ``shape``: P, the
+    padded complex64 volume, about 4.5 times (the data's spectrum, the cone's cached
+    spectrum, its conjugate, the filter's denominator and quotient) for the Wiener filter,
+    3 times for the adjoint; and the transient and its resampling. The v samples at their
+    most (``max_bins``) when the band or the depths are not known yet."""
+    wall = wall_shape(shape)
+    reach, depths, dt = transient_sizes(config, shape)
+    if depths is None or dt is None:
+        m = config.max_bins
+        padded = (scipy.fft.next_fast_len(2 * m),) + tuple(
+            scipy.fft.next_fast_len(2 * n) if n > 1 else 1 for n in wall)
+        why = f"at most {m} v samples (max_bins)"
+    else:
+        cone = light_cone(wall, reach, depths, dt, config.max_bins)
+        m, padded = cone.m, cone.shape
+        why = f"{m} v samples"
+    volume = 8.0 * float(np.prod(padded))
+    samples = 8.0 * wall[0] * wall[1]
+    factor = 4.5 if wiener else 3.0
+    return MemoryEstimate((
+        MemoryPart("the light-cone volumes", f"{factor:g} x the padded volume "
+                   f"{' x '.join(map(str, padded))} (complex64; {why})", factor * volume),
+        MemoryPart("the transient resampled", f"{m} v samples and the transient on "
+                   f"{wall[0]} x {wall[1]} wall points", 4.0 * m * samples),
+    ))
 
 
 def _v_resampling(cone: _Cone, dt: float, n_t: int) -> scipy.sparse.csr_matrix:

@@ -40,6 +40,7 @@ and interpolate it linearly in depth at the voxels' depths.
 from __future__ import annotations
 
 import dataclasses
+import math
 from abc import abstractmethod
 from dataclasses import dataclass
 from typing import ClassVar, TypeVar
@@ -50,7 +51,9 @@ from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.hints import ImagingHints
 from nlosfw.common.config import Choice, require, require_threads
 from nlosfw.common.errors import DataError
+from nlosfw.common.memory import PlanShape
 from nlosfw.common.progress import ProgressCallback, ProgressCounter
+from nlosfw.image.arrays import Device, DeviceImager
 from nlosfw.image.data_settings import FALLOFFS, binned_wall, estimated_snr, sparsity
 from nlosfw.image.interface import Imager, ImagerConfig
 from nlosfw.image.plane_convolution import plane_layout, to_canonical, wall_layout
@@ -81,6 +84,10 @@ class TransientImagerConfig(ImagerConfig):
     """Time samples per shortest wavelength of the field's band (dt = 1/(this x f_max))."""
     workers: int = -1
     """Threads of scipy.fft (-1: all cores)."""
+    device: Device = Device.cpu
+    """``cpu``: numpy; ``cuda``: the FFTs and products on a CUDA device through an array
+    backend plugin (nlosfw-torch); ``auto``: cuda when one is seen, else cpu
+    (:mod:`nlosfw.image.arrays`)."""
 
     def __post_init__(self) -> None:
         require(self.samples_per_wavelength >= 2, "samples_per_wavelength",
@@ -123,7 +130,7 @@ class VoxelPlanes:
 TransientConfigT = TypeVar("TransientConfigT", bound=TransientImagerConfig)
 
 
-class TransientImager(Imager[TransientConfigT]):
+class TransientImager(DeviceImager, Imager[TransientConfigT]):
     """Base of the imagers that work on the field's transient (see the module docstring)."""
 
     config_class: ClassVar[type] = TransientImagerConfig
@@ -249,16 +256,34 @@ class TransientImager(Imager[TransientConfigT]):
         out = np.zeros((t.size,) + grid.shape, dtype=np.complex64)
         if not inside.any():
             return out
-        coeffs = np.exp(
-            2j * np.pi * np.outer(t[inside], field.frequencies))         # (T', F)
-        power = 4 if self.falloff_for(field) == "diffuse" else 2          # 1/r^n falloff
-        gain = (t[inside] / 2.0) ** (power - 1)
-        if self.tapers_end:
-            gain = gain * end_taper(t[inside], window)
-        coeffs *= gain[:, None]
+        coeffs = self.transient_coefficients(field, t[inside], window)   # (T', F)
         flat = grid.values.reshape(grid.values.shape[0], -1)
         out[inside] = (coeffs @ flat).reshape((-1,) + grid.shape)
         return out
+
+    def transient_coefficients(self, field: PhasorField, times: np.ndarray,
+                               window: tuple[float, float]) -> np.ndarray:
+        """(T, F) complex128: h at ``times`` (all inside ``window``) is these rows times
+        the wall grid's values (F, Y·X): exp(2 pi i f t) times the falloff compensation
+        and the end taper (:meth:`transient`)."""
+        coeffs = np.exp(2j * np.pi * np.outer(times, field.frequencies))
+        power = 4 if self.falloff_for(field) == "diffuse" else 2          # 1/r^n falloff
+        gain = (times / 2.0) ** (power - 1)
+        if self.tapers_end:
+            gain = gain * end_taper(times, window)
+        coeffs *= gain[:, None]
+        return coeffs
+
+    def window_coefficients(self, field: PhasorField, times: np.ndarray,
+                            window: tuple[float, float]) -> np.ndarray:
+        """:meth:`transient_coefficients` at every one of ``times``, zero rows outside
+        ``window`` (T, F): the device code's transient is these rows times the wall."""
+        t = np.asarray(times, dtype=float)
+        inside = (t >= window[0]) & (t < window[1])
+        coeffs = np.zeros((t.size, field.frequencies.size), dtype=np.complex128)
+        if inside.any():
+            coeffs[inside] = self.transient_coefficients(field, t[inside], window)
+        return coeffs
 
 
 def end_taper(times: np.ndarray, window: tuple[float, float]) -> np.ndarray:
@@ -363,3 +388,26 @@ def interpolate_depths(volume: np.ndarray, z0: float, dz: float,
     a = np.where(((i0 >= 0) & (i0 < n))[:, None, None], volume[lo], 0)
     b = np.where(((i0 + 1 >= 0) & (i0 + 1 < n))[:, None, None], volume[hi], 0)
     return a * (1 - frac) + b * frac
+
+
+def wall_shape(shape: PlanShape) -> tuple[int, int]:
+    """The wall grid (ny, nx) of a run of ``shape`` (a square of its sensors when the grid
+    is not known yet)."""
+    if shape.grid is not None:
+        return int(shape.grid[0]), int(shape.grid[1])
+    side = max(1, math.isqrt(max(1, int(shape.sensors))))
+    return side, side
+
+
+def transient_sizes(config: TransientImagerConfig, shape: PlanShape
+                    ) -> tuple[float, tuple[float, float] | None, float | None]:
+    """(lateral reach of the wall (m), the depths imaged (nearest, farthest; m), the time
+    step dt (m)) of a run of ``shape``, as the imagers derive them; None where the shape
+    does not know them yet (the band's top, the depth range)."""
+    ny, nx = wall_shape(shape)
+    spacing = float(shape.spacing or 0.0)
+    reach = math.hypot((ny - 1) * spacing, (nx - 1) * spacing)
+    dt = (None if not shape.f_max else 1.0 / (config.samples_per_wavelength * shape.f_max))
+    depths = None if shape.depth_range is None else (float(shape.depth_range[0]),
+                                                     float(shape.depth_range[1]))
+    return reach, depths, dt

@@ -36,10 +36,12 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.interpolate import CloughTocher2DInterpolator, CubicSpline
-from scipy.spatial import Delaunay, QhullError, cKDTree
+
+if TYPE_CHECKING:
+    from scipy.spatial import Delaunay
 
 from nlosfw.common.config import Choice
 from nlosfw.common.errors import DataError, FitError
@@ -93,6 +95,8 @@ def spline_weights(knots: np.ndarray, queries: np.ndarray, extrapolation: str) -
     if n == 2:
         t = (q - knots[0]) / (knots[1] - knots[0])
         return np.stack([1 - t, t], axis=1)
+    from scipy.interpolate import CubicSpline  # not at import: the config alone is light
+
     return CubicSpline(knots, np.eye(n), axis=0, extrapolate=True)(q)
 
 
@@ -133,6 +137,8 @@ def _triangulation(points: np.ndarray) -> Delaunay | None:
     three points, or all on one line)."""
     if points.shape[0] < 3:
         return None
+    from scipy.spatial import Delaunay, QhullError  # not at import: the config alone is light
+
     try:
         return Delaunay(points)
     except QhullError:
@@ -271,9 +277,13 @@ def _scattered_predict(stored: _Scattered, values: np.ndarray, points: np.ndarra
     Clough-Tocher inside the samples' hull, the nearest sample outside it."""
     out = np.full((values.shape[0], points.shape[0]), np.nan, dtype=np.complex128)
     if stored.triangulation is not None:
+        from scipy.interpolate import CloughTocher2DInterpolator
+
         out[:] = CloughTocher2DInterpolator(stored.triangulation, values.T)(points).T
     outside = np.isnan(out[0].real)
     if np.any(outside):
+        from scipy.spatial import cKDTree
+
         _, nearest = cKDTree(stored.points).query(points[outside])
         out[:, outside] = values[:, nearest]
     return out

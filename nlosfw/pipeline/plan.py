@@ -23,17 +23,19 @@ from dataclasses import dataclass
 from typing import Any
 
 import msgspec
+import numpy as np
 
 from nlosfw.capture.data import Capture
 from nlosfw.capture.enums import CaptureKind
 from nlosfw.capture.source import FileCapture, FormatCatalogue, open_capture
 from nlosfw.common.errors import ConfigError
 from nlosfw.common.logs import recorded
-from nlosfw.common.memory import MemoryEstimate, PlanShape
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
+from nlosfw.evaluation.reference import memory_reason, reference_bytes, reference_reason
 from nlosfw.image.choice import Pick, picked_for, picked_imager
 from nlosfw.image.depths import MAX_AUTOMATIC_PLANES
 from nlosfw.image.interface import Imager, ImagerNeeds
-from nlosfw.image.transient import measured_band_frequencies
+from nlosfw.image.transient import full_band_frequencies, measured_band_frequencies
 from nlosfw.model.interface import ModelNeeds
 from nlosfw.pipeline.budget import RunCounts, array_parts, check_memory
 from nlosfw.pipeline.depth_plan import DepthPlan
@@ -199,9 +201,9 @@ class _Base:
             return self
         kind = PluginKind.IMAGER
         spec = self.host.registry.get(kind, pick.name)
-        created: Any = self.host.registry.create(kind, pick.name)
-        imager: Planned[Imager] = Planned(pick.name, created,
-                                          plugin_version(self.host, kind, pick.name))
+        imager: Planned[Imager] = Planned(
+            pick.name, self.host.registry.create(PluginKind.IMAGER, pick.name),
+            plugin_version(self.host, kind, pick.name))
         reference = bool(reconstruction.histogram_reference)
         settings = dataclasses.replace(self.settings, reconstruction=dataclasses.replace(
             reconstruction, histogram_reference=reference))
@@ -224,15 +226,36 @@ class _Base:
             needs = needs | planned.needs
         return needs
 
-    def estimate(self, shape: PlanShape, counts: RunCounts) -> MemoryEstimate:
-        """The engine's arrays and every model's own estimate, checked against the memory
-        available (a one-line ConfigError when it does not fit)."""
-        estimate = array_parts(shape, counts)
+    def estimate(self, shape: PlanShape, counts: RunCounts,
+                 reference: PlanShape | None = None) -> MemoryEstimate:
+        """The engine's arrays, the imager's and every model's own estimate, checked against
+        the memory available (a one-line ConfigError when it does not fit). ``reference``:
+        the shape of the reference picture's field (the histograms at native bins) when the
+        run makes one: the imager images it after the run's fields, so the larger of its
+        two estimates counts."""
+        estimate = array_parts(shape, counts) + self._imaging(shape, counts, reference)
         for planned in self.models:
             own = type(planned.model).estimate_memory(planned.model.config, shape)
             estimate = estimate + labelled(own, planned.option, planned.name)
         check_memory(estimate, self.settings.limits.allow_large)
         return estimate
+
+    def _imaging(self, shape: PlanShape, counts: RunCounts,
+                 reference: PlanShape | None) -> MemoryEstimate:
+        """The imager's own estimate for the run's fields, or for the reference picture's
+        (with its field) when that is larger."""
+        imager = self.imager.plugin
+        own = type(imager).estimate_memory(imager.config, shape, counts.depth_planes)
+        if reference is not None:
+            field = MemoryPart("the reference picture's field",
+                               f"{reference.frequencies} frequencies (native bins) × "
+                               f"{reference.sensors * reference.lasers} samples",
+                               16.0 * reference.samples)
+            native = type(imager).estimate_memory(imager.config, reference,
+                                                  counts.depth_planes) + MemoryEstimate((field,))
+            if native.total > own.total:
+                return labelled(native, "imager", f"{self.imager.name}, the reference picture")
+        return labelled(own, "imager", self.imager.name)
 
     def counts(self, depth_planes: int, why: str, noisy: bool = False) -> RunCounts:
         return RunCounts(models=len(self.models), noisy=noisy,
@@ -328,9 +351,29 @@ def _file_plan(base: _Base) -> RunPlan:
     why = (f"capture.path's transient of {shape.bins} time bins × "
            f"{shape.sensors * shape.lasers} samples")
     planes = depths.count(depth_range, shape.f_max, capture.kind)   # known once it is read
-    memory = base.estimate(shape, base.counts(planes, why))
+    memory = base.estimate(shape, base.counts(planes, why), _reference_shape(base, capture,
+                                                                             shape))
     return dataclasses.replace(base.plan(shape, memory, capture=loaded), transform=transform,
                                transform_note=note, read_log=tuple(said))
+
+
+def _reference_shape(base: _Base, capture: Capture, shape: PlanShape) -> PlanShape | None:
+    """The shape of the reference picture's field (every DFT bin of the histograms) when the
+    run will make one (:func:`~nlosfw.evaluation.reference.reference_reason`, and the memory
+    it needs available, :func:`~nlosfw.evaluation.reference.memory_reason`: else the run
+    skips it), else None."""
+    settings = base.settings
+    reason = reference_reason(settings.reconstruction.histogram_reference,
+                              base.imager.name, base.needs.time_domain, True, capture)
+    if reason is not None or shape.depth_range is None:
+        return None
+    needed = reference_bytes(capture, np.asarray(shape.depth_range, dtype=float),
+                             base.imager.plugin.config)
+    if memory_reason(needed, settings.limits.allow_large) is not None:
+        return None
+    freqs = full_band_frequencies(capture.n_bins, capture.delta_t)
+    return dataclasses.replace(shape, frequencies=int(freqs.size), f_min=float(freqs[0]),
+                               f_max=float(freqs[-1]))
 
 
 def _measured_band(base: _Base, capture: Capture) -> tuple[Planned[PhasorTransform], str]:

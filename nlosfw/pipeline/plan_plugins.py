@@ -16,7 +16,7 @@ from nlosfw.common.errors import ConfigError, PluginError
 from nlosfw.image.interface import Imager, ImagerNeeds
 from nlosfw.model.interface import FieldModel, FieldModelConfig, ModelNeeds
 from nlosfw.pipeline.settings import NO_MODEL, RunSettings
-from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec
+from nlosfw.plugins import RUN_KINDS, PluginHost, PluginKind, PluginSpec, check_device
 
 P = TypeVar("P")
 
@@ -104,6 +104,8 @@ def checked_plugins(config: PlainConfig, host: PluginHost) -> dict[str, tuple[st
         settings = spec.make_config(options)
         if kind is PluginKind.FIELD_MODEL:
             spec.load().check_config(settings)
+        if kind is PluginKind.IMAGER and hasattr(settings, "device"):
+            check_device(settings.device, host.registry.array_backends)
         chosen[kind.value] = (name, settings)
     return chosen
 

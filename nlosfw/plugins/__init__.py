@@ -6,10 +6,18 @@ the registries imports the plugin modules only: factories (and with them
 torch, JAX, mitsuba or embreex) are imported when a plugin is instantiated.
 Plugins declare what they can do from their kind's :data:`CAPABILITIES` vocabulary.
 Networks registered through ``register_networks`` become field models
-``<name>_<backend>`` (:mod:`nlosfw.plugins.networks`).
+``<name>_<backend>`` (:mod:`nlosfw.plugins.networks`); array backends registered through
+``register_array_backends`` run the FFT-based imagers on a GPU
+(:mod:`nlosfw.plugins.array_backends`).
 """
 
 from nlosfw.common.deprecation import moved_names
+from nlosfw.plugins.array_backends import (
+    ArrayBackendRegistrar,
+    ArrayBackendSpec,
+    bind_device,
+    check_device,
+)
 from nlosfw.plugins.capabilities import DEFAULTS as DEFAULT_CAPABILITIES
 from nlosfw.plugins.capabilities import VOCABULARY as CAPABILITIES
 from nlosfw.plugins.capabilities import Capability
@@ -49,6 +57,10 @@ from nlosfw.plugins.registry import (
 )
 
 __all__ = [
+    "ArrayBackendRegistrar",
+    "ArrayBackendSpec",
+    "bind_device",
+    "check_device",
     "CAPABILITIES",
     "DEFAULT_CAPABILITIES",
     "Capability",

@@ -93,7 +93,7 @@ def register_imagers(register: Registrar) -> None:
         config="nlosfw.image.fft:FFTImagerConfig",
         description="Fast RSD: per-plane FFT convolution (Liu 2020)",
         test_config={"workers": 2},
-        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.RSD, C.PROGRESS],
+        capabilities=[C.SINGLE_SPOT, C.CONFOCAL, C.PLANE_VOXELS, C.RSD, C.PROGRESS, C.GPU],
     )
     # the classical confocal imagers, on the field's transient (nlosfw.image.transient)
     register(
@@ -101,21 +101,21 @@ def register_imagers(register: Registrar) -> None:
         "nlosfw.image.lct:LCTImager",
         config="nlosfw.image.lct:LCTImagerConfig",
         description="Light-cone transform with a Wiener filter (O'Toole 2018), confocal",
-        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS, C.GPU],
     )
     register(
         "fk",
         "nlosfw.image.fk:FKImager",
         config="nlosfw.image.transient:TransientImagerConfig",
         description="f-k (Stolt) migration (Lindell 2019), confocal",
-        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS, C.GPU],
     )
     register(
         "fbp",
         "nlosfw.image.lct:FBPImager",
         config="nlosfw.image.lct:FBPImagerConfig",
         description="Backprojection with a Laplacian filter along depth, confocal",
-        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS],
+        capabilities=[C.CONFOCAL, C.PLANE_VOXELS, C.PROGRESS, C.GPU],
     )
 
 

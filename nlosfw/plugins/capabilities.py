@@ -104,6 +104,8 @@ VOCABULARY: Mapping[str, Mapping[Capability, str]] = MappingProxyType({
                     "voxels finish, the last time with done == total",
         C.RSD: "its image is the field's Rayleigh-Sommerfeld image (the reference RSD's); "
                "classical imagers (lct, fk, fbp) image the field's transient otherwise",
+        C.GPU: "option `device` (auto, cpu, cuda): images on a GPU through an array backend "
+               "plugin, nlosfw-torch's (descriptive: no check needs it)",
     }),
     "capture_format": MappingProxyType({
         C.READABLE: "recognises its files by their content and reads them as captures",

@@ -19,6 +19,7 @@ if TYPE_CHECKING:  # the run's types, for the run hooks' annotations only
     from nlosfw.pipeline.metrics import RunMetrics
     from nlosfw.pipeline.results import CaptureResult, RunResults
     from nlosfw.pipeline.settings import RunSettings
+    from nlosfw.plugins.array_backends import ArrayBackendRegistrar
     from nlosfw.plugins.networks import NetworkRegistrar
     from nlosfw.plugins.registry import Registrar
 
@@ -57,6 +58,13 @@ def register_networks(register: NetworkRegistrar) -> None:
 @hookspec
 def register_imagers(register: Registrar) -> None:
     """Register :class:`~nlosfw.image.Imager` plugins."""
+
+
+@hookspec
+def register_array_backends(register: ArrayBackendRegistrar) -> None:
+    """Register array backends of the FFT-based imagers' ``device`` option (see
+    :mod:`nlosfw.plugins.array_backends`): ``register(name, factory="module:Class",
+    counter="module:function", devices=["cuda"])``."""
 
 
 @hookspec

@@ -24,6 +24,7 @@ import pluggy
 from nlosfw.capture.source import FormatCatalogue
 from nlosfw.common.errors import ConfigError
 from nlosfw.plugins import hookspecs
+from nlosfw.plugins.array_backends import ArrayBackendRegistrar
 from nlosfw.plugins.kinds import PluginKind
 from nlosfw.plugins.networks import NetworkRegistrar, NetworkSpec
 from nlosfw.plugins.registry import PluginSpec, Registrar, Registry
@@ -49,6 +50,7 @@ _HOOK_OF_KIND = {
     PluginKind.CAPTURE_FORMAT: "register_capture_formats",
 }
 _NETWORK_HOOK = "register_networks"
+_ARRAYS_HOOK = "register_array_backends"
 
 
 @dataclass(frozen=True)
@@ -148,6 +150,10 @@ def load_plugins(env: Mapping[str, str] | None = None,
             register = Registrar(kind, dist, ep_name, rules.accepts, registry)
             caller(register=NetworkRegistrar(register) if hook_name == _NETWORK_HOOK
                    else register)
+    for key, (dist, _) in origins.items():
+        others = [p for k, p in manager.list_name_plugin() if k != key]
+        caller = manager.subset_hook_caller(_ARRAYS_HOOK, remove_plugins=others)
+        caller(register=ArrayBackendRegistrar(dist, registry.array_backends))
     return PluginHost(manager=manager, registry=registry, broken=broken)
 
 

@@ -1,9 +1,6 @@
-"""Plugin specifications and the per-kind registry.
-
-A :class:`PluginSpec` names a factory lazily (``"package.module:Class"``) so
-that listing plugins never imports a heavy backend; the factory is imported
-when :meth:`PluginSpec.create` is first called.
-"""
+"""Plugin specifications and the per-kind registry. A :class:`PluginSpec` names a factory
+lazily (``"package.module:Class"``) so that listing plugins never imports a heavy backend;
+the factory is imported when :meth:`PluginSpec.create` is first called."""
 
 from __future__ import annotations
 
@@ -26,6 +23,8 @@ from nlosfw.transform.interface import PhasorTransform
 
 if TYPE_CHECKING:
     from typing_extensions import Unpack
+
+    from nlosfw.plugins.array_backends import ArrayBackendSpec
 
 T = TypeVar("T")
 
@@ -249,6 +248,8 @@ class Registry:
 
     def __init__(self, specs: Iterable[PluginSpec] = ()) -> None:
         self._specs: dict[tuple[PluginKind, str], PluginSpec] = {}
+        #: The array backends registered (:mod:`nlosfw.plugins.array_backends`).
+        self.array_backends: dict[str, ArrayBackendSpec] = {}
         for spec in specs:
             self.add(spec)
 
@@ -328,6 +329,9 @@ class Registry:
         if not isinstance(plugin, interface):
             raise PluginError(f"{spec.label} is not a {interface.__name__} (its factory made "
                               f"a {type(plugin).__name__})")
+        if spec.kind is PluginKind.IMAGER:  # bound to the array backend its device selects
+            from nlosfw.plugins.array_backends import bind_device
+            return bind_device(plugin, self.array_backends)  # type: ignore[return-value]
         return plugin
 
     def __len__(self) -> int:

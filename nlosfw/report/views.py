@@ -64,8 +64,8 @@ def time_profile(capture: Capture) -> tuple[np.ndarray, np.ndarray]:
     in time the capture holds light. A capture stored in frequency has none (empty arrays)."""
     if not capture.is_time_domain:
         return np.zeros(0), np.zeros(0)
-    counts = np.abs(np.asarray(capture.H)).reshape(capture.n_bins, -1).sum(axis=1,
-                                                                        dtype=np.float64)
+    h = np.abs(np.asarray(capture.H))
+    counts = h.sum(axis=tuple(range(1, h.ndim)), dtype=np.float64)    # no reshaped copy
     return np.asarray(capture.bin_centers, dtype=np.float64), counts
 
 
@@ -180,45 +180,80 @@ def _map_figure(recon: Reconstruction, values: np.ndarray, title: str, map_title
     """One (y, x) map over the wall's extent, with its colour bar and the run's title;
     ``scale``: the colour map and the values at its ends; the texts escaped already."""
     cmap, vmin, vmax = scale
-    fig = Figure(figsize=(5.4, 5.0), layout="constrained")
-    ax = fig.subplots()
-    image = ax.imshow(values, origin="lower", extent=_extent(recon), cmap=cmap, vmin=vmin,
-                      vmax=vmax)
-    ax.set_title(map_title, fontsize=9)
+    width, height = 5.4, 5.0
+    fig = Figure(figsize=(width, height))
+    suptitle = f"{title}\n{_VIEW}"
+    top = 1 - (_text_inches(suptitle, 8) + _text_inches(map_title, 9) + 0.2) / height
+    extent = _extent(recon)
+    aspect = abs(extent[3] - extent[2]) / max(abs(extent[1] - extent[0]), 1e-12)
+    room = (top * height - 0.6, 3.2)                        # the map's (height, width), in
+    box_w = min(room[1], room[0] / aspect)
+    box_h = box_w * aspect
+    left, bottom = 0.8 + (room[1] - box_w) / 2, 0.6 + (room[0] - box_h) / 2
+    ax = fig.add_axes((left / width, bottom / height, box_w / width, box_h / height))
+    image = ax.imshow(values, origin="lower", extent=extent, cmap=cmap, vmin=vmin, vmax=vmax)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    fig.colorbar(image, ax=ax, shrink=0.85, label=colour_label)
-    fig.suptitle(f"{title}\n{_VIEW}", fontsize=8)
+    cax = fig.add_axes(((left + box_w + 0.2) / width, (bottom + 0.075 * box_h) / height,
+                        0.14 / width, 0.85 * box_h / height))
+    fig.colorbar(image, cax=cax, label=colour_label)
+    fig.suptitle(suptitle, fontsize=8, y=1 - 0.05 / height, va="top")
+    fig.text(0.5, (bottom + box_h + 0.1) / height, map_title, fontsize=9, ha="center",
+             va="bottom")
     return fig
+
+
+def _text_inches(text: str, fontsize: float) -> float:
+    """The height (inches) of ``text``'s lines at ``fontsize`` points, line spacing 1.2."""
+    return (text.count("\n") + 1) * fontsize * 1.2 / 72
 
 
 def slices_figure(recon: Reconstruction, name: str, title: str,
                   count: int = MAX_SLICES) -> Figure:
     """A strip of up to ``count`` depth slices, each the amplitude over the volume's maximum
-    (one colour scale: a faint slice looks faint)."""
+    (one colour scale: a faint slice looks faint), tiled into one image (each tile as the
+    front view: x to the right, y up)."""
     volume, _ = recon.as_volume()
     amp = amplitude(volume)
     peak = float(amp.max()) or 1.0
     chosen = slice_indices(amp.shape[0], count)
     cols = min(SLICES_PER_ROW, chosen.size)
     rows = math.ceil(chosen.size / cols)
-    fig = Figure(figsize=(2.3 * cols + 0.9, 2.35 * rows + 0.9), layout="constrained")
-    axes = fig.subplots(rows, cols, squeeze=False)
-    extent = _extent(recon)
+    ny, nx = amp.shape[1:]
+    gap = max(1, round(0.06 * max(ny, nx)))
+    label = max(2, round(0.22 * ny))                      # room above each tile for its depth
+    tiles = np.full((rows * (ny + label + gap), cols * (nx + gap)), np.nan)
     depths = recon.depths
-    image = None
-    for ax, index in zip(axes.ravel(), chosen, strict=False):
-        image = ax.imshow(amp[index] / peak, origin="lower", extent=extent, cmap="hot",
-                          vmin=0, vmax=1)
-        ax.set_title(f"z = {depths[index]:.3f} m", fontsize=8)
-        ax.tick_params(labelsize=6)
-    for ax in axes.ravel()[chosen.size:]:
-        ax.axis("off")
-    if image is not None:
-        fig.colorbar(image, ax=axes, shrink=0.8, label="amplitude / the volume's maximum")
-    fig.suptitle(f"{plain_title(name)}: {chosen.size} depth slices of {depths.size} "
-                 f"({_range_text(recon)})\n{plain_title(title)}", fontsize=8)
+    corners = []
+    for k, index in enumerate(chosen):
+        r, c = divmod(k, cols)
+        y0 = (rows - 1 - r) * (ny + label + gap)
+        x0 = c * (nx + gap)
+        tiles[y0:y0 + ny, x0:x0 + nx] = amp[index] / peak
+        corners.append((x0 + nx / 2, y0 + ny + label / 2, f"z = {depths[index]:.3f} m"))
+    width, height = 2.1 * cols + 1.3, 2.3 * rows + 0.5
+    fig = Figure(figsize=(width, height))
+    suptitle = (f"{plain_title(name)}: {chosen.size} depth slices of {depths.size} "
+                f"({_range_text(recon)}); x right, y up, as the front view\n{plain_title(title)}")
+    top = 1 - (_text_inches(suptitle, 8) + 0.15) / height
+    ax = fig.add_axes((0.1 / width, 0.1 / height, (width - 1.2) / width, top - 0.1 / height))
+    image = ax.imshow(tiles, origin="lower", cmap=_blank_bad("hot"), vmin=0, vmax=1,
+                      interpolation="nearest")
+    for x, y, text in corners:
+        ax.text(x, y, text, ha="center", va="center", fontsize=8)
+    ax.set_axis_off()
+    cax = fig.add_axes(((width - 0.95) / width, 0.25 / height, 0.12 / width,
+                        top - 0.4 / height))
+    fig.colorbar(image, cax=cax, label="amplitude / the volume's maximum")
+    fig.suptitle(suptitle, fontsize=8, y=1 - 0.05 / height, va="top")
     return fig
+
+
+def _blank_bad(name: str) -> Colormap:
+    """The colour map ``name`` with NaN drawn white (the gaps between tiles)."""
+    from matplotlib import colormaps
+
+    return colormaps[name].with_extremes(bad="white")
 
 
 def time_profile_figure(capture: Capture, depth_range: tuple[float, float],
@@ -227,8 +262,13 @@ def time_profile_figure(capture: Capture, depth_range: tuple[float, float],
     depth range the planes span (:func:`round_trip_path`) shaded."""
     path, counts = time_profile(capture)
     near, far = round_trip_path(capture, np.asarray(depth_range))
-    fig = Figure(figsize=(8.0, 3.8), layout="constrained")
-    ax = fig.subplots()
+    width, height = 8.0, 3.8
+    fig = Figure(figsize=(width, height))
+    heading = ("time profile of the capture (histograms summed over the wall)\n"
+               + plain_title(title))
+    top = 1 - (_text_inches(heading, 9) + 0.6) / height      # the time axis above the plot
+    ax = fig.add_axes((1.0 / width, 0.55 / height, (width - 1.2) / width,
+                       top - 0.55 / height))
     ax.plot(path, counts, lw=0.9, color="C0")
     ax.axvspan(float(near), float(far), color="C1", alpha=0.2,
                label=f"the planes' depths {depth_range[0]:.3f}-{depth_range[1]:.3f} m "
@@ -236,12 +276,11 @@ def time_profile_figure(capture: Capture, depth_range: tuple[float, float],
     ax.set_yscale("symlog", linthresh=max(float(np.max(counts)) * 1e-4, 1e-12))
     ax.set_xlabel("optical path (m)")
     ax.set_ylabel("sum over the wall")
-    top = ax.secondary_xaxis("top", functions=(_path_to_ns, _ns_to_path))
-    top.set_xlabel("time (ns)")
+    top_axis = ax.secondary_xaxis("top", functions=(_path_to_ns, _ns_to_path))
+    top_axis.set_xlabel("time (ns)")
     ax.legend(loc="upper right", fontsize=8)
     ax.grid(alpha=0.3)
-    ax.set_title("time profile of the capture (histograms summed over the wall)\n"
-                 + plain_title(title), fontsize=9)
+    fig.suptitle(heading, fontsize=9, y=1 - 0.05 / height, va="top")
     return fig
 
 

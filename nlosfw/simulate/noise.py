@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.capture.pileup import piled_up_counts
@@ -28,6 +27,8 @@ def apply_noise(H: np.ndarray, delta_t: float, noise: NoiseConfig,
     info: dict = {"model": noise.model, "jitter_ps": float(noise.jitter_ps)}
     if noise.jitter_ps > 0:
         sigma_bins = noise.jitter_ps * 1e-12 * SPEED_OF_LIGHT / delta_t
+        from scipy.ndimage import gaussian_filter1d  # only when there is jitter to apply
+
         out = gaussian_filter1d(out, sigma_bins, axis=0, mode="constant")
         info["jitter_sigma_bins"] = float(sigma_bins)
     if noise.model == "poisson":

@@ -43,7 +43,8 @@ def test_process_memory_grows_with_an_array_this_process_holds():
 def test_the_program_is_a_part_of_the_summary_not_of_the_check(interp):
     arrays = interp.memory
     assert [p.what for p in arrays.parts] == ["the transient H", "the phasor transform",
-                                              "the fields imaged", "the voxels and images"]
+                                              "the fields imaged", "the voxels and images",
+                                              "the field's spectrum", "the kernels' blocks"]
     summary = memory_summary(arrays)
     assert "the program" in summary
     number, unit = summary.rsplit("the program ", 1)[1].split()[:2]

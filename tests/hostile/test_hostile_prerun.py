@@ -191,6 +191,20 @@ def test_a_device_the_machine_lacks_is_refused_before_the_run(option, overrides,
     assert "cuda:7" in line or "gpu:7" in line
 
 
+@pytest.mark.parametrize("imager", ["fft", "lct", "fk", "fbp"])
+def test_an_imager_on_cuda_without_one_is_refused_before_the_run(imager, tools, workdir):
+    """``imager.device=cuda`` on a machine where no array backend sees a CUDA device: one
+    line naming the option and what is valid here, before anything is written."""
+    import torch
+
+    if torch.cuda.device_count():
+        pytest.skip("this machine has a CUDA device: imager.device=cuda runs")
+    line = refused(tools, workdir, "imager.device", "scene=tiny", "model=none",
+                   "scene.capture.type=confocal", "figures.enabled=false",
+                   f"imager={imager}", "imager.device=cuda")
+    assert "no CUDA device" in line and "valid here: auto, cpu" in line, line
+
+
 # --------------------------------------------------------------- network options
 @pytest.mark.parametrize(("option", "overrides"), [
     ("model.network_lr", ["model=rsd_residual_torch", "model.network_steps=2",

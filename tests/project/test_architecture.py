@@ -405,6 +405,7 @@ def test_hook_specifications_keep_their_signatures():
         "register_simulators": ["register"], "register_phasor_transforms": ["register"],
         "register_field_models": ["register"], "register_networks": ["register"],
         "register_imagers": ["register"], "register_capture_formats": ["register"],
+        "register_array_backends": ["register"],
         "on_run_start": ["run_dir", "config"], "on_run_end": ["run_dir", "metrics", "status"],
         "on_stage_start": ["stage"], "on_stage_end": ["stage", "seconds"],
         "on_stage_result": ["stage", "result"], "on_progress": ["task", "done", "total", "info"],

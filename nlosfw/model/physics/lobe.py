@@ -25,7 +25,6 @@ import logging
 from collections.abc import Callable
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from nlosfw.common.errors import FitError
 from nlosfw.model.physics.background import Background
@@ -80,6 +79,8 @@ def search_lobe(residual: Callable[[float], float], config: RSDPriorConfig) -> f
             tried[k] = residual(k)
             log.debug("rsd_prior: lobe %.3f: relative error %.6f", k, tried[k])
         return tried[k]
+
+    from scipy.optimize import minimize_scalar  # not at import: the config alone is light
 
     once(0.0)
     minimize_scalar(once, bounds=(0.0, config.lobe.max), method="bounded",

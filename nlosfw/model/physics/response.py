@@ -45,7 +45,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from nlosfw.capture.geometry import SPEED_OF_LIGHT
 from nlosfw.common.config import Choice
@@ -131,6 +130,8 @@ def estimate_response(model: np.ndarray, data: np.ndarray, frequencies: np.ndarr
     step = 1.0 / (_TAU_GRID * f_max)
     diffs = np.diff(np.unique(f))
     half = 0.5 / float(diffs.min()) if diffs.size else 0.5 / f_max
+    from scipy.optimize import minimize_scalar  # not at import: the config alone is light
+
     for _ in range(_PASSES if gaussian and offset else 1):
         if offset:
             grid = np.arange(-half, half + step / 2, step)

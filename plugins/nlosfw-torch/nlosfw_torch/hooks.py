@@ -1,4 +1,5 @@
-"""Registration of the PyTorch networks and models (the ``torch`` entry point of ``nlosfw``).
+"""Registration of the PyTorch networks, models and array backend (the ``torch`` entry
+point of ``nlosfw``).
 
 Nothing here imports torch: factories are named by import path.
 """
@@ -6,6 +7,7 @@ Nothing here imports torch: factories are named by import path.
 from __future__ import annotations
 
 from nlosfw.plugins import (
+    ArrayBackendRegistrar,
     NetworkRegistrar,
     Registrar,
     hookimpl,
@@ -29,3 +31,9 @@ def register_field_models(register: Registrar) -> None:
     register_rsd_residual(register, backend="torch", factory="nlosfw_torch.models:RSDResidualTorch")
     register_neural_volume(register, backend="torch",
                            factory="nlosfw_torch.neural_volume:NeuralVolumeTorch")
+
+
+@hookimpl
+def register_array_backends(register: ArrayBackendRegistrar) -> None:
+    register("torch", factory="nlosfw_torch.arrays:TorchArrays",
+             counter="nlosfw_torch.arrays:device_count", devices=["cuda"])
