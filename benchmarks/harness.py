@@ -82,7 +82,7 @@ def write_results(path: Path, results: Mapping[str, object], keys: Collection[st
     """Write ``results`` as JSON to ``path`` (normally ``RESULTS_DIR / "<name>.json"``) after
     checking that its top-level keys are the script's declared ``keys`` (its
     ``RESULT_KEYS``) and at most ``optional`` ones besides (its ``OPTIONAL_KEYS``);
-    tests/test_benchmarks.py compares the same declarations with the committed files."""
+    tests/project/test_benchmarks.py compares the same declarations with the committed files."""
     missing, extra = set(keys) - set(results), set(results) - set(keys) - set(optional)
     if missing or extra:
         raise ValueError(f"{path.name}: the results' keys {sorted(results)} are not the "

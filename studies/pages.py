@@ -5,7 +5,7 @@ commit and date they were measured on), the generated part of its page (between
 
 A study's ``render`` is a pure function of its ``results.json``: the page's text outside the
 markers is written by hand and kept; inside them it is exactly what ``render`` writes, so
-``tests/test_studies.py`` can rebuild every page and compare it byte for byte.
+``tests/project/test_studies.py`` can rebuild every page and compare it byte for byte.
 """
 
 from __future__ import annotations
