@@ -12,7 +12,7 @@ imager=lct,fk,fbp,fft``, into ``DIR/<stem>``: the capture as its format reads it
 automatic depths; ``lct``, ``fk`` and ``fbp`` over the measured-capture band, ``fft`` over
 the default transform's), then collects them. ``collect`` reads each run's volume
 (``nlosfw.image.read_reconstruction``) and compares it with the authors' LCT
-(``tests/lct_reference.py``: their MATLAB procedure, per-scene falloff, SNR and depth
+(``tests/image/lct_reference.py``: their MATLAB procedure, per-scene falloff, SNR and depth
 window; 8 ps bins): ``ncc``, the normalised cross-correlation (``nlosfw.evaluation.ncc``)
 of the front views (the amplitude's maximum over depth; theirs the maximum over their
 window of max(real, 0)), and ``depth_error_m``, the depth of the volume's brightest voxel
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # tests/lct_reference.py
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # tests/image/lct_reference.py
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # studies/: the shared helpers
 import pages
 
@@ -84,7 +84,7 @@ def sweep_command(sweep: Path, capture: Path, overrides: Sequence[str]) -> list[
 
 def run(args: argparse.Namespace) -> None:
     """One sweep per capture (then ``collect`` reads them)."""
-    from tests.lct_reference import AUTHORS_SCENES
+    from tests.image.lct_reference import AUTHORS_SCENES
 
     root = args.dir or ROOT / "multirun" / f"imagers-{time.strftime('%Y%m%d-%H%M%S')}"
     names = [n for n in AUTHORS_SCENES if not args.only or n in args.only]
@@ -104,7 +104,7 @@ def authors(capture: Path) -> tuple[np.ndarray, float, list[float]]:
     """The authors' LCT of ``capture``: (front view (Y, X), brightest depth, their window)."""
     import scipy.io
 
-    from tests.lct_reference import AUTHORS_SCENES, authors_lct
+    from tests.image.lct_reference import AUTHORS_SCENES, authors_lct
 
     data = scipy.io.loadmat(capture)
     settings = dataclasses.replace(AUTHORS_SCENES[capture.stem], downsample=1)
