@@ -94,8 +94,6 @@ class RunPlan:
     """The run's sizes."""
     memory: MemoryEstimate
     """The memory the run needs (the program itself not counted)."""
-    choices: Mapping[str, str]
-    """The scene and plugin names the configuration selects, by group."""
     imager_needs: ImagerNeeds = ImagerNeeds()
     simulator: Planned[Simulator] | None = None
     """The simulator of a simulated capture (None for a capture file)."""
@@ -114,6 +112,11 @@ class RunPlan:
     the run says it used (:meth:`used_config`); None when nothing was picked."""
     read_log: tuple[logging.LogRecord, ...] = ()
     """What reading the capture file logged (said again in the run's log)."""
+
+    @property
+    def choices(self) -> dict[str, str]:
+        """The scene and plugin names the run uses, by group (:meth:`used_config`'s)."""
+        return choices(self.used_config())
 
     def selected(self, group: str) -> str | None:
         """The plugin or scene name the configuration selects in ``group`` (None: none)."""
@@ -265,13 +268,10 @@ class _Base:
                          why=why)
 
     def plan(self, shape: PlanShape, memory: MemoryEstimate, **more: object) -> RunPlan:
-        selected = choices({**self.config, **(self.picked or {})})
-        if more.get("simulator") is None:   # a capture file: no scene, nothing simulated
-            selected = {k: v for k, v in selected.items() if k not in ("scene", "simulator")}
         return RunPlan(config=self.config, settings=self.settings, transform=self.transform,
                        imager=self.imager, models=self.models, formats=self.formats,
                        depths=DepthPlan.of(self.settings.reconstruction), shape=shape,
-                       memory=memory, choices=selected,
+                       memory=memory,
                        imager_needs=self.needs, imager_note=self.imager_note,
                        picked=self.picked, **more)  # type: ignore[arg-type]
 
