@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -130,10 +130,7 @@ class RunPlan:
     @property
     def needs(self) -> ModelNeeds:
         """What the run's field models need of it, together."""
-        needs = ModelNeeds()
-        for planned in self.models:
-            needs = needs | planned.needs
-        return needs
+        return _models_needs(self.models)
 
     def used_config(self) -> PlainConfig:
         """The configuration without what the run does not use: a run from a file has no
@@ -142,6 +139,14 @@ class RunPlan:
         if self.settings.capture.path is None:
             return config
         return {k: v for k, v in config.items() if k not in ("scene", "simulator")}
+
+
+def _models_needs(models: Iterable[PlannedModel]) -> ModelNeeds:
+    """What ``models`` need of a run, together."""
+    needs = ModelNeeds()
+    for planned in models:
+        needs = needs | planned.needs
+    return needs
 
 
 def make_plan(config: PlainConfig, host: PluginHost) -> RunPlan:
@@ -224,10 +229,7 @@ class _Base:
 
     @property
     def model_needs(self) -> ModelNeeds:
-        needs = ModelNeeds()
-        for planned in self.models:
-            needs = needs | planned.needs
-        return needs
+        return _models_needs(self.models)
 
     def estimate(self, shape: PlanShape, counts: RunCounts,
                  reference: PlanShape | None = None) -> MemoryEstimate:
