@@ -6,11 +6,13 @@ the estimate, what dominates it and the memory available; ``limits.allow_large=t
 it anyway. The estimate adds up the arrays a run holds at once (order of magnitude, on the
 generous side), from the sizes the plan knows (:class:`~nlosfw.common.memory.PlanShape`:
 S sensors, L laser points, B time bins, F frequencies) and the run's counts
-(:class:`RunCounts`: D depth planes, M field models):
+(:class:`RunCounts`: D depth planes, M field models, whether the capture is read):
 
 =================  ===========================================================
 the transient      16·B·S·L bytes (float64 histogram while rendering, float32
-                   capture, its HDF5 image), and 4·B·S·L more with noise
+                   capture, its HDF5 image), and 4·B·S·L more with noise; a capture
+                   read from a file 12·B·S·L (the file's float64 image, the float32
+                   capture)
 the transform      8·B·S·L (the spectrum) + 16·F·S·L per field (2 with noise)
 the fields         16·F·S·(2 + M) (true, raw, each model's prediction)
 the voxels         8·D·S·(3 + (2 + M)·(1 + single-frequency images)); D, when it is
@@ -47,7 +49,8 @@ class RunCounts:
     """What the engine's own arrays are counted from beside the sizes: the field models
     fitted (0: ``model=none``), whether the simulated capture is ``noisy`` (its noise-free
     twin is kept) or split in two (``thinned``), the most depth planes, the single-frequency
-    images per field, and where the sizes come from (``why``, one line)."""
+    images per field, where the sizes come from (``why``, one line) and whether the
+    capture is ``read`` from a file (no histogram rendered)."""
 
     models: int
     noisy: bool
@@ -55,6 +58,7 @@ class RunCounts:
     depth_planes: int
     single_frequency_images: int
     why: str
+    read: bool = False
 
 
 def process_memory() -> int:
@@ -76,9 +80,10 @@ def array_parts(shape: PlanShape, counts: RunCounts) -> MemoryEstimate:
     per_field = 16.0 * freqs * sensors * shape.lasers
     thinned = counts.thinned                 # halves A and B, B's field, the ceiling
     imaged = fields + int(thinned)
+    held = 12 if counts.read else (20 if counts.noisy else 16)   # bytes per sample
     return MemoryEstimate((
         MemoryPart("the transient H", counts.why,
-                   samples * (20 if counts.noisy else 16) + (24 * samples if thinned else 0)),
+                   samples * held + (24 * samples if thinned else 0)),
         MemoryPart("the phasor transform", f"{counts.why}, {freqs} frequencies",
                    8 * samples + per_field * ((2 if counts.noisy else 1) + (2 if thinned else 0))),
         MemoryPart("the fields imaged", f"{freqs} frequencies × {sensors * shape.lasers} "

@@ -262,8 +262,9 @@ class _Base:
                 return labelled(native, "imager", f"{self.imager.name}, the reference picture")
         return labelled(own, "imager", self.imager.name)
 
-    def counts(self, depth_planes: int, why: str, noisy: bool = False) -> RunCounts:
-        return RunCounts(models=len(self.models), noisy=noisy,
+    def counts(self, depth_planes: int, why: str, noisy: bool = False,
+               read: bool = False) -> RunCounts:
+        return RunCounts(models=len(self.models), noisy=noisy, read=read,
                          thinned=self.settings.split.count_splitting, depth_planes=depth_planes,
                          single_frequency_images=(
                              self.settings.reconstruction.single_frequency_images),
@@ -337,7 +338,7 @@ def _file_plan(base: _Base) -> RunPlan:
             bins, sensors, lasers = header
             why = f"capture.path's transient of {bins} time bins × {sensors * lasers} samples"
             base.estimate(header_shape(header, base.transform.plugin, base.training),
-                          base.counts(planes, why))
+                          base.counts(planes, why, read=True))
         loaded = file.load()
     capture = loaded.prepared.capture
     base = base.picking(picked_for(capture))
@@ -353,8 +354,8 @@ def _file_plan(base: _Base) -> RunPlan:
     why = (f"capture.path's transient of {shape.bins} time bins × "
            f"{shape.sensors * shape.lasers} samples")
     planes = depths.count(depth_range, shape.f_max, capture.kind)   # known once it is read
-    memory = base.estimate(shape, base.counts(planes, why), _reference_shape(base, capture,
-                                                                             shape))
+    memory = base.estimate(shape, base.counts(planes, why, read=True),
+                           _reference_shape(base, capture, shape))
     return dataclasses.replace(base.plan(shape, memory, capture=loaded), transform=transform,
                                transform_note=note, read_log=tuple(said))
 
