@@ -57,7 +57,8 @@ def _fit_seconds(records: Sequence[RunRecord]) -> dict[str, dict[str, float]]:
 
 #: Every score a study row may carry: rows collected before a score existed lack it.
 SCORES = ("heldout_excess_db", "heldout_nmse_db", "heldout_floor_db", "psnr", "ssim",
-          "volume_psnr", "volume_ssim", "depth_rmse_m")
+          "scale_invariant_psnr", "front_view_gain", "volume_psnr", "volume_ssim",
+          "depth_rmse_m")
 
 
 def study_rows_of(results: dict[str, Any]) -> list[StudyRow]:

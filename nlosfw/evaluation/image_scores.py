@@ -95,6 +95,24 @@ def ssim(reference: np.ndarray, test: np.ndarray, data_range: float = 1.0,
     return float(structural_similarity(x, y, data_range=data_range))
 
 
+def least_squares_gain(reference: np.ndarray, test: np.ndarray) -> float | None:
+    """The gain g minimising ``|reference - g test|²`` (None when ``test`` is zero
+    everywhere): above 1, ``test`` is the darker."""
+    a, b = _pair(reference, test)
+    power = float(np.sum(b * b))
+    return float(np.sum(a * b)) / power if power > 0 else None
+
+
+def scale_invariant_psnr(reference: np.ndarray, test: np.ndarray) -> float | None:
+    """PSNR (data range 1) of ``test`` times its :func:`least_squares_gain` against
+    ``reference``, both normalised to max 1: the error left once the overall brightness
+    is matched, so that a few hot voxels that set one image's maximum do not move the
+    score of every pixel. None when ``test`` is zero everywhere."""
+    a, b = normalise(reference), normalise(test)
+    gain = least_squares_gain(a, b)
+    return None if gain is None else psnr(a, gain * b)
+
+
 def image_metrics(reference: np.ndarray, test: np.ndarray) -> dict[str, float | None]:
     """RMSE, PSNR and SSIM (scikit-image's defaults) of ``test`` against ``reference``,
     images or volumes, both normalised to max 1.
@@ -111,17 +129,22 @@ def reconstruction_scores(reference: Reconstruction, test: Reconstruction,
     """The scores of ``test`` against ``reference`` (both planes or volumes on the same voxels).
 
     On amplitudes, each normalised to its maximum: ``rmse``, ``psnr`` and ``ssim`` of the
-    front view (the maximum over depth, (Y, X)); ``volume_psnr`` and ``volume_ssim`` of the
-    whole (Z, Y, X) volume; ``depth_rmse_m`` against ``truth_depth`` (see
-    :func:`depth_rmse`), None without one. An SSIM is None where the image is smaller
-    than the 7-pixel window; a PSNR is inf for identical images.
+    front view (the maximum over depth, (Y, X)); ``scale_invariant_psnr`` of the front view
+    and its ``front_view_gain`` (:func:`scale_invariant_psnr`, :func:`least_squares_gain`);
+    ``volume_psnr`` and ``volume_ssim`` of the whole (Z, Y, X) volume; ``depth_rmse_m``
+    against ``truth_depth`` (see :func:`depth_rmse`), None without one. An SSIM is None
+    where the image is smaller than the 7-pixel window; a PSNR is inf for identical
+    images.
     """
     ref, tst = amplitude(reference.as_volume()[0]), amplitude(test.as_volume()[0])
     if ref.shape != tst.shape:
         raise DataError(f"reconstructions differ in shape: {ref.shape} vs {tst.shape}")
-    front = image_metrics(ref.max(axis=0), tst.max(axis=0))
+    front_ref, front_tst = ref.max(axis=0), tst.max(axis=0)
+    front = image_metrics(front_ref, front_tst)
     volume = image_metrics(ref, tst)
-    return {**front, "volume_psnr": volume["psnr"], "volume_ssim": volume["ssim"],
+    return {**front, "scale_invariant_psnr": scale_invariant_psnr(front_ref, front_tst),
+            "front_view_gain": least_squares_gain(normalise(front_ref), normalise(front_tst)),
+            "volume_psnr": volume["psnr"], "volume_ssim": volume["ssim"],
             "depth_rmse_m": None if truth_depth is None else depth_rmse(test, truth_depth)}
 
 
@@ -132,9 +155,9 @@ def scored(reference: Reconstruction, test: Reconstruction,
     ``truth_depth``)."""
     values = reconstruction_scores(reference, test)
     ref, tst = amplitude(reference.as_volume()[0]), amplitude(test.as_volume()[0])
-    views = {"psnr": (ref.max(axis=0), tst.max(axis=0)), "ssim": (ref.max(axis=0),
-                                                                  tst.max(axis=0)),
-             "volume_psnr": (ref, tst), "volume_ssim": (ref, tst)}
+    front = (ref.max(axis=0), tst.max(axis=0))
+    views = {"psnr": front, "ssim": front, "scale_invariant_psnr": front,
+             "front_view_gain": front, "volume_psnr": (ref, tst), "volume_ssim": (ref, tst)}
     reasons: dict[str, str] = {}
     for name, (a, b) in views.items():
         value = values[name]
@@ -152,6 +175,8 @@ def scored(reference: Reconstruction, test: Reconstruction,
 def _undefined_image_score(name: str, value: float | None, a: np.ndarray,
                            b: np.ndarray) -> str:
     """Why score ``name`` (None or not finite) of images ``a`` and ``b`` is undefined."""
+    if value is None and name in ("scale_invariant_psnr", "front_view_gain"):
+        return "the image is zero everywhere: no gain matches it to the reference"
     if value is None and name.endswith("ssim"):
         return (f"the image ({' x '.join(map(str, a.shape))}) is smaller than SSIM's "
                 f"{SSIM_WINDOW}-pixel window")

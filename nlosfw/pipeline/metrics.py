@@ -37,10 +37,10 @@ from nlosfw.model.interface import FitReport
 from nlosfw.pipeline.metrics_versions import metrics_as_current
 from nlosfw.pipeline.nulls import Number, error_values, fit_values, with_explicit_nulls
 
-SchemaVersion = Literal[9]
+SchemaVersion = Literal[10]
 #: Version of the metrics.json layout; bump it (both lines) with every change to it, and
 #: say in :mod:`nlosfw.pipeline.metrics_versions` how an older file reads as this one.
-SCHEMA_VERSION: Final[SchemaVersion] = 9
+SCHEMA_VERSION: Final[SchemaVersion] = 10
 
 #: A section's ``null_reasons``: why each of its null values is null (one line each), by
 #: its key (``fitted.<name>`` for a fitted number); absent when none is
@@ -284,6 +284,12 @@ class ImageScores(Document, frozen=True, kw_only=True):
     rmse: Annotated[float | None, doc("of the front view: the maximum over depth")]
     psnr: Annotated[float | None, doc("dB, of the front view")]
     ssim: Annotated[float | None, doc("of the front view")]
+    scale_invariant_psnr: Annotated[Absent[float | None], doc(
+        "dB, of the front view times the least-squares gain that matches it to the "
+        "reference's: the error once overall brightness is matched")] = None
+    front_view_gain: Annotated[Absent[float | None], doc(
+        "that gain (above 1: this front view is darker than the reference's, each "
+        "normalised to its maximum)")] = None
     volume_psnr: Annotated[float | None, doc("dB, of the whole (z, y, x) volume")]
     volume_ssim: Annotated[float | None, doc("of the whole (z, y, x) volume")]
     depth_rmse_m: Annotated[Absent[float | None], doc(

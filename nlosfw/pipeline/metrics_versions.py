@@ -4,7 +4,8 @@ Each later version only added optional keys or allowed null where a number was r
 (6: count splitting, ``capture.thinning`` and ``field.*.splits.heldout_measurement``; 7:
 ``field.*.fit.fitted``; 8: ``null_reasons`` in each section of scores, null for
 ``depth_rmse_m``, a ``fitted`` number and the held-out ``excess``), or renamed a key
-(9: ``capture.thinning`` is ``capture.count_splitting``, :data:`RENAMED_KEYS`).
+(9: ``capture.thinning`` is ``capture.count_splitting``, :data:`RENAMED_KEYS`; 10: the
+front view's ``scale_invariant_psnr`` and ``front_view_gain`` in each section of scores).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Final
 from nlosfw.common.errors import DataError
 
 #: The versions :meth:`~nlosfw.pipeline.metrics.RunMetrics.from_json` reads.
-READABLE_VERSIONS: Final = (5, 6, 7, 8, 9)
+READABLE_VERSIONS: Final = (5, 6, 7, 8, 9, 10)
 
 #: Keys renamed since an older version: (the last version that wrote the old name, the
 #: section, the old key, the new key); an older file is read with them renamed.

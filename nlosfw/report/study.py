@@ -46,7 +46,8 @@ if TYPE_CHECKING:
 
 #: The reconstruction scores aggregated, in order (attributes of
 #: :class:`~nlosfw.pipeline.metrics.ImageScores`).
-SCORES = ("psnr", "ssim", "volume_psnr", "volume_ssim", "depth_rmse_m")
+SCORES = ("psnr", "ssim", "scale_invariant_psnr", "front_view_gain", "volume_psnr",
+          "volume_ssim", "depth_rmse_m")
 
 #: Count splitting's field scores (``field.<source>.splits.heldout_measurement``): the
 #: held-out measurement error, its noise floor and the excess, in dB.
@@ -228,6 +229,12 @@ _TABLE = (("PSNR (dB)", "psnr", 1, 1.0), ("SSIM", "ssim", 3, 1.0),
           ("depth RMSE (mm)", "depth_rmse_m", 1, 1000.0))
 
 
+#: Columns of the front view's brightness-matched score, shown when a row has them (runs
+#: before they were scored have none): after the SSIM.
+_MATCHED_TABLE = (("scale-invariant PSNR (dB)", "scale_invariant_psnr", 1, 1.0),
+                  ("front-view gain", "front_view_gain", 2, 1.0))
+
+
 #: Columns of count splitting's scores, shown when a row has them.
 _FIELD_TABLE = (("held-out excess (dB)", "heldout_excess_db", 1, 1.0),
                 ("held-out NMSE (dB)", "heldout_nmse_db", 1, 1.0),
@@ -237,7 +244,11 @@ _FIELD_TABLE = (("held-out excess (dB)", "heldout_excess_db", 1, 1.0),
 def study_table(rows: Sequence[StudyRow]) -> tuple[list[str], list[list[str]]]:
     """(header, cells) of the study's markdown table: mean ± std over seeds (with count
     splitting, the held-out excess, error and floor first)."""
-    columns = tuple(c for c in _FIELD_TABLE if any(r.scores[c[1]].n for r in rows)) + _TABLE
+    def scored(table: tuple[tuple[str, str, int, float], ...]) -> tuple[
+            tuple[str, str, int, float], ...]:
+        return tuple(c for c in table if any(r.scores[c[1]].n for r in rows))
+
+    columns = scored(_FIELD_TABLE) + _TABLE[:2] + scored(_MATCHED_TABLE) + _TABLE[2:]
     header = ["condition", "sparsity", "source", "runs", "seeds", *[h for h, *_ in columns]]
     cells = [[r.condition, r.sparsity, r.series, str(r.runs),
               ",".join(str(s) for s in r.seeds) or "-",

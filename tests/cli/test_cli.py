@@ -218,7 +218,7 @@ def test_full_run_writes_documented_artefacts(workdir):
     assert expected <= names, expected - names
     assert any(n.startswith("figures/fields_f") for n in names)
     metrics = json.loads((run / "metrics.json").read_text())
-    assert metrics["status"] == "completed" and metrics["schema_version"] == 9
+    assert metrics["status"] == "completed" and metrics["schema_version"] == 10
     assert set(metrics["timings"]) >= {"capture", "transform", "fit", "predict", "reconstruct",
                                        "report", "total"}
     splits = metrics["field"]["interp"]["splits"]

@@ -240,7 +240,7 @@ def split_sweep(tmp_path_factory) -> Path:
 def test_a_run_with_count_splitting_scores_against_half_b(split_sweep):
     run = split_sweep / "0"
     m = json.loads((run / "metrics.json").read_text())
-    assert m["schema_version"] == 9
+    assert m["schema_version"] == 10
     halves = m["capture"]["count_splitting"]
     assert halves["seed"] == 1 and halves["count_scale"] > 0
     total = (halves["counts_a"] + halves["counts_b"]) / halves["count_scale"]

@@ -125,3 +125,35 @@ def test_ncc_is_pearsons_r_of_the_pixels_and_refuses_what_has_none():
         ncc(a, np.ones_like(a))
     with pytest.raises(DataError, match="shape"):
         ncc(a, b[:, :8])
+
+
+def test_the_scale_invariant_psnr_matches_brightness_before_the_error():
+    """One hot voxel halves every other pixel of a normalised front view. Reference
+    amplitudes (8 x 8 front view, one plane): 0.5 everywhere, 1 at (0, 0). Test: the same
+    halved, with a hot pixel of amplitude 1 at (7, 7), so normalised it reads 0.25 (62
+    pixels), 0.5 at (0, 0), 1 at (7, 7). By hand: Σab = 62·0.125 + 0.5 + 0.5 = 8.75,
+    Σb² = 62·0.0625 + 0.25 + 1 = 5.125, gain g = 8.75 / 5.125; today's PSNR has MSE
+    (62·0.25² + 2·0.5²) / 64; the scale-invariant one the residual a - g b."""
+    a = np.full((1, 8, 8), 0.5)
+    a[0, 0, 0] = 1.0
+    b = a / 2
+    b[0, 7, 7] = 1.0
+    scores = reconstruction_scores(_recon(a**2), _recon(b**2))     # intensities
+    g = 8.75 / 5.125
+    assert scores["front_view_gain"] == pytest.approx(g, rel=1e-12)
+    plain_mse = (62 * 0.25**2 + 2 * 0.5**2) / 64
+    assert scores["psnr"] == pytest.approx(-10 * math.log10(plain_mse), rel=1e-12)
+    matched_mse = (62 * (0.5 - g * 0.25) ** 2 + (1 - g * 0.5) ** 2 + (0.5 - g) ** 2) / 64
+    assert scores["scale_invariant_psnr"] == pytest.approx(-10 * math.log10(matched_mse),
+                                                           rel=1e-12)
+    assert scores["scale_invariant_psnr"] > scores["psnr"] + 3.8          # 15.48 vs 11.65 dB
+
+
+def test_a_dark_test_image_has_no_gain_and_says_why():
+    from nlosfw.evaluation.image_scores import scored
+
+    reference = _recon(np.ones((8, 10, 12)))
+    values, reasons = scored(reference, _recon(np.zeros((8, 10, 12))))
+    assert values["scale_invariant_psnr"] is None and values["front_view_gain"] is None
+    assert reasons["front_view_gain"] == ("the image is zero everywhere: no gain matches it "
+                                          "to the reference")

@@ -38,7 +38,8 @@ LAYOUTS = {1: "df68d9802d66f6c788ccb3f73598862a1b3e03e0195b95c4a5dababd971930e2"
            6: "f97056c1ab226f7f0bdb9c183d927b8d7234b7e023c544ca3d9a5f9fb44efeb9",
            7: "9b31013e44eecda3daa1c8abe3ad5ac9e92452f4fa28745a3d8ff3c88efd5e82",
            8: "11c2bda7f7f6e7592b477ed398c22ec04d36fd56c2fa5f773331ccf8bce0e9e0",
-           9: "262aa4a837b1040bcd211c67fdfb498df7f1579830c72fc399f89a0b79dd1553"}
+           9: "262aa4a837b1040bcd211c67fdfb498df7f1579830c72fc399f89a0b79dd1553",
+           10: "e1874bb2c7d3109dd4d55bce6fc54358ae2a0f77b2ba5ccd6ca4be54848f8172"}
 
 
 @pytest.fixture(scope="module")
@@ -62,7 +63,7 @@ def _validator(run: Path) -> jsonschema.Draft202012Validator:
 def test_a_run_writes_a_schema_its_metrics_match(finished_run):
     data = json.loads((finished_run / "metrics.json").read_text())
     _validator(finished_run).validate(data)
-    assert data["schema_version"] == SCHEMA_VERSION == 9
+    assert data["schema_version"] == SCHEMA_VERSION == 10
     metrics = RunMetrics.read(finished_run / "metrics.json")
     assert metrics.to_json() == data
     assert set(metrics.field or {}) == {"interp"}
@@ -133,7 +134,7 @@ def _sweep_with(tmp_path, finished_run, text):
 @pytest.mark.malformed_metrics
 @pytest.mark.parametrize(("edit", "message"), [
     (lambda d: d.update(schema_version=0),
-     "schema_version is 0; this nlosfw reads versions 5, 6, 7, 8, 9 (written by another nlosfw "
+     "schema_version is 0; this nlosfw reads versions 5, 6, 7, 8, 9, 10 (written by another nlosfw "
      "version"),
     (lambda d: d["field"]["interp"]["splits"].pop("all"), "field.interp.splits.all: is missing"),
     (lambda d: d["timings"].update(total="slow"), "timings.total: must be a number, got 'slow'"),
