@@ -24,8 +24,9 @@ model, ``ceiling``) against ``true`` (half B's full scan) in several ways:
 
     python benchmarks/image_scores_analysis.py DIR [DIR ...] [--out JSON]
 
-Each DIR is searched for runs (``metrics.json`` beside ``reconstructions/``). The JSON
-holds every run's scores and the means per capture, sparsity and source.
+Each DIR is searched for runs (``metrics.json`` beside ``reconstructions/``); a run's model
+is labelled with its ``model.*`` overrides (``rsd_prior[tv_weight=0.3]``). The JSON holds
+every run's scores and the means per capture, sparsity and source over the thinning seeds.
 """
 
 from __future__ import annotations
@@ -90,7 +91,7 @@ def run_scores(run: Path) -> dict[str, Any] | None:
         return None
     metrics = json.loads((run / "metrics.json").read_text(encoding="utf-8"))
     ref = amplitude(read_reconstruction(folder / "true.hdf5").as_volume()[0])
-    plugin = metrics["field"]["model"]["plugin"]
+    plugin = metrics["field"]["model"]["plugin"] + model_options(run)
     out: dict[str, Any] = {
         "run": str(run), "capture": Path(metrics["capture"]["path"]).name,
         "undersampling": metrics["split"]["undersampling"],
@@ -114,6 +115,20 @@ def run_scores(run: Path) -> dict[str, Any] | None:
         scores["recorded_psnr"] = recorded.get("psnr")
         out["sources"][name] = scores
     return out
+
+
+def model_options(run: Path) -> str:
+    """The run's ``model.<option>`` overrides (but the device) as a label suffix,
+    ``[tv_weight=0.3]``; empty without any (``.hydra/overrides.yaml``)."""
+    path = run / ".hydra" / "overrides.yaml"
+    if not path.is_file():
+        return ""
+    import yaml
+
+    overrides = yaml.safe_load(path.read_text(encoding="utf-8")) or []
+    options = [o.removeprefix("model.") for o in overrides
+               if str(o).startswith("model.") and not str(o).startswith("model.device=")]
+    return f"[{','.join(options)}]" if options else ""
 
 
 def find_runs(dirs: Sequence[Path]) -> list[Path]:
