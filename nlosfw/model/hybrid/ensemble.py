@@ -46,6 +46,7 @@ from typing import ClassVar
 import numpy as np
 
 from nlosfw.common.errors import ConfigError, DataError, FitError
+from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.model.hybrid.ensemble_config import VOLUME_LABEL, EnsembleConfig, prior_label
 from nlosfw.model.hybrid.residual import RSDResidualFieldModel
 from nlosfw.model.hybrid.stacking import (
@@ -121,6 +122,30 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         if config.neural_volume:
             with options_in_group("volume"):
                 cls.volume_class().check_config(config.volume_config())
+
+    @classmethod
+    def estimate_memory(cls, config: EnsembleConfig, shape: PlanShape) -> MemoryEstimate:
+        """The members' estimates together (each part's why names its member; a runtime
+        they share counts once), and the members' fields on the wall grid that weigh them
+        (one per member, the blend and the residual's, every training frequency)."""
+        estimate = MemoryEstimate()
+        if config.neural_volume:
+            estimate += _member_part(VOLUME_LABEL, cls.volume_class().estimate_memory(
+                config.volume_config(), shape))
+        for weight in config.tv_weights:
+            estimate += _member_part(prior_label(weight), RSDPriorFieldModel.estimate_memory(
+                config.prior_member_config(weight), shape))
+        if config.add_residual:
+            estimate += _member_part("residual", cls.residual_class().estimate_memory(
+                config.residual_config(), shape))
+        if config.member_count > 1 or config.add_residual:
+            ny, nx = shape.square_grid
+            fields = config.member_count + 1 + int(config.add_residual)
+            estimate += MemoryEstimate((MemoryPart(
+                "the members' fields", f"{fields} fields of {shape.training_frequencies} "
+                f"frequencies × {ny} × {nx} wall points", 16.0 * fields
+                * shape.training_frequencies * ny * nx),))
+        return estimate
 
     @property
     def member_weights(self) -> dict[str, float]:
@@ -388,6 +413,12 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         if label == RESIDUAL_FILE:
             return self.residual_class().network_class(self.config.residual.network)
         return RSDPriorFieldModel
+
+
+def _member_part(label: str, estimate: MemoryEstimate) -> MemoryEstimate:
+    """``estimate`` with each part's why naming the member (a shared runtime as it is)."""
+    return MemoryEstimate(tuple(part if part.once else dataclasses.replace(
+        part, why=f"member {label}: {part.why}") for part in estimate.parts))
 
 
 def _db(ratio: float) -> float:

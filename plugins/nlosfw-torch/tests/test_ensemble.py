@@ -170,3 +170,46 @@ def test_bad_options_name_the_group():
         type(model).check_config(model.config)
     with pytest.raises(ConfigError, match=r"model\.volume\.steps"):
         _model("ensemble_torch", volume={"steps": 0})
+
+
+def test_the_memory_estimate_is_the_members_together():
+    """The plan's memory estimate of the ensemble: the neural volume's, each rsd_prior
+    member's and the residual network's estimates (each part naming its member, the torch
+    runtime they share counted once), and the members' fields that weigh them; a lone
+    neural volume without a residual is exactly neural_volume_torch's estimate."""
+    from nlosfw.testing.checks_memory import SHAPES
+
+    registry = load_plugins().registry
+    shape = SHAPES[-1]
+    model = _ensemble(tv_weights=[0.03, 0.1])
+    estimate = type(model).estimate_memory(model.config, shape)
+    volume = registry.get("model", "neural_volume_torch").load().estimate_memory(
+        model.config.volume_config(), shape)
+    residual = registry.get("model", "rsd_residual_torch").load().estimate_memory(
+        model.config.residual_config(), shape)
+    assert volume.total > 0 and residual.total > 0
+    fields = 16.0 * (3 + 2) * shape.training_frequencies * 64 * 64   # 3 members, blend, residual
+    assert estimate.total == pytest.approx((volume + residual).total + fields)
+    runtimes = [p for p in estimate.merged() if p.what == "the model's runtime"]
+    assert len(runtimes) == 1 and runtimes[0].once == "runtime:torch"
+    whys = [p.why for p in estimate.parts if not p.once and p.what != "the members' fields"]
+    assert {w.split(":")[0] for w in whys} == {"member neural_volume", "member residual"}
+    alone = _ensemble(tv_weights=[], add_residual=False)
+    assert type(alone).estimate_memory(alone.config, shape).total == volume.total
+
+
+def test_the_plan_reads_the_members_needs():
+    """The rsd_prior members' Poisson likelihood is the ensemble's need: the plan of a
+    run asks the scene for photon counts and computes the field's variance."""
+    from tests.planned import TINY, planned
+
+    plain = planned((*TINY[:-1], "model=ensemble_torch", "model.device=cpu"))
+    assert not plain.needs.noise_variance and not plain.needs.photon_counts
+    with pytest.raises(ConfigError, match="a Poisson likelihood needs photon counts"):
+        planned((*TINY[:-1], "model=ensemble_torch", "model.prior.likelihood=poisson"))
+    poisson = planned((*TINY[:-1], "model=ensemble_torch", "model.prior.likelihood=poisson",
+                       "scene.noise.model=poisson"))
+    assert poisson.needs.noise_variance and not poisson.needs.photon_counts
+    no_prior = planned((*TINY[:-1], "model=ensemble_torch", "model.prior.likelihood=poisson",
+                        "model.tv_weights=[]", "scene.noise.model=poisson"))
+    assert not no_prior.needs.noise_variance
