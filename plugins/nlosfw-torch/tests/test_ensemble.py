@@ -8,7 +8,7 @@ import pytest
 
 pytest.importorskip("torch")
 
-from nlosfw.common import ConfigError
+from nlosfw.common import ConfigError, PlanShape
 from nlosfw.model.hybrid import held_out_points
 from nlosfw.plugins import load_plugins
 from nlosfw.testing import fixtures, heldout_error_db
@@ -177,10 +177,10 @@ def test_the_memory_estimate_is_the_members_together():
     member's and the residual network's estimates (each part naming its member, the torch
     runtime they share counted once), and the members' fields that weigh them; a lone
     neural volume without a residual is exactly neural_volume_torch's estimate."""
-    from nlosfw.testing.checks_memory import SHAPES
-
     registry = load_plugins().registry
-    shape = SHAPES[-1]
+    shape = PlanShape(bins=2048, sensors=4096, grid=(64, 64), spacing=1 / 64, confocal=True,
+                      frequencies=151, f_min=4.0, f_max=16.0, training_frequencies=135,
+                      training=(16, 16), step=4, depth_range=(0.3, 0.9), deepest=1.5)
     model = _ensemble(tv_weights=[0.03, 0.1])
     estimate = type(model).estimate_memory(model.config, shape)
     volume = registry.get("model", "neural_volume_torch").load().estimate_memory(
