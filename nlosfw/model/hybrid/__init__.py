@@ -6,10 +6,11 @@ plugins build on.
 * ``neural_volume_<backend>`` (:class:`NeuralVolumeFieldModel`): a network's non-negative
   albedo on ``rsd_prior``'s lattice, propagated to the wall by the scene operator, which
   each backend writes from the numpy constants of :func:`plane_stack`;
-* ``ensemble_<backend>`` (:class:`EnsembleFieldModel`): ``rsd_prior``, the residual and the
-  neural volume weighed by their error at held-out kept wall points.
+* ``ensemble_<backend>`` (:class:`EnsembleFieldModel`): ``rsd_prior`` at several TV weights
+  and the neural volume weighed by their error at held-out kept wall points, plus the
+  residual's network on their blend.
 
-Both hold ``rsd_prior``'s options as one group, ``prior``
+Each holds ``rsd_prior``'s options as one group, ``prior``
 (:class:`~nlosfw.model.physics.PriorOptions`)."""
 
 from typing import TYPE_CHECKING
