@@ -303,3 +303,31 @@ def register_neural_volume(register: Callable[..., None], backend: str, factory:
         test_config=dict(NEURAL_VOLUME_TEST_CONFIG),
         # physical_prior: like rsd_prior it makes only fields a hidden scene can produce
         capabilities=(*NETWORK_CAPABILITIES, Capability.PHYSICAL_PRIOR))
+
+
+#: Small, fast options of ``ensemble_<backend>`` for the conformance kit: its members' own
+#: (the kit's plane-wave field is no hidden scene's: the volume may find nothing to fit, and
+#: is then left out).
+ENSEMBLE_TEST_CONFIG: Mapping[str, object] = {
+    "prior": RSD_RESIDUAL_TEST_CONFIG["prior"], "tv_weights": [0.0, 0.1],
+    "residual": {k: v for k, v in RSD_RESIDUAL_TEST_CONFIG.items() if k != "prior"},
+    "volume": {k: v for k, v in NEURAL_VOLUME_TEST_CONFIG.items() if k != "device"},
+    "device": "cpu"}
+
+
+def register_ensemble(register: Callable[..., None], backend: str, factory: str) -> None:
+    """Register ``ensemble_<backend>`` (``register`` is a ``register_field_models`` hook's):
+    ``rsd_prior``, the neural residual and the neural volume weighed by their error at
+    held-out kept wall points, the class ``factory`` (a subclass of
+    :class:`nlosfw.model.hybrid.EnsembleFieldModel` for ``backend``)."""
+    register(
+        f"ensemble_{backend}", factory,
+        config="nlosfw.model.hybrid.ensemble_config:EnsembleConfig",
+        requires=dict(BACKENDS[NetworkBackend(backend)][1]),
+        description=f"use it on a measured capture when unsure which field model fits it "
+                    f"(the real-data study's default): rsd_prior at three TV weights and the "
+                    f"neural volume weighed on held-out kept points, plus a residual network, "
+                    f"{_TITLES[backend]}",
+        test_config=dict(ENSEMBLE_TEST_CONFIG),
+        # not physical_prior: its residual members represent fields no hidden scene makes
+        capabilities=NETWORK_CAPABILITIES)

@@ -220,21 +220,14 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
         """Fit rsd_prior to ``field``, then the network to what it leaves (``validation``,
         if given, drives the network's early stopping)."""
         start = time.perf_counter()
-        who = self.model_name()
-        check_training_field(field, who)
-        network = self._network_model()         # a bad network name fails before the fit
+        check_training_field(field, self.model_name())
+        self._network_model()                   # a bad network name fails before the fit
         prior = RSDPriorFieldModel(self.config.prior_config())
         with options_in_group("prior"):
             prior_report = prior.fit(field)
         residual = _residual(prior, field)
         val_residual = None if validation is None else _residual(prior, validation)
-        if not np.any(residual.values != 0):
-            raise FitError(f"{who}: rsd_prior fits the field exactly; nothing is left for "
-                           "the residual network (use model=rsd_prior)")
-        if val_residual is None and self.config.network_validation_fraction > 0:
-            residual, val_residual = _hold_out_points(
-                residual, self.config.network_validation_fraction, self.config.seed)
-        report = network.fit(residual, val_residual, on_step)
+        network, report = self.fit_network(residual, val_residual, on_step)
         self._prior, self._network = prior, network
         history = [{"stage": 0.0, **h} for h in prior_report.history]
         history += [{"stage": 1.0, **h} for h in report.history]
@@ -244,6 +237,28 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
                          stopped_early=report.stopped_early, history=history,
                          fitted=prior_report.fitted)
 
+    def fit_network(self, residual: PhasorField, validation: PhasorField | None = None,
+                    on_step: Callable[[TrainingStep], None] | None = None
+                    ) -> tuple[NeuralFieldModel, FitReport]:
+        """The second stage alone: a new network fitted to ``residual`` (what a physics
+        stage leaves of a field; ``validation``, if given, drives its early stopping, else
+        ``network_validation_fraction`` of its wall points are held out). Its output times
+        :attr:`shrink` is the penalised residual. This model keeps nothing of it."""
+        who = self.model_name()
+        network = self._network_model()
+        if not np.any(residual.values != 0):
+            raise FitError(f"{who}: rsd_prior fits the field exactly; nothing is left for "
+                           "the residual network (use model=rsd_prior)")
+        if validation is None and self.config.network_validation_fraction > 0:
+            residual, validation = _hold_out_points(
+                residual, self.config.network_validation_fraction, self.config.seed)
+        return network, network.fit(residual, validation, on_step)
+
+    @property
+    def shrink(self) -> float:
+        """The factor 1 / (1 + residual_weight) on the network's output."""
+        return 1.0 / (1.0 + self.config.residual_weight)
+
     # ------------------------------------------------------------------ predict
     def predict(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
         """rsd_prior's field plus the scaled residual at wall points (..., 2) and
@@ -251,8 +266,7 @@ class RSDResidualFieldModel(FieldModel[RSDResidualConfig]):
         xy, f = check_query(wall_xy, frequencies, self.model_name())
         prior, network = self._stages()
         physics = prior.predict(xy, f)
-        shrink = 1.0 / (1.0 + self.config.residual_weight)
-        return physics + shrink * network.predict(xy, f).astype(np.complex128)
+        return physics + self.shrink * network.predict(xy, f).astype(np.complex128)
 
     def physics(self, wall_xy: np.ndarray, frequencies: np.ndarray) -> np.ndarray:
         """The physics stage's field alone (rsd_prior's prediction)."""

@@ -11,6 +11,7 @@ from nlosfw.plugins import (
     NetworkRegistrar,
     Registrar,
     hookimpl,
+    register_ensemble,
     register_field_networks,
     register_neural_volume,
     register_rsd_residual,
@@ -31,6 +32,7 @@ def register_field_models(register: Registrar) -> None:
     register_rsd_residual(register, backend="torch", factory="nlosfw_torch.models:RSDResidualTorch")
     register_neural_volume(register, backend="torch",
                            factory="nlosfw_torch.neural_volume:NeuralVolumeTorch")
+    register_ensemble(register, backend="torch", factory="nlosfw_torch.ensemble:EnsembleTorch")
 
 
 @hookimpl
