@@ -34,12 +34,16 @@ Cost: the neural volume's fit, one ``rsd_prior`` fit per TV weight and a small n
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
 import logging
 import math
+import queue
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Mapping
+from functools import partial
 from pathlib import Path
 from typing import ClassVar
 
@@ -77,6 +81,22 @@ StepCallback = Callable[[TrainingStep], None] | None
 #: its share is within what a few held-out points can tell apart, and a member kept costs a
 #: fit on every kept point (and a clear choice is then exactly one member).
 MIN_WEIGHT = 0.05
+#: A member's fit, or the FitError that left it out.
+_Outcome = tuple[FieldModel, FitReport] | FitError
+
+
+class _Abandoned(Exception):
+    """Raised in the volume's thread at its next step once the fitting thread stopped."""
+
+
+def _attempt(fit: Callable[[], tuple[FieldModel, FitReport]]) -> _Outcome:
+    """``fit()``, or the FitError it raised."""
+    try:
+        return fit()
+    except FitError as err:
+        return err
+
+
 #: The residual network's name in saved files.
 RESIDUAL_FILE = "residual_network"
 
@@ -230,9 +250,10 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
                          seconds=time.perf_counter() - start, final_loss=error,
                          best_val_loss=error, history=history, fitted=info)
 
-    def _fit_member(self, label: str, field: PhasorField, on_step: StepCallback
-                    ) -> tuple[FieldModel, FitReport]:
-        """Member ``label`` fitted to ``field``."""
+    def _fit_member(self, label: str, field: PhasorField, on_step: StepCallback,
+                    workers: int | None = None) -> tuple[FieldModel, FitReport]:
+        """Member ``label`` fitted to ``field`` (an ``rsd_prior`` one on ``workers``
+        threads, if given)."""
         cfg = self.config
         model: FieldModel
         if label == VOLUME_LABEL:
@@ -240,7 +261,7 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
             with options_in_group("volume"):
                 return model, model.fit(field, on_step=on_step)
         weight = next(w for w in cfg.tv_weights if prior_label(w) == label)
-        model = RSDPriorFieldModel(cfg.prior_member_config(weight))
+        model = RSDPriorFieldModel(cfg.prior_member_config(weight, workers))
         with options_in_group("prior"):
             return model, model.fit(field, on_step=on_step)
 
@@ -250,19 +271,83 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         itself), ``rsd_prior`` on the rest. A member that cannot fit the field (a FitError:
         e.g. no non-negative albedo correlates with it) is left out with a warning; if
         every one is, the first error stands."""
+        labels = self._labels()
+        if self.config.concurrent and VOLUME_LABEL in labels and len(labels) > 1:
+            outcomes = self._fit_beside_volume(field, trained, on_step)
+        else:
+            outcomes = {label: _attempt(partial(
+                self._fit_member, label, field if label == VOLUME_LABEL else trained, on_step))
+                for label in labels}
         fitted: dict[str, FieldModel] = {}
         reports: dict[str, FitReport] = {}
         failures: list[FitError] = []
-        for label in self._labels():
-            try:
-                fitted[label], reports[label] = self._fit_member(
-                    label, field if label == VOLUME_LABEL else trained, on_step)
-            except FitError as err:
-                failures.append(err)
-                log.warning("%s: member %s left out: %s", self.model_name(), label, err)
+        for label in labels:                       # in the members' order, either way
+            outcome = outcomes[label]
+            if isinstance(outcome, FitError):
+                failures.append(outcome)
+                log.warning("%s: member %s left out: %s", self.model_name(), label, outcome)
+            else:
+                fitted[label], reports[label] = outcome
         if not fitted:
             raise failures[0]
         return fitted, reports
+
+    def _fit_beside_volume(self, field: PhasorField, trained: PhasorField,
+                           on_step: StepCallback) -> dict[str, _Outcome]:
+        """The members' fits (or their FitErrors), the volume's in a second thread while the
+        ``rsd_prior`` ones fit in this one on the cores it leaves. The volume's steps reach
+        ``on_step`` from this thread (queued, passed on between and after the priors'
+        fits); if this thread stops (an error, an interrupt), the volume's fit stops at its
+        next step."""
+        steps: queue.SimpleQueue[TrainingStep] = queue.SimpleQueue()
+        stop = threading.Event()
+
+        def volume_step(step: TrainingStep) -> None:
+            if stop.is_set():
+                raise _Abandoned
+            steps.put(step)
+
+        def pass_on(_: TrainingStep | None = None) -> None:
+            while True:
+                try:
+                    step = steps.get_nowait()
+                except queue.Empty:
+                    return
+                if on_step is not None:
+                    on_step(step)
+
+        ended: list[_Outcome | BaseException] = []      # the volume's outcome, once it ends
+        volume = threading.Thread(target=contextvars.copy_context().run, daemon=True,
+                                  name="nlosfw-neural-volume",
+                                  args=(self._volume_outcome, field, volume_step, ended))
+        volume.start()
+        try:
+            outcomes: dict[str, _Outcome] = {
+                label: _attempt(partial(self._fit_member, label, trained, pass_on,
+                                        self.config.workers_beside_volume))
+                for label in self._labels() if label != VOLUME_LABEL}
+            while volume.is_alive():
+                volume.join(timeout=0.2)
+                pass_on()
+            pass_on()
+        finally:
+            stop.set()
+            volume.join()
+        result = ended.pop()
+        if isinstance(result, BaseException) and not isinstance(result, FitError):
+            raise result
+        outcomes[VOLUME_LABEL] = result
+        return outcomes
+
+    def _volume_outcome(self, field: PhasorField, on_step: StepCallback,
+                        ended: list[_Outcome | BaseException]) -> None:
+        """The volume's fit, or what it raised, appended to ``ended`` (the volume's thread
+        of :meth:`_fit_beside_volume`)."""
+        try:
+            result: _Outcome | BaseException = self._fit_member(VOLUME_LABEL, field, on_step)
+        except BaseException as err:       # handed to the fitting thread, which raises it
+            result = err
+        ended.append(result)
 
     def _refitted(self, field: PhasorField, fitted: Mapping[str, FieldModel],
                   weights: Mapping[str, float], reports: dict[str, FitReport],

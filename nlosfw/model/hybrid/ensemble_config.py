@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 
 from nlosfw.common.config import require
+from nlosfw.common.cores import available_cores, worker_count
 from nlosfw.model.hybrid.residual import RSDResidualConfig
 from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig
 from nlosfw.model.interface import FieldModelConfig
@@ -37,6 +38,11 @@ class EnsembleConfig(FieldModelConfig):
     tv_weight times smaller): the albedo is then a blurred, dim start."""
     neural_volume: bool = True
     """Whether the neural volume (``volume``'s options) is a member."""
+    concurrent: bool = True
+    """Fit the neural volume in a second thread while the ``rsd_prior`` members fit, on the
+    cores the volume leaves (:attr:`workers_beside_volume`); false: one after another.
+    Where those are ``prior.workers``'s, the result is the same bit for bit; else the
+    priors' sums run in another order and differ in rounding."""
     add_residual: bool = True
     """Whether a residual network (``residual``'s options) is fitted to what the weighed
     members leave at the kept points, and added as far as the held-out points say it helps
@@ -85,10 +91,21 @@ class EnsembleConfig(FieldModelConfig):
         """With ``prior.likelihood: poisson_counts`` they need the photon counts."""
         return bool(self.tv_weights) and self.prior.uses_photon_counts
 
-    def prior_member_config(self, tv_weight: float) -> RSDPriorConfig:
-        """``rsd_prior``'s config of the member fitted with ``tv_weight``."""
-        return prior_config(dataclasses.replace(self.prior, tv_weight=tv_weight), self.seed,
-                            self.device)
+    def prior_member_config(self, tv_weight: float, workers: int | None = None
+                            ) -> RSDPriorConfig:
+        """``rsd_prior``'s config of the member fitted with ``tv_weight`` (on ``workers``
+        threads, if given, else ``prior.workers``)."""
+        options = dataclasses.replace(self.prior, tv_weight=tv_weight)
+        if workers is not None:
+            options = dataclasses.replace(options, workers=workers)
+        return prior_config(options, self.seed, self.device)
+
+    @property
+    def workers_beside_volume(self) -> int:
+        """The ``rsd_prior`` members' threads while the volume fits beside them: the cores
+        the volume's threads leave, at most ``prior.workers``'s, at least 1."""
+        volume = self.volume.threads if self.volume.threads > 0 else available_cores()
+        return max(1, min(worker_count(self.prior.workers), available_cores() - volume))
 
     def residual_config(self) -> RSDResidualConfig:
         """The residual group with this config's seed and device."""

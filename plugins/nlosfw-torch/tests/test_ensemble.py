@@ -213,3 +213,59 @@ def test_the_plan_reads_the_members_needs():
     no_prior = planned((*TINY[:-1], "model=ensemble_torch", "model.prior.likelihood=poisson",
                         "model.tv_weights=[]", "scene.noise.model=poisson"))
     assert not no_prior.needs.noise_variance
+
+
+def test_the_volume_beside_the_priors_fits_the_same_ensemble(offset_scene):
+    """The volume fitted in a second thread while the rsd_prior members fit in this one
+    gives the ensemble of the fits one after another, bit for bit, and its steps reach
+    ``on_step`` in this thread, in order."""
+    import threading
+
+    full, train, _ = offset_scene
+    seen: list[tuple[int, str]] = []
+    together = _ensemble(concurrent=True)
+    report = together.fit(train, on_step=lambda s: seen.append(
+        (s.step, threading.current_thread().name)))
+    apart = _ensemble(concurrent=False)
+    apart_report = apart.fit(train)
+    assert together.member_weights == apart.member_weights
+    assert report.fitted == apart_report.fitted
+    assert np.array_equal(together.predict(_points(full), FREQUENCIES),
+                          apart.predict(_points(full), FREQUENCIES))
+    names = {name for _, name in seen}
+    assert names == {threading.current_thread().name}, names
+    assert seen and seen[0][0] == 1                  # the volume's first step, passed on
+
+
+def test_an_error_in_the_fitting_thread_stops_the_volume(plain_scene, monkeypatch):
+    """If this thread stops (here a prior member's fit raises), the volume's fit stops at
+    its next step instead of running on: the error is raised once the volume has ended."""
+    import threading
+    import time
+
+    from nlosfw.model.physics.prior import RSDPriorFieldModel
+
+    _, train, _ = plain_scene
+    started = time.perf_counter()
+
+    def broken(self, *args, **kwargs):
+        time.sleep(0.5)                        # the volume is training by now
+        raise RuntimeError("a prior member broke")
+
+    monkeypatch.setattr(RSDPriorFieldModel, "fit", broken)
+    model = _ensemble(volume={**VOLUME, "steps": 100000, "patience": 100000})
+    with pytest.raises(RuntimeError, match="a prior member broke"):
+        model.fit(train)
+    assert time.perf_counter() - started < 60      # 100000 steps would take many minutes
+    assert not any(t.name == "nlosfw-neural-volume" for t in threading.enumerate())
+
+
+def test_the_priors_beside_the_volume_take_the_cores_it_leaves():
+    """Every core but the volume's thread, at most prior.workers's, at least one."""
+    from nlosfw.common import available_cores
+    from nlosfw.model.hybrid import EnsembleConfig
+    from nlosfw.model.physics import PriorOptions
+
+    cores = available_cores()
+    assert EnsembleConfig().workers_beside_volume == max(1, cores - 1)
+    assert EnsembleConfig(prior=PriorOptions(workers=1)).workers_beside_volume == 1
