@@ -7,7 +7,10 @@ and the whole command's wall time is split with the stage times the run itself r
 in ``metrics.json``: the **overhead** is the wall time minus the transform and
 reconstruct stages (start-up, the checks before the run, reading the capture, the report
 and the run's page). Each capture keeps the run of least overhead of ``--repeat`` runs
-(the machine's cores are shared). The target: an overhead of at most 3 s.
+(the machine's cores are shared). The target: an overhead of at most 3 s. The table
+prints the wall time beside the overhead (work moved aside, such as an import in a thread
+while imaging runs, lowers the overhead without lowering the wall time), and the results
+say whether Python's bytecode cache was kept and the machine's load when it started.
 
 ``--full`` also runs a default run (``python -m nlosfw`` without overrides: the default
 scene simulated, a field model fitted) once and reports its overhead (the wall time minus
@@ -46,8 +49,8 @@ from rich.table import Table
 REPO = Path(__file__).resolve().parents[2]
 REAL_DIR = Path(os.environ.get("NLOSFW_REAL_DATA") or REPO.parent / "shared" / "data" / "real")
 RESULTS = RESULTS_DIR / "bench_image_command.json"
-RESULT_KEYS = ("benchmark", "command", "overhead", "timing", "target_s", "machine", "runs",
-               "within_target")
+RESULT_KEYS = ("benchmark", "command", "overhead", "timing", "target_s", "machine",
+               "bytecode", "load_before", "runs", "within_target")
 #: The stages an overhead leaves in: the work of imaging itself.
 IMAGING = ("transform", "reconstruct")
 #: A default run's work: every stage but the report (its overhead: start-up, the checks
@@ -104,7 +107,17 @@ def print_table(rows: dict[str, dict[str, Any]]) -> None:
     Console(width=160).print(table)
 
 
+def bytecode() -> str:
+    """Whether the runs could keep Python's bytecode cache: without it (this sandbox sets
+    ``PYTHONDONTWRITEBYTECODE``) every module compiles at each start, about 0.45 s of
+    overhead that a user's install does not pay."""
+    if os.environ.get("PYTHONDONTWRITEBYTECODE"):
+        return "not written (PYTHONDONTWRITEBYTECODE set): modules compiled at each start"
+    return "written and reused"
+
+
 def main() -> None:
+    load_before = os.getloadavg()[0]              # the machine's 1-minute load at the start
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3, help="runs per capture (least kept)")
     parser.add_argument("--full", action="store_true",
@@ -131,6 +144,8 @@ def main() -> None:
         "timing": f"least overhead of {args.repeat} runs per capture",
         "target_s": TARGET_S,
         "machine": machine(),
+        "bytecode": bytecode(),
+        "load_before": round(load_before, 2),
         "runs": rows,
         "within_target": all(r["overhead_s"] <= TARGET_S for k, r in rows.items()
                              if k != "default run"),
