@@ -34,13 +34,10 @@ Cost: the neural volume's fit, one ``rsd_prior`` fit per TV weight and a small n
 
 from __future__ import annotations
 
-import contextvars
 import dataclasses
 import logging
 import math
-import queue
 import tempfile
-import threading
 import time
 from collections.abc import Callable, Mapping
 from functools import partial
@@ -51,6 +48,7 @@ import numpy as np
 
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
+from nlosfw.model.hybrid.beside import attempt, fit_beside
 from nlosfw.model.hybrid.ensemble_config import VOLUME_LABEL, EnsembleConfig, prior_label
 from nlosfw.model.hybrid.residual import RSDResidualFieldModel
 from nlosfw.model.hybrid.stacking import (
@@ -81,22 +79,6 @@ StepCallback = Callable[[TrainingStep], None] | None
 #: its share is within what a few held-out points can tell apart, and a member kept costs a
 #: fit on every kept point (and a clear choice is then exactly one member).
 MIN_WEIGHT = 0.05
-#: A member's fit, or the FitError that left it out.
-_Outcome = tuple[FieldModel, FitReport] | FitError
-
-
-class _Abandoned(Exception):
-    """Raised in the volume's thread at its next step once the fitting thread stopped."""
-
-
-def _attempt(fit: Callable[[], tuple[FieldModel, FitReport]]) -> _Outcome:
-    """``fit()``, or the FitError it raised."""
-    try:
-        return fit()
-    except FitError as err:
-        return err
-
-
 #: The residual network's name in saved files.
 RESIDUAL_FILE = "residual_network"
 
@@ -250,7 +232,7 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
                          seconds=time.perf_counter() - start, final_loss=error,
                          best_val_loss=error, history=history, fitted=info)
 
-    def _fit_member(self, label: str, field: PhasorField, on_step: StepCallback,
+    def _fit_member(self, label: str, field: PhasorField, on_step: StepCallback = None,
                     workers: int | None = None) -> tuple[FieldModel, FitReport]:
         """Member ``label`` fitted to ``field`` (an ``rsd_prior`` one on ``workers``
         threads, if given)."""
@@ -272,12 +254,19 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         e.g. no non-negative albedo correlates with it) is left out with a warning; if
         every one is, the first error stands."""
         labels = self._labels()
-        if self.config.concurrent and VOLUME_LABEL in labels and len(labels) > 1:
-            outcomes = self._fit_beside_volume(field, trained, on_step)
-        else:
-            outcomes = {label: _attempt(partial(
-                self._fit_member, label, field if label == VOLUME_LABEL else trained, on_step))
+        fits = {label: partial(self._fit_member, label,
+                               field if label == VOLUME_LABEL else trained)
                 for label in labels}
+        outcomes: dict[str, tuple[FieldModel, FitReport] | FitError]
+        if self.config.concurrent and VOLUME_LABEL in labels and len(labels) > 1:
+            # the volume in a second thread, the priors here on the cores it leaves
+            workers = self.config.workers_beside_volume
+            priors = {label: partial(self._fit_member, label, trained, workers=workers)
+                      for label in labels if label != VOLUME_LABEL}
+            outcomes = fit_beside((VOLUME_LABEL, fits[VOLUME_LABEL]), priors, on_step,
+                                  name="nlosfw-neural-volume")
+        else:
+            outcomes = {label: attempt(fit, on_step) for label, fit in fits.items()}
         fitted: dict[str, FieldModel] = {}
         reports: dict[str, FitReport] = {}
         failures: list[FitError] = []
@@ -291,63 +280,6 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         if not fitted:
             raise failures[0]
         return fitted, reports
-
-    def _fit_beside_volume(self, field: PhasorField, trained: PhasorField,
-                           on_step: StepCallback) -> dict[str, _Outcome]:
-        """The members' fits (or their FitErrors), the volume's in a second thread while the
-        ``rsd_prior`` ones fit in this one on the cores it leaves. The volume's steps reach
-        ``on_step`` from this thread (queued, passed on between and after the priors'
-        fits); if this thread stops (an error, an interrupt), the volume's fit stops at its
-        next step."""
-        steps: queue.SimpleQueue[TrainingStep] = queue.SimpleQueue()
-        stop = threading.Event()
-
-        def volume_step(step: TrainingStep) -> None:
-            if stop.is_set():
-                raise _Abandoned
-            steps.put(step)
-
-        def pass_on(_: TrainingStep | None = None) -> None:
-            while True:
-                try:
-                    step = steps.get_nowait()
-                except queue.Empty:
-                    return
-                if on_step is not None:
-                    on_step(step)
-
-        ended: list[_Outcome | BaseException] = []      # the volume's outcome, once it ends
-        volume = threading.Thread(target=contextvars.copy_context().run, daemon=True,
-                                  name="nlosfw-neural-volume",
-                                  args=(self._volume_outcome, field, volume_step, ended))
-        volume.start()
-        try:
-            outcomes: dict[str, _Outcome] = {
-                label: _attempt(partial(self._fit_member, label, trained, pass_on,
-                                        self.config.workers_beside_volume))
-                for label in self._labels() if label != VOLUME_LABEL}
-            while volume.is_alive():
-                volume.join(timeout=0.2)
-                pass_on()
-            pass_on()
-        finally:
-            stop.set()
-            volume.join()
-        result = ended.pop()
-        if isinstance(result, BaseException) and not isinstance(result, FitError):
-            raise result
-        outcomes[VOLUME_LABEL] = result
-        return outcomes
-
-    def _volume_outcome(self, field: PhasorField, on_step: StepCallback,
-                        ended: list[_Outcome | BaseException]) -> None:
-        """The volume's fit, or what it raised, appended to ``ended`` (the volume's thread
-        of :meth:`_fit_beside_volume`)."""
-        try:
-            result: _Outcome | BaseException = self._fit_member(VOLUME_LABEL, field, on_step)
-        except BaseException as err:       # handed to the fitting thread, which raises it
-            result = err
-        ended.append(result)
 
     def _refitted(self, field: PhasorField, fitted: Mapping[str, FieldModel],
                   weights: Mapping[str, float], reports: dict[str, FitReport],

@@ -243,7 +243,7 @@ def test_an_error_in_the_fitting_thread_stops_the_volume(plain_scene, monkeypatc
     import threading
     import time
 
-    from nlosfw.model.physics.prior import RSDPriorFieldModel
+    from nlosfw.model.physics import RSDPriorFieldModel
 
     _, train, _ = plain_scene
     started = time.perf_counter()
