@@ -108,9 +108,16 @@ def scale_invariant_psnr(reference: np.ndarray, test: np.ndarray) -> float | Non
     ``reference``, both normalised to max 1: the error left once the overall brightness
     is matched, so that a few hot voxels that set one image's maximum do not move the
     score of every pixel. None when ``test`` is zero everywhere."""
+    return brightness_matched(reference, test)[0]
+
+
+def brightness_matched(reference: np.ndarray, test: np.ndarray
+                       ) -> tuple[float | None, float | None]:
+    """(:func:`scale_invariant_psnr`, the :func:`least_squares_gain` it applies) of ``test``
+    against ``reference``, both normalised to max 1 once."""
     a, b = normalise(reference), normalise(test)
     gain = least_squares_gain(a, b)
-    return None if gain is None else psnr(a, gain * b)
+    return (None if gain is None else psnr(a, gain * b)), gain
 
 
 def image_metrics(reference: np.ndarray, test: np.ndarray) -> dict[str, float | None]:
@@ -142,8 +149,8 @@ def reconstruction_scores(reference: Reconstruction, test: Reconstruction,
     front_ref, front_tst = ref.max(axis=0), tst.max(axis=0)
     front = image_metrics(front_ref, front_tst)
     volume = image_metrics(ref, tst)
-    return {**front, "scale_invariant_psnr": scale_invariant_psnr(front_ref, front_tst),
-            "front_view_gain": least_squares_gain(normalise(front_ref), normalise(front_tst)),
+    matched_psnr, gain = brightness_matched(front_ref, front_tst)
+    return {**front, "scale_invariant_psnr": matched_psnr, "front_view_gain": gain,
             "volume_psnr": volume["psnr"], "volume_ssim": volume["ssim"],
             "depth_rmse_m": None if truth_depth is None else depth_rmse(test, truth_depth)}
 
