@@ -124,6 +124,14 @@ class PlanShape:
     deepest: float | None = None
 
     @property
+    def training_spacing(self) -> float | None:
+        """The spacing (m) of the grid ``training``: ``step`` wall spacings, or the wall's
+        own where that grid is the whole wall (every point, or a random pattern's)."""
+        if self.spacing is None:
+            return None
+        return self.spacing if self.training == self.grid else self.spacing * self.step
+
+    @property
     def samples(self) -> float:
         """The field's values: frequencies × sensors × lasers."""
         return float(self.frequencies) * self.sensors * self.lasers

@@ -1,0 +1,46 @@
+"""The neural volume's memory estimate sizes the lattice the fit builds: on the wall the
+training points lie on, at that wall's own spacing (a random pattern's points lie on the
+whole wall's grid, a regular pattern's on every ``step``-th point)."""
+
+from __future__ import annotations
+
+import re
+
+import pytest
+
+from nlosfw.common.memory import PlanShape
+from nlosfw.model.hybrid.volume_memory import operator_bytes
+from nlosfw.model.physics.config import RSDPriorConfig
+
+#: A 64 x 64 confocal wall 2 cm apart (the shared captures' size), its band to 40 cycles/m.
+WALL = dict(bins=512, sensors=64 * 64, grid=(64, 64), spacing=0.02, confocal=True,
+            frequencies=151, f_min=10.0, f_max=40.0, training_frequencies=135,
+            deepest=1.0)
+
+
+def _voxels(shape: PlanShape) -> tuple[int, int]:
+    found = operator_bytes(RSDPriorConfig(), shape)
+    assert found is not None
+    match = re.search(r"lattice of (\d+) x (\d+) voxels", found[1])
+    assert match, found[1]
+    return int(match.group(1)), int(match.group(2))
+
+
+@pytest.mark.parametrize("step", [2, 4, 8])
+def test_a_random_pattern_is_sized_on_the_whole_wall_at_its_own_spacing(step):
+    """Random points of the 64 x 64 wall: the operator of the wall itself (as with every
+    point kept, whose points the fit's lattice is built on), not of a wall ``step`` times
+    wider (which counted 17 to 300 GB here instead of 4)."""
+    random = PlanShape(**WALL, training=(64, 64), step=step)
+    every = PlanShape(**WALL, training=(64, 64), step=1)
+    assert operator_bytes(RSDPriorConfig(), random) == operator_bytes(RSDPriorConfig(), every)
+    assert _voxels(random) == _voxels(every) == (257, 257)
+
+
+def test_a_regular_pattern_is_sized_on_every_step_th_point():
+    """A grid of every 4th point: 16 x 16 points 8 cm apart, the spacing the shape's
+    ``training_spacing`` gives."""
+    grid = PlanShape(**WALL, training=(16, 16), step=4)
+    assert grid.training_spacing == pytest.approx(0.08)
+    assert PlanShape(**WALL, training=(64, 64), step=4).training_spacing == 0.02
+    assert _voxels(grid) == (208, 208)
