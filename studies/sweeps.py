@@ -64,12 +64,24 @@ SCORES = ("heldout_excess_db", "heldout_nmse_db", "heldout_floor_db", "psnr", "s
 def study_rows_of(results: dict[str, Any]) -> list[StudyRow]:
     """The collected rows as ``nlosfw.report.StudyRow`` (for its tables and figure), a
     score the row lacks as a score no run has."""
+    return _as_study_rows(results["rows"])
+
+
+def paired_rows_of(results: dict[str, Any]) -> dict[tuple[str, str, float, str], StudyRow]:
+    """The added runs' own rows of the sources the committed results already had (see
+    :func:`add_runs`), by capture, pattern, sparsity and source."""
+    rows = [r for addition in results.get("additions", []) for r in addition["paired_rows"]]
+    return {(r.condition, r.pattern, float(r.undersampling), r.series): r
+            for r in _as_study_rows(rows)}
+
+
+def _as_study_rows(rows: Sequence[dict[str, Any]]) -> list[StudyRow]:
     return [StudyRow(condition=r["condition"], pattern=r["pattern"],
                      undersampling=r["undersampling"], train_samples=r["train_samples"],
                      series=r["series"], kind=r["kind"], runs=r["runs"], seeds=tuple(r["seeds"]),
                      scores={**{k: Stat.of([]) for k in SCORES},
                              **{k: Stat(**v) for k, v in r["scores"].items()}})
-            for r in results["rows"]]
+            for r in rows]
 
 
 def fmt(stat: Stat, digits: int, scale: float = 1.0) -> str:
@@ -80,3 +92,69 @@ def fmt(stat: Stat, digits: int, scale: float = 1.0) -> str:
     if stat.n > 1 and stat.std:
         text += f" ± {stat.std * scale:.{digits}f}"
     return text
+
+
+def add_runs(base: dict[str, Any], added: dict[str, Any]) -> dict[str, Any]:
+    """``base`` (a study's committed results) with the runs collected in ``added``: the rows
+    of series ``base`` lacks, and in ``base``'s own rows the scores they lack (a score its
+    runs predate, taken from the added runs of the same capture, sparsity and source). Every
+    number ``base`` has stays as it is; the sweeps, run counts, axes and fit times are both
+    together, and ``additions`` says what was added, where and when."""
+    rows = [dict(r) for r in base["rows"]]
+    index = {_row_key(r): i for i, r in enumerate(rows)}
+    for row in added["rows"]:
+        i = index.get(_row_key(row))
+        if i is None:
+            rows.append(row)
+            continue
+        scores = dict(rows[i]["scores"])
+        for name, stat in row["scores"].items():
+            if not scores.get(name, {}).get("n"):
+                scores[name] = stat
+        rows[i] = {**rows[i], "scores": scores}
+    cells = {cell: n for n, cell in enumerate(dict.fromkeys(_row_key(r)[:3] for r in rows))}
+    rows.sort(key=lambda r: cells[_row_key(r)[:3]])  # stable: a cell's added rows last
+    axes = {key: sorted(set(base["overrides"].get(key, [])) | set(added["overrides"].get(key, [])))
+            for key in sorted({*base["overrides"], *added["overrides"]})}
+    fits = dict(base["fit_seconds"])
+    for name, t in added["fit_seconds"].items():
+        old = fits.get(name)
+        fits[name] = t if old is None else {
+            "mean": round((old["mean"] * old["runs"] + t["mean"] * t["runs"])
+                          / (old["runs"] + t["runs"]), 2),
+            "max": max(old["max"], t["max"]), "runs": old["runs"] + t["runs"]}
+    series = sorted({r["series"] for r in added["rows"] if r["kind"] == "model"})
+    # The added runs' own rows of what base already had (interp, the ceiling): scores
+    # against the same runs, for comparisons a code change between the two would skew.
+    paired = [r for r in added["rows"] if _row_key(r) in index]
+    addition = {"series": series, "runs": added["runs"], "completed": added["completed"],
+                "sweeps": added["sweeps"], "ran_on": added["ran_on"],
+                "recorded": added["recorded"], "paired_rows": paired}
+    joined = {key: f"{base['recorded'][key]}; added ({', '.join(series)}): "
+                   f"{added['recorded'][key]}" for key in ("machine", "commit", "date")}
+    return {**base, "recorded": joined, "sweeps": [*base["sweeps"], *added["sweeps"]],
+            "runs": base["runs"] + added["runs"],
+            "completed": base["completed"] + added["completed"], "overrides": axes,
+            "fit_seconds": dict(sorted(fits.items())), "rows": rows,
+            "ran_on": f"{base['ran_on']}; added: {', '.join(series)} on {added['ran_on']}",
+            "additions": [*base.get("additions", []), addition]}
+
+
+def shared_score_differences(base: dict[str, Any], added: dict[str, Any]) -> dict[str, float]:
+    """The largest difference of each score's mean between the rows both have (the same
+    capture, sparsity and source measured twice, e.g. ``interp`` in every run)."""
+    mine = {_row_key(r): r for r in base["rows"]}
+    found: dict[str, float] = {}
+    for row in added["rows"]:
+        other = mine.get(_row_key(row))
+        if other is None:
+            continue
+        for name, stat in row["scores"].items():
+            was = other["scores"].get(name, {}).get("mean")
+            if stat.get("mean") is not None and was is not None:
+                found[name] = max(found.get(name, 0.0), abs(stat["mean"] - was))
+    return found
+
+
+def _row_key(row: dict[str, Any]) -> tuple[str, str, float, str]:
+    return (row["condition"], row["pattern"], float(row["undersampling"]), row["series"])

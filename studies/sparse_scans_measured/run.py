@@ -15,7 +15,8 @@ the smallest useful part (``model=rsd_prior split.spatial_step=4 sampling=grid
 split.count_splitting_seed=0``: interp and rsd_prior at 16x, one seed) and labels the
 results as reduced; overrides narrow or extend either. ``collect`` reads every run's
 metrics.json (``nlosfw.report``) into ``results.json`` (``--out JSON``: elsewhere, the page
-untouched) and prints the page's generated section; ``render`` rewrites that section and
+untouched; ``--add-to``: added to the committed results, whose numbers stay, e.g. a new model's
+runs) and prints the page's generated section; ``render`` rewrites that section and
 ``figure.png`` from ``results.json``. The scores are the runs' own
 (:mod:`nlosfw.evaluation`):
 
@@ -32,13 +33,20 @@ import shlex
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # studies/: the shared helpers
 import pages
-from sweeps import collect_study, fmt, study_rows_of
+from sweeps import (
+    add_runs,
+    collect_study,
+    fmt,
+    paired_rows_of,
+    shared_score_differences,
+    study_rows_of,
+)
 
 from nlosfw.common import markdown, override_value
 from nlosfw.report import StudyRow, markdown_table, study_figure
@@ -55,6 +63,11 @@ REDUCED = ("model=rsd_prior", "split.spatial_step=4", "sampling=grid",
 #: The study's targets: the best model against interp, averaged over count-splitting seeds.
 TARGETS = {"excess_db": 3.0, "psnr_db": 1.0, "ssim": 0.02, "network_over_rsd_db": 0.5}
 NETWORK_PLUGINS = ("siren_torch", "hashgrid_torch", "rsd_residual_torch", "neural_volume_torch")
+#: The study's default model (``conf/experiment/sparsity_real.yaml``) and the models it must
+#: match: the best of them by held-out excess, within ``TARGETS["default_behind_best_db"]``.
+DEFAULT_MODEL = "ensemble_torch"
+COMPARED = ("rsd_prior", "rsd_residual_torch", "neural_volume_torch")
+TARGETS["default_behind_best_db"] = 0.5
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -71,6 +84,10 @@ def _arguments(run_parser: argparse.ArgumentParser,
                             help="sweeps go to DIR/<stem> (default: multirun/sparsity-real-<date>)")
     run_parser.add_argument("overrides", nargs="*", help="Hydra overrides for every sweep")
     collect_parser.add_argument("dirs", type=Path, nargs="+")
+    collect_parser.add_argument("--add-to", action="store_true",
+                                help="add the runs to the committed results.json: rows of the "
+                                     "sources it lacks, and the scores its rows lack; every "
+                                     "number it has stays")
     for parser in (run_parser, collect_parser):
         parser.add_argument("--reduced", action="store_true",
                             help="the reduced study (run: its overrides; both: the label)")
@@ -106,6 +123,12 @@ def collect(args: argparse.Namespace) -> dict[str, Any]:
         "recorded": pages.recorded(args.ran_on or ""), **collect_study(args.dirs)}
     results["reduced"] = bool(args.reduced)
     results["ran_on"] = args.ran_on or f"{results['machine']['cpus']} CPU cores"
+    if getattr(args, "add_to", False):
+        base = pages.read_results(HERE)
+        for score, difference in sorted(shared_score_differences(base, results).items()):
+            print(f"{score}: the added runs' means differ from the committed by at most "
+                  f"{difference:.3g} where both have it")
+        results = add_runs(base, results)
     print(results_markdown(results))
     return results
 
@@ -132,7 +155,9 @@ def quality_table(rows: Sequence[StudyRow]) -> str:
     """Every capture, sparsity and source: held-out excess, error and floor (dB), PSNR and
     SSIM against half B's full scan."""
     header = ["capture", "sparsity", "source", "seeds", "held-out excess (dB)",
-              "held-out NMSE (dB)", "noise floor (dB)", "PSNR (dB)", "SSIM"]
+              "held-out NMSE (dB)", "noise floor (dB)", "PSNR (dB)", "SSIM",
+              "scale-invariant PSNR (dB)", "front-view gain", "volume PSNR (dB)",
+              "volume SSIM"]
     lines = []
     for r in rows:
         if r.kind == "reference":
@@ -141,7 +166,9 @@ def quality_table(rows: Sequence[StudyRow]) -> str:
         lines.append([r.condition, _sparsity(r), r.series,
                       " ".join(str(x) for x in r.seeds) or "-",
                       fmt(s["heldout_excess_db"], 1), fmt(s["heldout_nmse_db"], 1),
-                      fmt(s["heldout_floor_db"], 1), fmt(s["psnr"], 1), fmt(s["ssim"], 3)])
+                      fmt(s["heldout_floor_db"], 1), fmt(s["psnr"], 1), fmt(s["ssim"], 3),
+                      fmt(s["scale_invariant_psnr"], 1), fmt(s["front_view_gain"], 2),
+                      fmt(s["volume_psnr"], 1), fmt(s["volume_ssim"], 3)])
     return markdown_table(header, lines)
 
 
@@ -195,6 +222,67 @@ def verdict_table(found: Sequence[dict[str, Any]]) -> str:
     return markdown_table(header, lines)
 
 
+def default_verdicts(rows: Sequence[StudyRow],
+                     paired: Mapping[tuple[str, str, float, str], StudyRow] | None = None
+                     ) -> list[dict[str, Any]]:
+    """Per capture and sparsity where the default model ran: its held-out excess behind the
+    best of ``COMPARED`` (dB; ≤ 0 when it is the best), and its gains against ``interp``
+    (excess, PSNR, SSIM, scale-invariant PSNR, volume PSNR; positive means better), against
+    ``interp`` of the default's own runs where ``paired`` has it (runs added later)."""
+    out = []
+    for cell in dict.fromkeys((r.condition, r.pattern, r.undersampling) for r in rows):
+        by = {r.series: r for r in rows if (r.condition, r.pattern, r.undersampling) == cell}
+        default = by.get(DEFAULT_MODEL)
+        interp = (paired or {}).get((*cell[:2], float(cell[2]), "interp"), by.get("interp"))
+        if default is None or interp is None:
+            continue
+        others = {name: by[name].scores["heldout_excess_db"].mean for name in COMPARED
+                  if name in by and by[name].scores["heldout_excess_db"].mean is not None}
+        best = min(others, key=lambda name: others[name]) if others else None
+
+        def gain(score: str, lower: bool = False, row: StudyRow = default,
+                 base: StudyRow = interp) -> float | None:
+            a, b = row.scores[score].mean, base.scores[score].mean
+            return None if a is None or b is None else (b - a if lower else a - b)
+
+        mine = default.scores["heldout_excess_db"].mean
+        out.append({"capture": cell[0], "pattern": cell[1], "undersampling": cell[2],
+                     "best_compared": best,
+                     "behind_best_db": None if best is None or mine is None
+                     else mine - others[best],
+                     "excess_gain_db": gain("heldout_excess_db", lower=True),
+                     "psnr_gain_db": gain("psnr"), "ssim_gain": gain("ssim"),
+                     "si_psnr_gain_db": gain("scale_invariant_psnr"),
+                     "volume_psnr_gain_db": gain("volume_psnr")})
+    return out
+
+
+def _met(v: dict[str, Any]) -> str:
+    checks = [(v["behind_best_db"], TARGETS["default_behind_best_db"], True),
+              (v["excess_gain_db"], TARGETS["excess_db"], False),
+              (v["psnr_gain_db"], TARGETS["psnr_db"], False),
+              (v["ssim_gain"], TARGETS["ssim"], False)]
+    if any(value is None for value, _, _ in checks):
+        return "-"
+    return "yes" if all((value <= target) if at_most else (value >= target)
+                        for value, target, at_most in checks) else "no"
+
+
+def default_table(found: Sequence[dict[str, Any]]) -> str:
+    header = ["capture", "sparsity", "best of " + ", ".join(COMPARED),
+              f"behind it (dB of excess, ≤ {TARGETS['default_behind_best_db']:g})",
+              f"excess gain vs interp (dB, ≥ {TARGETS['excess_db']:g})",
+              f"PSNR gain (dB, ≥ {TARGETS['psnr_db']:g})", f"SSIM gain (≥ {TARGETS['ssim']:g})",
+              "scale-invariant PSNR gain (dB)", "volume PSNR gain (dB)", "all four targets"]
+    lines = [[v["capture"], f"{v['undersampling']:.3g}×"
+              f"{' random' if v['pattern'] == 'random' else ''}", v["best_compared"] or "-",
+              _signed(v["behind_best_db"], ".1f"), _signed(v["excess_gain_db"], ".1f"),
+              _signed(v["psnr_gain_db"], ".1f"), _signed(v["ssim_gain"], ".3f"),
+              _signed(v["si_psnr_gain_db"], ".1f"), _signed(v["volume_psnr_gain_db"], ".1f"),
+              _met(v)] for v in found]
+    return markdown_table(header, lines)
+
+
 def results_markdown(results: dict[str, Any]) -> str:
     """The page's generated section, from the collected study."""
     rows = study_rows_of(results)
@@ -217,8 +305,21 @@ def results_markdown(results: dict[str, Any]) -> str:
         "",
         verdict_table(verdicts(rows)),
         "",
+        *_default_section(rows, paired_rows_of(results)),
         f"![held-out excess, PSNR and SSIM against undersampling]({FIGURE})",
     ]) + "\n"
+
+
+def _default_section(rows: Sequence[StudyRow],
+                     paired: Mapping[tuple[str, str, float, str], StudyRow]) -> list[str]:
+    found = default_verdicts(rows, paired)
+    if not found:
+        return []
+    return [f"The default model, `{DEFAULT_MODEL}`, against the best of "
+            f"{', '.join(f'`{m}`' for m in COMPARED)} (held-out excess) and against `interp`, "
+            "with the scale-invariant and volume PSNR beside (not targets)"
+            + (", `interp` scored in the default's own runs" if paired else "") + ":", "",
+            default_table(found), ""]
 
 
 if __name__ == "__main__":

@@ -183,3 +183,95 @@ def test_every_run_a_study_would_start_is_a_valid_configuration():
     assert planned >= 1
     with pytest.raises(ConfigError, match="sigmax"):
         compose_run_config(["model=interp", "model.sigmax=1"], host)
+
+
+def _row(condition: str, under: float, series: str, kind: str, **scores: float) -> dict:
+    return {"condition": condition, "pattern": "grid", "undersampling": under,
+            "train_samples": 1, "series": series, "kind": kind, "runs": 3, "seeds": [0, 1, 2],
+            "scores": {k: {"n": 3, "mean": v, "std": 0.0, "min": v, "max": v}
+                       for k, v in scores.items()}}
+
+
+def _results(rows: list, runs: int, fits: dict, date: str) -> dict:
+    return {"rows": rows, "runs": runs, "completed": runs, "sweeps": [f"/runs/{date}"],
+            "overrides": {"model": sorted(fits)}, "ran_on": f"machine of {date}",
+            "recorded": {"machine": f"machine of {date}", "commit": "c" + date, "date": date},
+            "fit_seconds": {m: {"mean": t, "max": t, "runs": runs} for m, t in fits.items()}}
+
+
+def test_added_runs_keep_every_committed_number():
+    """``collect --add-to``: the committed rows keep their numbers and gain only the scores
+    they lacked; the new model's rows join their cells; the added runs' own interp is kept
+    apart for the default's comparison; run counts and fit times add up."""
+    sys.path.insert(0, str(STUDIES))
+    try:
+        import sweeps
+    finally:
+        sys.path.remove(str(STUDIES))
+    base = _results([_row("a.mat", 16, "interp", "baseline", psnr=19.0, volume_psnr=22.3),
+                     _row("a.mat", 16, "nv", "model", psnr=18.9),
+                     _row("a.mat", 64, "interp", "baseline", psnr=16.0)], 6, {"nv": 30.0},
+                    "d1")
+    added = _results([_row("a.mat", 16, "interp", "baseline", psnr=19.1, volume_psnr=22.1,
+                           scale_invariant_psnr=19.3),
+                      _row("a.mat", 16, "ens", "model", psnr=19.8),
+                      _row("a.mat", 4, "ens", "model", psnr=21.0)], 2, {"ens": 100.0, "nv": 60.0},
+                     "d2")
+    before = json.dumps(base, sort_keys=True)
+    merged = sweeps.add_runs(base, added)
+    assert json.dumps(base, sort_keys=True) == before               # nothing of base mutated
+    rows = [(r["undersampling"], r["series"]) for r in merged["rows"]]
+    assert rows == [(16, "interp"), (16, "nv"), (16, "ens"), (64, "interp"), (4, "ens")]
+    interp = merged["rows"][0]["scores"]
+    assert interp["psnr"]["mean"] == 19.0 and interp["volume_psnr"]["mean"] == 22.3
+    assert interp["scale_invariant_psnr"]["mean"] == 19.3
+    (addition,) = merged["additions"]
+    assert [r["series"] for r in addition["paired_rows"]] == ["interp"]
+    assert addition["paired_rows"][0]["scores"]["volume_psnr"]["mean"] == 22.1
+    assert merged["runs"] == 8 and merged["fit_seconds"]["nv"] == {"mean": 37.5, "max": 60.0,
+                                                                   "runs": 8}
+    assert merged["recorded"]["date"] == "d1; added (ens): d2"
+    assert sweeps.shared_score_differences(base, added) == pytest.approx(
+        {"psnr": 0.1, "volume_psnr": 0.2})
+
+
+def test_the_default_is_judged_against_the_best_model_and_its_own_runs_interp():
+    """The page's default-model table: its excess behind the best of rsd_prior, the residual
+    and the neural volume, and its gains against interp scored in its own runs (the paired
+    row), not against the committed interp, and a cell meets all four targets or not."""
+    study = _study_module("sparse_scans_measured")
+    sys.path.insert(0, str(STUDIES))
+    try:
+        import sweeps
+    finally:
+        sys.path.remove(str(STUDIES))
+    cell = [_row("a.mat", 16, "interp", "baseline", heldout_excess_db=-2.0, psnr=19.0,
+                 ssim=0.50, volume_psnr=22.3),
+            _row("a.mat", 16, "rsd_prior", "model", heldout_excess_db=-4.0),
+            _row("a.mat", 16, "neural_volume_torch", "model", heldout_excess_db=-12.0),
+            _row("a.mat", 16, study.DEFAULT_MODEL, "model", heldout_excess_db=-11.8,
+                 psnr=20.1, ssim=0.53, scale_invariant_psnr=20.5, volume_psnr=25.0)]
+    own = _row("a.mat", 16, "interp", "baseline", heldout_excess_db=-2.0, psnr=19.0,
+               ssim=0.50, scale_invariant_psnr=19.5, volume_psnr=22.0)
+    rows = sweeps.study_rows_of({"rows": cell})
+    paired = sweeps.paired_rows_of({"additions": [{"paired_rows": [own]}]})
+    (found,) = study.default_verdicts(rows, paired)
+    assert found["best_compared"] == "neural_volume_torch"
+    assert found["behind_best_db"] == pytest.approx(0.2)
+    assert found["excess_gain_db"] == pytest.approx(9.8)
+    assert found["psnr_gain_db"] == pytest.approx(1.1) and found["ssim_gain"] == pytest.approx(0.03)
+    assert found["si_psnr_gain_db"] == pytest.approx(1.0)
+    assert found["volume_psnr_gain_db"] == pytest.approx(3.0)          # against its own runs
+    assert study._met(found) == "yes"
+    assert study._met({**found, "psnr_gain_db": 0.9}) == "no"
+    assert study._met({**found, "behind_best_db": 0.6}) == "no"
+    assert study.default_verdicts(rows)[0]["volume_psnr_gain_db"] == pytest.approx(2.7)
+
+
+def test_the_studys_default_model_is_the_experiments():
+    """The page judges the model that ``experiment=sparsity_real`` runs by default."""
+    import yaml
+
+    config = yaml.safe_load((ROOT / "conf" / "experiment" / "sparsity_real.yaml").read_text())
+    (model,) = [d["override /model"] for d in config["defaults"] if "override /model" in d]
+    assert model == _study_module("sparse_scans_measured").DEFAULT_MODEL
