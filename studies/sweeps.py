@@ -99,7 +99,12 @@ def add_runs(base: dict[str, Any], added: dict[str, Any]) -> dict[str, Any]:
     of series ``base`` lacks, and in ``base``'s own rows the scores they lack (a score its
     runs predate, taken from the added runs of the same capture, sparsity and source). Every
     number ``base`` has stays as it is; the sweeps, run counts, axes and fit times are both
-    together, and ``additions`` says what was added, where and when."""
+    together, and ``additions`` says what was added, where and when. Runs of a sweep
+    ``base`` already has are refused (SystemExit naming the folder): they would count twice."""
+    again = sorted(set(base["sweeps"]) & set(added["sweeps"]))
+    if again:
+        raise SystemExit(f"{again[0]}: its runs are in the results already; collect only the "
+                         "sweeps they lack")
     rows = [dict(r) for r in base["rows"]]
     index = {_row_key(r): i for i, r in enumerate(rows)}
     for row in added["rows"]:

@@ -233,6 +233,8 @@ def test_added_runs_keep_every_committed_number():
     assert merged["recorded"]["date"] == "d1; added (ens): d2"
     assert sweeps.shared_score_differences(base, added) == pytest.approx(
         {"psnr": 0.1, "volume_psnr": 0.2})
+    with pytest.raises(SystemExit, match="/runs/d2: its runs are in the results already"):
+        sweeps.add_runs(merged, added)
 
 
 def test_the_default_is_judged_against_the_best_model_and_its_own_runs_interp():
