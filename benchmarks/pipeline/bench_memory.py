@@ -49,6 +49,8 @@ RSD_PRIOR = ("model=rsd_prior", "split.spatial_step=4", "imager=fft", "figures.e
 #: The neural hidden volume on the same grid with count splitting: its operator dominates.
 NEURAL_VOLUME = ("model=neural_volume_torch", "split.spatial_step=4",
                  "split.count_splitting=true", "imager=fft", "figures.enabled=false")
+#: The real-data study's default, which fits the neural volume beside three rsd_priors.
+ENSEMBLE = ("model=ensemble_torch", *NEURAL_VOLUME[1:])
 
 #: ``image FILE imager=NAME`` of the real capture: each imager's own arrays on top.
 IMAGE = ("model=none", "output.keep=[reconstructions]", "figures.enabled=false")
@@ -67,6 +69,12 @@ CONFIGS: dict[str, tuple[tuple[str, ...], bool]] = {
     "real-64x64x2048-rsd_prior-16x": ((f"capture.path={REAL}", *RSD_PRIOR), True),
     "real-64x64x2048-neural_volume_torch-16x": ((f"capture.path={REAL}", *NEURAL_VOLUME),
                                                 True),
+    "real-64x64x2048-neural_volume_torch-16x-random": (
+        (f"capture.path={REAL}", *NEURAL_VOLUME, "sampling=random"), True),
+    "real-64x64x2048-ensemble_torch-16x": (
+        (f"capture.path={REAL}", *ENSEMBLE), True),
+    "real-64x64x2048-ensemble_torch-16x-random": (
+        (f"capture.path={REAL}", *ENSEMBLE, "sampling=random"), True),
 }
 
 
