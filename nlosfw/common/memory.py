@@ -104,9 +104,9 @@ class PlanShape:
     grid is ``grid`` (ny, nx) with ``spacing`` (m) between points; the phasor field holds
     ``frequencies`` frequencies from ``f_min`` to ``f_max`` (cycles/m); the models train
     on ``training_frequencies`` of them and on the grid ``training`` (ny, nx) of its wall
-    points, ``step`` wall spacings apart (a random pattern's points lie on the whole grid);
-    the hidden scene lies within ``depth_range`` (m), at most ``deepest`` (m, half the time
-    span) away."""
+    points, ``step`` wall spacings apart (a random pattern's points lie scattered on the
+    whole grid: ``training`` is ``grid``, ``step`` 1); the hidden scene lies within
+    ``depth_range`` (m), at most ``deepest`` (m, half the time span) away."""
 
     bins: int
     sensors: int
@@ -122,14 +122,6 @@ class PlanShape:
     step: int = 1
     depth_range: tuple[float, float] | None = None
     deepest: float | None = None
-
-    @property
-    def training_spacing(self) -> float | None:
-        """The spacing (m) of the grid ``training``: ``step`` wall spacings, or the wall's
-        own where that grid is the whole wall (every point, or a random pattern's)."""
-        if self.spacing is None:
-            return None
-        return self.spacing if self.training == self.grid else self.spacing * self.step
 
     @property
     def samples(self) -> float:

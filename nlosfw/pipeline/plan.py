@@ -299,11 +299,10 @@ def _scene_plan(base: _Base, simulator: Planned[Simulator]) -> RunPlan:
     counts = base.counts(planes, f"scene.wall.resolution {[nx, ny]} × scene.time.bins {bins}",
                          noisy=scene.noise.model != NoiseModel.none)
     frequencies = base.transform.plugin.frequency_count(bins)
-    sized = PlanShape(bins=bins, sensors=nx * ny, grid=(ny, nx), spacing=spacing,
-                      confocal=str(scene.capture.type) == "confocal", frequencies=frequencies,
-                      training_frequencies=base.training.frequencies(frequencies),
-                      training=base.training.grid((ny, nx)), step=base.training.step,
-                      depth_range=DepthPlan.of(settings.reconstruction).given)
+    sized = base.training.sized(PlanShape(
+        bins=bins, sensors=nx * ny, grid=(ny, nx), spacing=spacing,
+        confocal=str(scene.capture.type) == "confocal", frequencies=frequencies,
+        depth_range=DepthPlan.of(settings.reconstruction).given))
     base.estimate(sized, counts)                   # before anything sized by it is allocated
     scene = validate_scene(scene).scene
     check_scene_counts(scene, settings.split.count_splitting,

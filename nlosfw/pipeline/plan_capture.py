@@ -153,14 +153,12 @@ def capture_shape(capture: Capture, transform: PhasorTransform, training: Traini
         except (ConfigError, ValueError):
             spacing = None
     end = capture.t_start + bins * capture.delta_t
-    return PlanShape(
+    return training.sized(PlanShape(
         bins=bins, sensors=sensors, lasers=lasers, grid=wall, spacing=spacing,
         confocal=capture.kind is CaptureKind.CONFOCAL, frequencies=count,
         f_min=None if frequencies is None else float(frequencies.min()),
         f_max=None if frequencies is None else float(frequencies.max()),
-        training_frequencies=training.frequencies(count),
-        training=None if wall is None else training.grid(wall), step=training.step,
-        depth_range=depth_range, deepest=end / 2 if end > 0 else None)
+        depth_range=depth_range, deepest=end / 2 if end > 0 else None))
 
 
 def header_shape(shape: tuple[int, int, int], transform: PhasorTransform,
@@ -169,32 +167,38 @@ def header_shape(shape: tuple[int, int, int], transform: PhasorTransform,
     (time bins, sensor points, laser points); the geometry is known once it is read."""
     bins, sensors, lasers = shape
     count = transform.frequency_count(bins)
-    return PlanShape(bins=bins, sensors=sensors, lasers=lasers, frequencies=count,
-                     training_frequencies=training.frequencies(count), step=training.step)
+    return training.sized(PlanShape(bins=bins, sensors=sensors, lasers=lasers,
+                                    frequencies=count))
 
 
 @dataclasses.dataclass(frozen=True)
 class TrainingSplit:
-    """What the models train on, as far as sizes go: every ``step``-th wall point of a grid
-    (``random``: scattered over the whole grid), the frequencies a ``spectral`` split of
-    ``fraction`` keeps."""
+    """What the models train on, as far as sizes go: the grid of every ``step``-th wall
+    point, the frequencies a ``spectral`` split of ``fraction`` keeps."""
 
     step: int
-    random: bool
     spectral: str
     fraction: float
 
     @classmethod
     def of(cls, split: SplitSettings) -> TrainingSplit:
-        return cls(step=split.spatial_step, random=split.pattern == SpatialPattern.random,
-                   spectral=str(split.spectral), fraction=split.spectral_fraction)
+        """The sizes of ``split``: a random pattern's points are scattered over the whole
+        wall grid, so its training grid is that grid, ``step`` 1 (``spatial_step`` only
+        sets how many points it keeps, which no estimate counts)."""
+        step = 1 if split.pattern == SpatialPattern.random else split.spatial_step
+        return cls(step=step, spectral=str(split.spectral), fraction=split.spectral_fraction)
 
     def grid(self, wall: tuple[int, int]) -> tuple[int, int]:
-        """The grid the training samples lie on (``random``: the whole wall's)."""
-        if self.random:
-            return wall
+        """The grid the training samples lie on: every ``step``-th point of ``wall``."""
         return (-(-wall[0] // self.step), -(-wall[1] // self.step))
 
     def frequencies(self, count: int) -> int:
         """The training frequencies of a field of ``count`` frequencies."""
         return max(1, count - heldout_frequency_count(count, self.spectral, self.fraction))
+
+    def sized(self, shape: PlanShape) -> PlanShape:
+        """``shape`` (a run's sizes) with what its models train on: the training
+        frequencies, the training grid (on a known wall grid) and its ``step``."""
+        return dataclasses.replace(
+            shape, training_frequencies=self.frequencies(shape.frequencies),
+            training=None if shape.grid is None else self.grid(shape.grid), step=self.step)

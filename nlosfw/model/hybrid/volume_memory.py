@@ -63,10 +63,11 @@ def operator_bytes(prior: RSDPriorConfig, shape: PlanShape) -> tuple[float, str]
     """(bytes, why) of the operator's stacked constants on the lattice of ``shape``'s
     training grid; None when the shape does not know the band, the grid or its spacing."""
     planes = volume_planes(prior, shape)
-    spacing = shape.training_spacing
-    if planes is None or shape.f_max is None or shape.training is None or spacing is None:
+    if planes is None or shape.f_max is None or shape.training is None \
+            or shape.spacing is None:
         return None
     multiplier = 2 if shape.confocal else 1
+    spacing = shape.spacing * shape.step
     wall = GridLayout(GridOrder(False, False, False), (0.0, 0.0), (spacing, spacing),
                       shape.training)
     lateral = prior.lateral_step or 1.0 / (shape.f_max * 2 * multiplier)
