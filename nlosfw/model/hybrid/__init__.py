@@ -24,7 +24,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.model.hybrid.residual import RSDResidualConfig, RSDResidualFieldModel
     from nlosfw.model.hybrid.stack import PlaneStack, aligned_empty, plane_stack, stack_bytes
     from nlosfw.model.hybrid.stacking import HeldOutPoints, held_out_points, simplex_weights
-    from nlosfw.model.hybrid.training import BestStep, history_entry
+    from nlosfw.model.hybrid.training import BestStep, albedo_total_variation, history_entry
     from nlosfw.model.hybrid.volume import (
         NeuralVolumeFieldModel,
         TrainedVolume,
@@ -34,6 +34,7 @@ if TYPE_CHECKING:  # at run time each name loads on first use (nlosfw.common.laz
     from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig, VolumePriorOptions
 
 __all__ = [
+    "albedo_total_variation",
     "aligned_empty",
     "BestStep",
     "EnsembleConfig",

@@ -1,10 +1,26 @@
-"""What the neural hidden volume's backend training loops keep: the history entries and
-the step with the lowest validation error (:meth:`NeuralVolumeFieldModel.train`)."""
+"""What the neural hidden volume's backend training loops keep: the history entries, the
+step with the lowest validation error and the albedo's total variation
+(:meth:`NeuralVolumeFieldModel.train`)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+import numpy as np
+
+
+def albedo_total_variation(albedo: np.ndarray) -> float:
+    """The total variation of an albedo (Z, Y, X) within each depth plane relative to its
+    sum: (sum |a[z, y, x+1] - a[z, y, x]| + sum |a[z, y+1, x] - a[z, y, x]|) / sum a (0 for
+    an albedo that is zero everywhere). The neural volume's ``albedo_tv`` term; each backend
+    writes it in its own arrays, holding the sum constant within a step."""
+    a = np.asarray(albedo, dtype=np.float64)
+    total = float(np.sum(a))
+    if not total > 0:
+        return 0.0
+    return float(np.sum(np.abs(np.diff(a, axis=2))) + np.sum(np.abs(np.diff(a, axis=1)))) \
+        / total
 
 
 def history_entry(step: int, loss: float, validation: float | None) -> dict[str, float]:

@@ -18,13 +18,16 @@ do, lit the weakly coupled lattice corners, where the uniform gain found the bri
 of the tests' sparse scene.) The network is trained by Adam on the kept
 wall samples (every training frequency, full batch) by least squares,
 
-    min  sum_f ||A_f a - P_f||^2 / sum_f ||P_f||^2,
+    min  sum_f ||A_f a - P_f||^2 / sum_f ||P_f||^2  +  albedo_tv TV(a) / sum(a),
 
 with the operator A written once per backend (torch, JAX: differentiable, native FFTs)
 from the numpy kernel spectra and laser legs of
 :class:`~nlosfw.model.physics.operator.SceneOperator` (:func:`plane_stack`). The network's
-smoothness is the prior: no L1 or TV term. The fitted albedo predicts the field anywhere
-``rsd_prior`` can (through :meth:`RSDPriorFieldModel.from_albedo`).
+smoothness is the prior, and with ``albedo_tv`` the albedo's total variation within each
+depth plane relative to its sum (:func:`~nlosfw.model.hybrid.albedo_total_variation`; the
+sum held constant within a step, so the term sharpens edges without dimming the volume).
+The fitted albedo predicts the field anywhere ``rsd_prior`` can (through
+:meth:`RSDPriorFieldModel.from_albedo`).
 
 A random scan trains like ``rsd_prior``'s: on the grid its points came from, the points not
 kept weighing nothing in the loss, the validation points drawn from the kept ones.

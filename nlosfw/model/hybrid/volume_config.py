@@ -95,6 +95,12 @@ class NeuralVolumeConfig(FieldModelConfig):
     albedo_start: float = 0.001
     """Albedo (times mean(n) / s, see the module docstring) where the network's output is
     0: the start is a faint, nearly uniform volume."""
+    albedo_tv: float = 0.0
+    """Weight of the albedo's total variation within each depth plane, relative to its sum
+    (:func:`~nlosfw.model.hybrid.albedo_total_variation`), added to the loss: flat,
+    sharp-edged targets then fit as plateaus, not as a smooth hill with one bright peak
+    (0: none, the network's smoothness is the only prior). The validation error that
+    chooses the kept step is the data's alone."""
     threads: int = 1
     """CPU threads of torch while training (0: torch's default; JAX ignores it)."""
     prior: VolumePriorOptions = dataclasses.field(default_factory=VolumePriorOptions)
@@ -120,6 +126,8 @@ class NeuralVolumeConfig(FieldModelConfig):
         require(self.patience >= 0, "patience", f"must be >= 0, got {self.patience}")
         require(0 < self.albedo_start < 1, "albedo_start",
                 f"must be in (0, 1), got {self.albedo_start}")
+        require(self.albedo_tv >= 0 and math.isfinite(self.albedo_tv), "albedo_tv",
+                f"must be >= 0 and finite, got {self.albedo_tv}")
         require_threads(self.threads, "threads", 0, "torch's default")
 
     def prior_config(self) -> RSDPriorConfig:

@@ -116,6 +116,14 @@ class JaxPlaneOperator:
         return self._jitted(jnp.asarray(albedo), self.spectra, self.laser)
 
 
+def total_variation(albedo: jax.Array) -> jax.Array:
+    """:func:`nlosfw.model.hybrid.albedo_total_variation` of ``albedo`` (Z, Y, X), its
+    sum held constant (no gradient flows through it)."""
+    total = jnp.maximum(jax.lax.stop_gradient(jnp.sum(albedo)), jnp.finfo(albedo.dtype).tiny)
+    return (jnp.sum(jnp.abs(jnp.diff(albedo, axis=2)))
+            + jnp.sum(jnp.abs(jnp.diff(albedo, axis=1)))) / total
+
+
 class NeuralVolumeJax(NeuralVolumeFieldModel):
     """A JAX (equinox) network's albedo propagated by RSD; on a GPU when JAX sees one."""
 
@@ -133,7 +141,8 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
 
     def train(self, problem: VolumeProblem,
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
-        """Adam on the relative squared error of the propagated albedo (full batch)."""
+        """Adam on the relative squared error of the propagated albedo (full batch), plus
+        ``albedo_tv`` times its :func:`total_variation`."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
         net = JaxBackend(NetworkBuild(problem.network.network_factory,
@@ -164,7 +173,10 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
             current = albedo(params, rest)
             squared = jnp.abs(op.forward(current, *constants) - data) ** 2
             error = jnp.sum(squared * val) / val_power
-            return jnp.sum(squared * train) / train_power, (error, current)
+            loss = jnp.sum(squared * train) / train_power
+            if cfg.albedo_tv > 0:
+                loss = loss + cfg.albedo_tv * total_variation(current)
+            return loss, (error, current)
 
         @jax.jit
         def step(params: Any, rest: Any, opt_state: Any, lr: jax.Array,
@@ -206,4 +218,4 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
                              steps=k + 1, best_validation=best.validation)
 
 
-__all__ = ["JaxPlaneOperator", "NeuralVolumeJax", "volume_albedo"]
+__all__ = ["JaxPlaneOperator", "NeuralVolumeJax", "total_variation", "volume_albedo"]

@@ -152,6 +152,14 @@ def volume_albedo(network: Callable[[torch.Tensor], torch.Tensor], coords: torch
     return gain * out.reshape(gain.shape)
 
 
+def total_variation(albedo: torch.Tensor) -> torch.Tensor:
+    """:func:`nlosfw.model.hybrid.albedo_total_variation` of ``albedo`` (Z, Y, X), its
+    sum held constant (no gradient flows through it)."""
+    total = torch.clamp_min(albedo.detach().sum(), torch.finfo(albedo.dtype).tiny)
+    return (torch.abs(torch.diff(albedo, dim=2)).sum()
+            + torch.abs(torch.diff(albedo, dim=1)).sum()) / total
+
+
 class NeuralVolumeTorch(NeuralVolumeFieldModel):
     """A torch network's albedo propagated by RSD; on a GPU when torch sees one."""
 
@@ -175,7 +183,8 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
 
     def train(self, problem: VolumeProblem,
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
-        """Adam on the relative squared error of the propagated albedo (full batch)."""
+        """Adam on the relative squared error of the propagated albedo (full batch), plus
+        ``albedo_tv`` times its :func:`total_variation`."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
         net = TorchBackend(NetworkBuild(problem.network.network_factory,
@@ -222,6 +231,8 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                 current = albedo()
                 squared = torch.abs(op(current) - data) ** 2
                 loss = torch.sum(squared * train) / train_power
+                if cfg.albedo_tv > 0:
+                    loss = loss + cfg.albedo_tv * total_variation(current)
                 error = validation_error(squared)
                 best.offer(k, error, current.detach())
                 loss.backward()
@@ -248,4 +259,4 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                              steps=k + 1, best_validation=best.validation)
 
 
-__all__ = ["NeuralVolumeTorch", "TorchPlaneOperator", "volume_albedo"]
+__all__ = ["NeuralVolumeTorch", "TorchPlaneOperator", "total_variation", "volume_albedo"]

@@ -14,13 +14,13 @@ pytest.importorskip("torch")
 
 import torch
 from nlosfw_torch.backend import TorchBackend
-from nlosfw_torch.neural_volume import TorchPlaneOperator, volume_albedo
+from nlosfw_torch.neural_volume import TorchPlaneOperator, total_variation, volume_albedo
 
 from nlosfw.capture import CaptureGeometry, CaptureKind
 from nlosfw.common import ConfigError, FitError
 from nlosfw.evaluation import SpatialSampling, split_field
 from nlosfw.image import grid_layout
-from nlosfw.model.hybrid import plane_stack, stack_bytes
+from nlosfw.model.hybrid import albedo_total_variation, plane_stack, stack_bytes
 from nlosfw.model.neural import FieldMode, FieldShape, NetworkBuild
 from nlosfw.model.physics import (
     OperatorOptions,
@@ -250,6 +250,7 @@ def test_bad_options_are_one_line_errors_naming_the_option(sparse_scene):
     with pytest.raises(ConfigError, match=r"model\.network.*no_such_network.*valid: .*siren"):
         model.fit(train)
     for option, value in (("steps", 0), ("network_hidden", []), ("albedo_start", 1.5),
+                          ("albedo_tv", -0.1), ("albedo_tv", float("inf")),
                           ("prior.depth.range", [0.5]), ("prior.likelihood", "poisson")):
         *groups, name = option.split(".")
         options: dict = {name: value}
@@ -460,3 +461,47 @@ def test_a_fitted_lobe_carries_into_the_network(backend):
     assert fitted["fitted"]["lobe_exponent"] == pytest.approx(8.0, abs=1.0)
     assert not fitted["lambertian"]
     assert errors["fitted"] < errors["lambertian"] - 10.0, errors
+
+
+def test_the_total_variation_by_hand_and_in_both_backends():
+    """One plane [[0, 1, 0], [0, 2, 0]] (sum 3): |1| + |-1| + |2| + |-2| along x and |1|
+    along y, 7 / 3. On a random albedo torch's and JAX's term equal numpy's (1e-6), and the
+    gradient is the numerator's over the constant sum: the term sharpens, never dims."""
+    plane = np.array([[[0.0, 1.0, 0.0], [0.0, 2.0, 0.0]]])
+    assert albedo_total_variation(plane) == pytest.approx(7.0 / 3.0, rel=1e-12)
+    assert albedo_total_variation(np.zeros((2, 3, 4))) == 0.0
+    albedo = np.random.default_rng(5).random((3, 6, 7))
+    a = torch.tensor(albedo, requires_grad=True)
+    value = total_variation(a)
+    assert float(value.detach()) == pytest.approx(albedo_total_variation(albedo), rel=1e-6)
+    value.backward()
+    numerator = torch.tensor(albedo, requires_grad=True)
+    (torch.abs(torch.diff(numerator, dim=2)).sum()
+     + torch.abs(torch.diff(numerator, dim=1)).sum()).backward()
+    np.testing.assert_allclose(a.grad.numpy(), numerator.grad.numpy() / albedo.sum(),
+                               rtol=1e-12)
+    if HAS_JAX:
+        import jax
+        from nlosfw_jax.neural_volume import total_variation as jax_total_variation
+
+        single = albedo.astype(np.float32)
+        assert float(jax_total_variation(single)) == pytest.approx(
+            albedo_total_variation(albedo), rel=1e-5)
+        np.testing.assert_allclose(np.asarray(jax.grad(jax_total_variation)(single)),
+                                   a.grad.numpy(), rtol=1e-4, atol=1e-7)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_tv_term_flattens_the_fitted_albedo(backend, sparse_scene):
+    """The same fit with ``albedo_tv`` 1 ends with an albedo of half the total variation or
+    less (measured: 0.577 without, 0.246 torch and 0.248 JAX with), and the brightest voxel
+    is still the scene's."""
+    _, train, _, lattice, brightest = sparse_scene
+    tv = {}
+    for weight in (0.0, 1.0):
+        model = load_plugins().registry.create("model", f"neural_volume_{backend}",
+                                               {**OPTIONS, "albedo_tv": weight})
+        model.fit(train)
+        tv[weight] = albedo_total_variation(model.albedo)
+        assert np.unravel_index(np.argmax(model.albedo), lattice.volume_shape) == brightest
+    assert tv[1.0] < 0.5 * tv[0.0], tv
