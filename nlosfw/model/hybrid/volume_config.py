@@ -99,8 +99,9 @@ class NeuralVolumeConfig(FieldModelConfig):
     """Weight of the albedo's total variation within each depth plane, relative to its sum
     (:func:`~nlosfw.model.hybrid.albedo_total_variation`), added to the loss: flat,
     sharp-edged targets then fit as plateaus, not as a smooth hill with one bright peak
-    (0: none, the network's smoothness is the only prior). The validation error that
-    chooses the kept step is the data's alone."""
+    (0: none, the network's smoothness is the only prior). The fit's loss and history
+    include the term; the validation error that chooses the kept step is the data's
+    alone."""
     threads: int = 1
     """CPU threads of torch while training (0: torch's default; JAX ignores it)."""
     prior: VolumePriorOptions = dataclasses.field(default_factory=VolumePriorOptions)
