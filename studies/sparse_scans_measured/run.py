@@ -150,7 +150,29 @@ def sweep_command(sweep: Path, capture: Path, overrides: Sequence[str]) -> list[
 
 # ---------------------------------------------------------------------- markdown
 def _sparsity(row: StudyRow) -> str:
-    return f"{row.undersampling:.3g}×{' random' if row.pattern == 'random' else ''}"
+    return _sparsity_label(row.undersampling, row.pattern)
+
+
+def _sparsity_label(undersampling: float, pattern: str) -> str:
+    """``16×`` (grid) or ``16× random``."""
+    return f"{undersampling:.3g}×{' random' if pattern == 'random' else ''}"
+
+
+def _cells(rows: Sequence[StudyRow]) -> list[tuple[tuple[str, str, float], dict[str, StudyRow]]]:
+    """Each capture, pattern and sparsity in the rows' order, with its rows by series."""
+    cells: dict[tuple[str, str, float], dict[str, StudyRow]] = {}
+    for r in rows:
+        cells.setdefault((r.condition, r.pattern, r.undersampling), {})[r.series] = r
+    return list(cells.items())
+
+
+def _gain(row: StudyRow, other: StudyRow | None, score: str,
+          lower: bool = False) -> float | None:
+    """How much better ``row``'s mean ``score`` is than ``other``'s (``lower``: lower is
+    better); None where either lacks it."""
+    a = row.scores[score].mean
+    b = None if other is None else other.scores[score].mean
+    return None if a is None or b is None else (b - a if lower else a - b)
 
 
 def quality_table(rows: Sequence[StudyRow]) -> str:
@@ -178,31 +200,22 @@ def verdicts(rows: Sequence[StudyRow]) -> list[dict[str, Any]]:
     """Per capture and sparsity: the best model (lowest mean excess) against interp, and the
     best network against rsd_prior (excess; positive gains mean better)."""
     out = []
-    for cell in dict.fromkeys((r.condition, r.pattern, r.undersampling) for r in rows):
-        mine = [r for r in rows if (r.condition, r.pattern, r.undersampling) == cell]
-        by = {r.series: r for r in mine}
+    for cell, by in _cells(rows):
         interp = by.get("interp")
-        models = [r for r in mine if r.kind == "model"
+        models = [r for r in by.values() if r.kind == "model"
                   and r.scores["heldout_excess_db"].mean is not None]
         if interp is None or not models:
             continue
         best = min(models, key=lambda r: r.scores["heldout_excess_db"].mean or 1e9)
-
-        def gain(row: StudyRow, other: StudyRow | None, score: str,
-                 lower: bool = False) -> float | None:
-            a = row.scores[score].mean
-            b = None if other is None else other.scores[score].mean
-            return None if a is None or b is None else (b - a if lower else a - b)
-
         nets = [r for r in models if r.series.split(" ")[0] in NETWORK_PLUGINS]
         net = min(nets, key=lambda r: r.scores["heldout_excess_db"].mean or 1e9) if nets else None
         out.append({"capture": cell[0], "pattern": cell[1], "undersampling": cell[2],
                      "model": best.series,
-                     "excess_gain_db": gain(best, interp, "heldout_excess_db", lower=True),
-                     "psnr_gain_db": gain(best, interp, "psnr"),
-                     "ssim_gain": gain(best, interp, "ssim"),
+                     "excess_gain_db": _gain(best, interp, "heldout_excess_db", lower=True),
+                     "psnr_gain_db": _gain(best, interp, "psnr"),
+                     "ssim_gain": _gain(best, interp, "ssim"),
                      "network": None if net is None else net.series,
-                     "network_over_rsd_db": None if net is None else gain(
+                     "network_over_rsd_db": None if net is None else _gain(
                          net, by.get("rsd_prior"), "heldout_excess_db", lower=True)})
     return out
 
@@ -216,8 +229,7 @@ def verdict_table(found: Sequence[dict[str, Any]]) -> str:
               f"target ≥ {TARGETS['excess_db']:g})", f"PSNR gain (dB, ≥ {TARGETS['psnr_db']:g})",
               f"SSIM gain (≥ {TARGETS['ssim']:g})", "best network",
               f"network vs rsd_prior (dB, ≥ {TARGETS['network_over_rsd_db']:g})"]
-    lines = [[v["capture"], f"{v['undersampling']:.3g}×"
-              f"{' random' if v['pattern'] == 'random' else ''}", v["model"],
+    lines = [[v["capture"], _sparsity_label(v["undersampling"], v["pattern"]), v["model"],
               _signed(v["excess_gain_db"], ".1f"), _signed(v["psnr_gain_db"], ".1f"),
               _signed(v["ssim_gain"], ".3f"), v["network"] or "-",
               _signed(v["network_over_rsd_db"], ".1f")] for v in found]
@@ -232,8 +244,7 @@ def default_verdicts(rows: Sequence[StudyRow],
     (excess, PSNR, SSIM, scale-invariant PSNR, volume PSNR; positive means better), against
     ``interp`` of the default's own runs where ``paired`` has it (runs added later)."""
     out = []
-    for cell in dict.fromkeys((r.condition, r.pattern, r.undersampling) for r in rows):
-        by = {r.series: r for r in rows if (r.condition, r.pattern, r.undersampling) == cell}
+    for cell, by in _cells(rows):
         default = by.get(DEFAULT_MODEL)
         interp = (paired or {}).get((*cell[:2], float(cell[2]), "interp"), by.get("interp"))
         if default is None or interp is None:
@@ -241,21 +252,16 @@ def default_verdicts(rows: Sequence[StudyRow],
         others = {name: by[name].scores["heldout_excess_db"].mean for name in COMPARED
                   if name in by and by[name].scores["heldout_excess_db"].mean is not None}
         best = min(others, key=lambda name: others[name]) if others else None
-
-        def gain(score: str, lower: bool = False, row: StudyRow = default,
-                 base: StudyRow = interp) -> float | None:
-            a, b = row.scores[score].mean, base.scores[score].mean
-            return None if a is None or b is None else (b - a if lower else a - b)
-
         mine = default.scores["heldout_excess_db"].mean
         out.append({"capture": cell[0], "pattern": cell[1], "undersampling": cell[2],
                      "best_compared": best,
                      "behind_best_db": None if best is None or mine is None
                      else mine - others[best],
-                     "excess_gain_db": gain("heldout_excess_db", lower=True),
-                     "psnr_gain_db": gain("psnr"), "ssim_gain": gain("ssim"),
-                     "si_psnr_gain_db": gain("scale_invariant_psnr"),
-                     "volume_psnr_gain_db": gain("volume_psnr")})
+                     "excess_gain_db": _gain(default, interp, "heldout_excess_db", lower=True),
+                     "psnr_gain_db": _gain(default, interp, "psnr"),
+                     "ssim_gain": _gain(default, interp, "ssim"),
+                     "si_psnr_gain_db": _gain(default, interp, "scale_invariant_psnr"),
+                     "volume_psnr_gain_db": _gain(default, interp, "volume_psnr")})
     return out
 
 
@@ -276,8 +282,8 @@ def default_table(found: Sequence[dict[str, Any]]) -> str:
               f"excess gain vs interp (dB, ≥ {TARGETS['excess_db']:g})",
               f"PSNR gain (dB, ≥ {TARGETS['psnr_db']:g})", f"SSIM gain (≥ {TARGETS['ssim']:g})",
               "scale-invariant PSNR gain (dB)", "volume PSNR gain (dB)", "all four targets"]
-    lines = [[v["capture"], f"{v['undersampling']:.3g}×"
-              f"{' random' if v['pattern'] == 'random' else ''}", v["best_compared"] or "-",
+    lines = [[v["capture"], _sparsity_label(v["undersampling"], v["pattern"]),
+              v["best_compared"] or "-",
               _signed(v["behind_best_db"], ".1f"), _signed(v["excess_gain_db"], ".1f"),
               _signed(v["psnr_gain_db"], ".1f"), _signed(v["ssim_gain"], ".3f"),
               _signed(v["si_psnr_gain_db"], ".1f"), _signed(v["volume_psnr_gain_db"], ".1f"),
