@@ -38,15 +38,23 @@ def attempt(fit: Fit[T], on_step: StepCallback) -> T | FitError:
 
 
 def fit_beside(long: tuple[str, Fit[T]], short: Mapping[str, Fit[T]],
-               on_step: StepCallback, name: str = "nlosfw-fit") -> dict[str, T | FitError]:
+               on_step: StepCallback, name: str = "nlosfw-fit",
+               on_alone: Callable[[], None] | None = None) -> dict[str, T | FitError]:
     """Each fit's outcome by label: ``long`` = (label, fit) in a thread named ``name``,
-    the ``short`` ones in order in this thread (their own steps are not reported)."""
+    the ``short`` ones in order in this thread (their own steps are not reported);
+    ``on_alone``, if given, is called in the long fit's thread at its first step after the
+    short ones end."""
     steps: queue.SimpleQueue[TrainingStep] = queue.SimpleQueue()
-    stop = threading.Event()
+    stop, short_ended = threading.Event(), threading.Event()
+    alone = on_alone                  # until it is called, in the long fit's thread
 
     def long_step(step: TrainingStep) -> None:
+        nonlocal alone
         if stop.is_set():
             raise _Abandoned
+        if alone is not None and short_ended.is_set():
+            call, alone = alone, None
+            call()
         steps.put(step)
 
     def pass_on(_: TrainingStep | None = None) -> None:
@@ -71,6 +79,7 @@ def fit_beside(long: tuple[str, Fit[T]], short: Mapping[str, Fit[T]],
     thread.start()
     try:
         outcomes = {label: attempt(fit, pass_on) for label, fit in short.items()}
+        short_ended.set()
         while thread.is_alive():
             thread.join(timeout=0.2)
             pass_on()

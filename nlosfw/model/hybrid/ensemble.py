@@ -46,6 +46,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from nlosfw.common.cores import available_cores
 from nlosfw.common.errors import ConfigError, DataError, FitError
 from nlosfw.common.memory import MemoryEstimate, MemoryPart, PlanShape
 from nlosfw.model.hybrid.beside import attempt, fit_beside
@@ -264,7 +265,7 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
             priors = {label: partial(self._fit_member, label, trained, workers=workers)
                       for label in labels if label != VOLUME_LABEL}
             outcomes = fit_beside((VOLUME_LABEL, fits[VOLUME_LABEL]), priors, on_step,
-                                  name="nlosfw-neural-volume")
+                                  name="nlosfw-neural-volume", on_alone=self._widen_volume())
         else:
             outcomes = {label: attempt(fit, on_step) for label, fit in fits.items()}
         fitted: dict[str, FieldModel] = {}
@@ -280,6 +281,15 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         if not fitted:
             raise failures[0]
         return fitted, reports
+
+    def _widen_volume(self) -> Callable[[], None] | None:
+        """What gives the volume, once the priors end, the cores they used (None: its
+        threads are torch's default, every core, already)."""
+        threads = self.config.volume.threads
+        if threads == 0:
+            return None
+        return partial(self.volume_class().use_threads,
+                       min(available_cores(), threads + self.config.workers_beside_volume))
 
     def _refitted(self, field: PhasorField, fitted: Mapping[str, FieldModel],
                   weights: Mapping[str, float], reports: dict[str, FitReport],

@@ -41,8 +41,9 @@ class EnsembleConfig(FieldModelConfig):
     concurrent: bool = True
     """Fit the neural volume in a second thread while the ``rsd_prior`` members fit, on the
     cores the volume leaves (:attr:`workers_beside_volume`); false: one after another.
-    Where those are ``prior.workers``'s, the result is the same bit for bit; else the
-    priors' sums run in another order and differ in rounding."""
+    Once the priors end, the volume trains on the cores they used too. Its sums then run
+    on more threads, and the priors' on other threads than ``prior.workers``'s, than one
+    after another: the results can differ in rounding."""
     add_residual: bool = True
     """Whether a residual network (``residual``'s options) is fitted to what the weighed
     members leave at the kept points, and added as far as the held-out points say it helps

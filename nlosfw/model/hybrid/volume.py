@@ -18,14 +18,15 @@ do, lit the weakly coupled lattice corners, where the uniform gain found the bri
 of the tests' sparse scene.) The network is trained by Adam on the kept
 wall samples (every training frequency, full batch) by least squares,
 
-    min  sum_f ||A_f a - P_f||^2 / sum_f ||P_f||^2  +  albedo_tv TV(a) / sum(a),
+    min  sum_f ||A_f a - P_f||^2 / sum_f ||P_f||^2  +  albedo_tv / N  TV(a) / sum(a),
 
-with the operator A written once per backend (torch, JAX: differentiable, native FFTs)
-from the numpy kernel spectra and laser legs of
+over the N kept wall points not held out, with the operator A written once per backend
+(torch, JAX: differentiable, native FFTs) from the numpy kernel spectra and laser legs of
 :class:`~nlosfw.model.physics.operator.SceneOperator` (:func:`plane_stack`). The network's
 smoothness is the prior, and with ``albedo_tv`` the albedo's total variation within each
 depth plane relative to its sum (:func:`~nlosfw.model.hybrid.albedo_total_variation`; the
-sum held constant within a step, so the term sharpens edges without dimming the volume).
+sum held constant within a step, so the term sharpens edges without dimming the volume),
+its weight rising from 0 over the first ``albedo_tv_warmup`` steps.
 The fitted albedo predicts the field anywhere ``rsd_prior`` can (through
 :meth:`RSDPriorFieldModel.from_albedo`).
 
@@ -96,10 +97,12 @@ class VolumeProblem:
     """What a backend trains on: the operator's constants, the normalised kept samples
     ``data`` (F, ny, nx) (canonical order), the network's inputs ``coords`` (V, 3) at the
     voxel centres (V = Z * Y * X, C order), ``gain`` = s / mean(n) (Z, Y, X) and ``shift`` = c
-    (the albedo is gain * softplus(out + shift)), the network to build, and which wall
+    (the albedo is gain * softplus(out + shift)), the network to build, which wall
     points (ny, nx) the loss uses (``train``, 1 or 0) and which choose the kept step
     (``validation``; None: no validation, or its points are all zero: the last step is
-    kept)."""
+    kept), and the weight of the albedo's total variation in the loss (``tv_weight``:
+    ``albedo_tv`` over the number of points the loss uses, reached after ``tv_warmup``
+    steps: :meth:`tv_weight_at`)."""
 
     stack: PlaneStack
     data: np.ndarray
@@ -111,6 +114,15 @@ class VolumeProblem:
     network_shape: FieldShape
     train: np.ndarray
     validation: np.ndarray | None
+    tv_weight: float = 0.0
+    tv_warmup: int = 0
+
+    def tv_weight_at(self, step: int) -> float:
+        """The total variation's weight at ``step`` (0-based): rising linearly to
+        ``tv_weight`` at step ``tv_warmup`` - 1."""
+        if self.tv_warmup <= 1:
+            return self.tv_weight
+        return self.tv_weight * min(1.0, (step + 1) / self.tv_warmup)
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,6 +182,12 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
         """Train the network on ``problem`` (the backend's)."""
         raise NotImplementedError(f"{type(self).__name__} names no backend")
+
+    @classmethod
+    def use_threads(cls, threads: int) -> None:
+        """From the calling thread's next step, train on ``threads`` CPU threads (called
+        from a step callback inside :meth:`train`); a backend without a thread setting
+        ignores it."""
 
     def stack_copies(self, confocal: bool) -> int:
         """How many copies of :func:`plane_stack`'s arrays host memory holds while
@@ -273,7 +291,9 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
             gain=np.full(norms.shape, peak / float(np.mean(norms)), dtype=np.float32),
             shift=float(np.log(np.expm1(cfg.albedo_start))),
             network=network, network_config=net_config, network_shape=shape,
-            train=train, validation=validation), lattice, scale, prior
+            train=train, validation=validation,
+            tv_weight=cfg.albedo_tv / max(1.0, float(np.sum(train))),
+            tv_warmup=cfg.albedo_tv_warmup), lattice, scale, prior
 
     @classmethod
     def check_config(cls, config: NeuralVolumeConfig) -> None:

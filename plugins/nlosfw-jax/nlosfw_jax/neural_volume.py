@@ -142,7 +142,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
     def train(self, problem: VolumeProblem,
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
         """Adam on the relative squared error of the propagated albedo (full batch), plus
-        ``albedo_tv`` times its :func:`total_variation`."""
+        ``problem.tv_weight_at`` the step times its :func:`total_variation`."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
         net = JaxBackend(NetworkBuild(problem.network.network_factory,
@@ -168,22 +168,22 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         # programs (70 planes x 135 frequencies on 2 cores: 1 step took 101 s, now 13 s)
         constants = (op.spectra, op.laser)
 
-        def loss_of(params: Any, rest: Any, constants: tuple[jax.Array, jax.Array | None]
-                    ) -> tuple[jax.Array, tuple[jax.Array, jax.Array]]:
+        def loss_of(params: Any, rest: Any, constants: tuple[jax.Array, jax.Array | None],
+                    tv: jax.Array) -> tuple[jax.Array, tuple[jax.Array, jax.Array]]:
             current = albedo(params, rest)
             squared = jnp.abs(op.forward(current, *constants) - data) ** 2
             error = jnp.sum(squared * val) / val_power
             loss = jnp.sum(squared * train) / train_power
-            if cfg.albedo_tv > 0:
-                loss = loss + cfg.albedo_tv * total_variation(current)
+            if problem.tv_weight > 0:
+                loss = loss + tv * total_variation(current)
             return loss, (error, current)
 
         @jax.jit
         def step(params: Any, rest: Any, opt_state: Any, lr: jax.Array,
-                 constants: tuple[jax.Array, jax.Array | None]
+                 constants: tuple[jax.Array, jax.Array | None], tv: jax.Array
                  ) -> tuple[Any, Any, jax.Array, jax.Array, jax.Array]:
             (loss, (error, current)), grads = jax.value_and_grad(loss_of, has_aux=True)(
-                params, rest, constants)
+                params, rest, constants, tv)
             updates, opt_state = _ADAM.update(grads, opt_state, params)
             params = jax.tree.map(lambda p, u: p - lr * u, params, updates)
             return params, opt_state, loss, error, current
@@ -197,7 +197,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         for k in range(cfg.steps):
             params, opt_state, loss, error, current = step(
                 params, rest, opt_state, jnp.asarray(self.learning_rate(k), jnp.float32),
-                constants)
+                constants, jnp.asarray(problem.tv_weight_at(k), jnp.float32))
             loss_value = float(loss)
             if not math.isfinite(loss_value):
                 raise FitError(f"{who}: training diverged at step {k + 1} (loss "
@@ -211,7 +211,8 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
                                      seconds=time.perf_counter() - start))
             if best.stop(k):
                 break
-        _, (error, current) = jax.jit(loss_of)(params, rest, constants)
+        _, (error, current) = jax.jit(loss_of)(params, rest, constants,
+                                               jnp.asarray(0.0, jnp.float32))
         best.offer(k + 1, float(error) if has_val else None, current)
         fitted = np.asarray(jax.device_get(best.albedo))
         return TrainedVolume(fitted, history, loss_value, net.parameters_per_network,

@@ -170,6 +170,12 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
         """The registered torch network ``name``'s field-model class."""
         return registered_network(name, "torch")
 
+    @classmethod
+    def use_threads(cls, threads: int) -> None:
+        """torch's CPU threads in the calling thread (its training restores its own at the
+        end)."""
+        torch.set_num_threads(threads)
+
     def stack_copies(self, confocal: bool) -> int:
         """Two on a confocal scan on the CPU (the operator's reordered spectra), else one
         (torch shares the numpy stack's memory on the CPU; a GPU holds its own)."""
@@ -184,7 +190,7 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
     def train(self, problem: VolumeProblem,
               on_step: Callable[[TrainingStep], None] | None = None) -> TrainedVolume:
         """Adam on the relative squared error of the propagated albedo (full batch), plus
-        ``albedo_tv`` times its :func:`total_variation`."""
+        ``problem.tv_weight_at`` the step times its :func:`total_variation`."""
         cfg, who = self.config, self.model_name()
         start = time.perf_counter()
         net = TorchBackend(NetworkBuild(problem.network.network_factory,
@@ -231,8 +237,8 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
                 current = albedo()
                 squared = torch.abs(op(current) - data) ** 2
                 loss = torch.sum(squared * train) / train_power
-                if cfg.albedo_tv > 0:
-                    loss = loss + cfg.albedo_tv * total_variation(current)
+                if problem.tv_weight > 0:
+                    loss = loss + problem.tv_weight_at(k) * total_variation(current)
                 error = validation_error(squared)
                 best.offer(k, error, current.detach())
                 loss.backward()

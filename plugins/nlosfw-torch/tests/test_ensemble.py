@@ -69,8 +69,9 @@ def plain_scene():
 def test_a_clear_winner_is_reproduced_exactly(plain_scene):
     """rsd_prior members told to look for the scene 1.5-2 m away cannot fit a scatterer at
     0.5 m; the neural volume can. Its weight is then exactly 1, and the ensemble predicts
-    exactly what neural_volume_torch fitted alone predicts (the same options and seed:
-    it holds out the ensemble's own validation points)."""
+    exactly what neural_volume_torch fitted alone with its options (the group ``volume``
+    over the ensemble's defaults) predicts (the same seed: it holds out the ensemble's own
+    validation points)."""
     full, train, _ = plain_scene
     far = {**PRIOR, "depth": {"range": [1.5, 2.0]}}
     model = _ensemble(prior=far, add_residual=False)
@@ -79,7 +80,8 @@ def test_a_clear_winner_is_reproduced_exactly(plain_scene):
                                     "rsd_prior_tv0.1": 0.0}, report.fitted
     assert report.fitted["validation_db_neural_volume"] < \
         report.fitted["validation_db_rsd_prior_tv0"] - 6.0, report.fitted
-    alone = _model("neural_volume_torch", **VOLUME)
+    alone = load_plugins().registry.create("model", "neural_volume_torch",
+                                           model.config.volume_config())
     alone.fit(train)
     assert np.array_equal(model.predict(_points(full), FREQUENCIES),
                           alone.predict(_points(full), FREQUENCIES))
@@ -269,3 +271,37 @@ def test_the_priors_beside_the_volume_take_the_cores_it_leaves():
     cores = available_cores()
     assert EnsembleConfig().workers_beside_volume == max(1, cores - 1)
     assert EnsembleConfig(prior=PriorOptions(workers=1)).workers_beside_volume == 1
+
+
+def test_the_volume_takes_the_priors_cores_once_they_end(plain_scene, monkeypatch):
+    """Once the rsd_prior members end (here at once: each fails and is left out), the
+    volume's next step runs on its own thread and the cores they used, at most every
+    core; torch's setting in this thread is untouched."""
+    import threading
+
+    import torch
+    from nlosfw_torch.neural_volume import NeuralVolumeTorch
+
+    from nlosfw.common import FitError, available_cores
+    from nlosfw.model.physics import RSDPriorFieldModel
+
+    _, train, _ = plain_scene
+    calls: list[tuple[int, str, int]] = []
+    use_threads = NeuralVolumeTorch.use_threads
+
+    def recorded(cls, threads):
+        use_threads(threads)
+        calls.append((threads, threading.current_thread().name, torch.get_num_threads()))
+
+    def failed(self, *args, **kwargs):
+        raise FitError("this member cannot fit")
+
+    monkeypatch.setattr(NeuralVolumeTorch, "use_threads", classmethod(recorded))
+    monkeypatch.setattr(RSDPriorFieldModel, "fit", failed)
+    before = torch.get_num_threads()
+    model = _ensemble(add_residual=False, volume={**VOLUME, "threads": 1})
+    model.fit(train)
+    assert model.member_weights["neural_volume"] == 1.0
+    wide = min(available_cores(), 1 + model.config.workers_beside_volume)
+    assert calls == [(wide, "nlosfw-neural-volume", wide)]
+    assert torch.get_num_threads() == before

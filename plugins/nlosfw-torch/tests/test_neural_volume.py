@@ -493,15 +493,48 @@ def test_the_total_variation_by_hand_and_in_both_backends():
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_the_tv_term_flattens_the_fitted_albedo(backend, sparse_scene):
-    """The same fit with ``albedo_tv`` 1 ends with an albedo of half the total variation or
-    less (measured: 0.577 without, 0.246 torch and 0.248 JAX with), and the brightest voxel
+    """The same fit with ``albedo_tv`` 58 (its weight 1 on the 58 points the loss sums:
+    64 kept, 6 held out) ends with an albedo of half the total variation or less
+    (measured: 0.577 without, 0.253 with, torch and JAX), and the brightest voxel
     is still the scene's."""
     _, train, _, lattice, brightest = sparse_scene
     tv = {}
-    for weight in (0.0, 1.0):
+    for weight in (0.0, 58.0):
         model = load_plugins().registry.create("model", f"neural_volume_{backend}",
                                                {**OPTIONS, "albedo_tv": weight})
         model.fit(train)
         tv[weight] = albedo_total_variation(model.albedo)
         assert np.unravel_index(np.argmax(model.albedo), lattice.volume_shape) == brightest
-    assert tv[1.0] < 0.5 * tv[0.0], tv
+    assert tv[58.0] < 0.5 * tv[0.0], tv
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_the_tv_weight_is_per_training_point_and_rises_over_the_warmup(backend, sparse_scene,
+                                                                       monkeypatch):
+    """The weight the backend trains with is ``albedo_tv`` over the points the loss sums
+    (the kept ones not held out for validation: fewer points, a stronger term), reached
+    linearly over ``albedo_tv_warmup`` steps."""
+    _, train, _, _, _ = sparse_scene
+    model = load_plugins().registry.create(
+        "model", f"neural_volume_{backend}",
+        {**OPTIONS, "albedo_tv": 29.0, "albedo_tv_warmup": 4, "steps": 2, "patience": 0})
+    seen = []
+    original = type(model).train
+
+    def spy(self, problem, on_step=None):
+        seen.append(problem)
+        return original(self, problem, on_step)
+
+    monkeypatch.setattr(type(model), "train", spy)
+    model.fit(train)
+    problem = seen[0]
+    points = int(np.sum(problem.train))
+    assert points == 64 - int(np.sum(problem.validation)) == 58
+    assert problem.tv_weight == pytest.approx(29.0 / 58)
+    assert [problem.tv_weight_at(k) for k in range(6)] == pytest.approx(
+        [0.125, 0.25, 0.375, 0.5, 0.5, 0.5])
+    unwarmed = load_plugins().registry.create(
+        "model", f"neural_volume_{backend}",
+        {**OPTIONS, "albedo_tv": 29.0, "albedo_tv_warmup": 0, "steps": 2, "patience": 0})
+    unwarmed.fit(train)
+    assert seen[1].tv_weight_at(0) == pytest.approx(0.5)
