@@ -11,9 +11,13 @@ from dataclasses import dataclass
 from nlosfw.common.config import require
 from nlosfw.common.cores import available_cores, worker_count
 from nlosfw.model.hybrid.residual import RSDResidualConfig
-from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig
+from nlosfw.model.hybrid.volume_config import NeuralVolumeConfig, VolumePriorOptions
 from nlosfw.model.interface import FieldModelConfig
 from nlosfw.model.physics.config import PriorOptions, RSDPriorConfig, prior_config
+
+#: The ensemble's ``volume.albedo_tv``: per kept wall point the loss sums (0.28 at 16x of a
+#: 64 x 64 scan, 1.1 at 64x).
+VOLUME_ALBEDO_TV = 64.0
 
 #: The label of the neural volume member (the ``rsd_prior`` ones: :func:`prior_label`).
 VOLUME_LABEL = "neural_volume"
@@ -51,8 +55,14 @@ class EnsembleConfig(FieldModelConfig):
     prior: PriorOptions = dataclasses.field(default_factory=PriorOptions)
     """``rsd_prior``'s options for its members (``model.prior.iterations``, ...), but for
     ``tv_weight`` (``tv_weights``)."""
-    volume: NeuralVolumeConfig = dataclasses.field(default_factory=NeuralVolumeConfig)
-    """``neural_volume``'s options (``model.volume.steps``, ...)."""
+    volume: NeuralVolumeConfig = dataclasses.field(default_factory=lambda: NeuralVolumeConfig(
+        albedo_tv=VOLUME_ALBEDO_TV, prior=VolumePriorOptions(fit_frequencies=64)))
+    """``neural_volume``'s options (``model.volume.steps``, ...), but for two defaults of the
+    ensemble's own: ``albedo_tv`` (the albedo's total variation, 0 alone) and
+    ``prior.fit_frequencies`` 64 (all alone). With the term the volume's image follows
+    its field (its front view without the term: a smooth hill with one bright peak); 64 of
+    the field's frequencies keep the ensemble's fit within its time (the measurements:
+    ``studies/sparse_scans_measured/README.md``)."""
     residual: RSDResidualConfig = dataclasses.field(default_factory=RSDResidualConfig)
     """The residual network's options as ``rsd_residual``'s (``model.residual.network``,
     ``model.residual.residual_weight``, ...); its physics is the members' blend, so its
