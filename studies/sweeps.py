@@ -145,6 +145,33 @@ def add_runs(base: dict[str, Any], added: dict[str, Any]) -> dict[str, Any]:
             "additions": [*base.get("additions", []), addition]}
 
 
+def withdraw_addition(results: dict[str, Any], series: Sequence[str]) -> dict[str, Any]:
+    """``results`` without the runs an earlier :func:`add_runs` added for exactly ``series``
+    (its rows, paired rows, sweeps, run counts, fit times and the text it joined to what
+    ran where and when), e.g. before the runs of a changed default model are added in
+    their place. No such addition: SystemExit naming the series."""
+    wanted = sorted(series)
+    found = [a for a in results.get("additions", []) if sorted(a["series"]) == wanted]
+    if len(found) != 1:
+        raise SystemExit(f"{', '.join(wanted)}: no one earlier addition of exactly these "
+                         "series to replace")
+    (old,) = found
+    suffix = f"; added ({', '.join(old['series'])}): "
+    recorded = {key: value.replace(suffix + old["recorded"][key], "")
+                for key, value in results["recorded"].items()}
+    gone = set(old["sweeps"])
+    return {**results, "recorded": recorded,
+            "sweeps": [s for s in results["sweeps"] if s not in gone],
+            "runs": results["runs"] - old["runs"],
+            "completed": results["completed"] - old["completed"],
+            "fit_seconds": {k: v for k, v in results["fit_seconds"].items()
+                            if k not in old["series"]},
+            "rows": [r for r in results["rows"] if r["series"] not in old["series"]],
+            "ran_on": results["ran_on"].replace(
+                f"; added: {', '.join(old['series'])} on {old['ran_on']}", ""),
+            "additions": [a for a in results["additions"] if a is not old]}
+
+
 def shared_score_differences(base: dict[str, Any], added: dict[str, Any]) -> dict[str, float]:
     """The largest difference of each score's mean between the rows both have (the same
     capture, sparsity and source measured twice, e.g. ``interp`` in every run)."""

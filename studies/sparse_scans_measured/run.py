@@ -3,6 +3,7 @@
     python studies/sparse_scans_measured/run.py run [--captures DIR] [--only NAME ...] [--dir DIR]
                                                     [--reduced] [OVERRIDE ...]
     python studies/sparse_scans_measured/run.py collect DIR [DIR ...] [--reduced] [--out JSON]
+                                                    [--add-to [--replace]]
     python studies/sparse_scans_measured/run.py render
 
 ``run`` runs ``python -m nlosfw -m experiment=sparsity_real capture.path=FILE`` for every
@@ -16,7 +17,8 @@ split.count_splitting_seed=0``: interp and rsd_prior at 16x, one seed) and label
 results as reduced; overrides narrow or extend either. ``collect`` reads every run's
 metrics.json (``nlosfw.report``) into ``results.json`` (``--out JSON``: elsewhere, the page
 untouched; ``--add-to``: added to the committed results, whose numbers stay, e.g. a new model's
-runs) and prints the page's generated section; ``render`` rewrites that section and
+runs; with ``--replace``: in place of an earlier addition of the same models, e.g. a changed
+default's runs) and prints the page's generated section; ``render`` rewrites that section and
 ``figure.png`` from ``results.json``. The scores are the runs' own
 (:mod:`nlosfw.evaluation`):
 
@@ -46,6 +48,7 @@ from sweeps import (
     paired_rows_of,
     shared_score_differences,
     study_rows_of,
+    withdraw_addition,
 )
 
 from nlosfw.common import markdown, override_value
@@ -90,6 +93,9 @@ def _arguments(run_parser: argparse.ArgumentParser,
                                 help="add the runs to the committed results.json: rows of the "
                                      "sources it lacks, and the scores its rows lack; every "
                                      "number it has stays")
+    collect_parser.add_argument("--replace", action="store_true",
+                                help="with --add-to: the runs replace an earlier addition "
+                                     "of the same models (e.g. a changed default model's)")
     for parser in (run_parser, collect_parser):
         parser.add_argument("--reduced", action="store_true",
                             help="the reduced study (run: its overrides; both: the label)")
@@ -125,8 +131,14 @@ def collect(args: argparse.Namespace) -> dict[str, Any]:
         "recorded": pages.recorded(args.ran_on or ""), **collect_study(args.dirs)}
     results["reduced"] = bool(args.reduced)
     results["ran_on"] = args.ran_on or f"{results['machine']['cpus']} CPU cores"
+    if getattr(args, "replace", False) and not getattr(args, "add_to", False):
+        raise SystemExit("collect: --replace replaces an addition to the committed results; "
+                         "give --add-to too")
     if getattr(args, "add_to", False):
         base = pages.read_results(HERE)
+        if getattr(args, "replace", False):
+            base = withdraw_addition(base, sorted({r["series"] for r in results["rows"]
+                                                   if r["kind"] == "model"}))
         for score, difference in sorted(shared_score_differences(base, results).items()):
             print(f"{score}: the added runs' means differ from the committed by at most "
                   f"{difference:.3g} where both have it")

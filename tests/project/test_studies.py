@@ -237,6 +237,39 @@ def test_added_runs_keep_every_committed_number():
         sweeps.add_runs(merged, added)
 
 
+def test_a_changed_models_runs_replace_its_earlier_addition():
+    """``collect --add-to --replace``: the earlier addition of the same model is withdrawn
+    (its rows, its runs' interp, sweeps, counts, fit times and text), then the new runs are
+    added: the committed numbers of the other sources stay, the model's are the new runs'."""
+    sys.path.insert(0, str(STUDIES))
+    try:
+        import sweeps
+    finally:
+        sys.path.remove(str(STUDIES))
+    base = _results([_row("a.mat", 16, "interp", "baseline", psnr=19.0),
+                     _row("a.mat", 16, "nv", "model", psnr=18.9)], 6, {"nv": 30.0}, "d1")
+    first = _results([_row("a.mat", 16, "interp", "baseline", psnr=19.1),
+                      _row("a.mat", 16, "ens", "model", psnr=19.8)], 3, {"ens": 100.0}, "d2")
+    second = _results([_row("a.mat", 16, "interp", "baseline", psnr=19.2),
+                       _row("a.mat", 16, "ens", "model", psnr=20.4)], 3, {"ens": 90.0}, "d3")
+    merged = sweeps.add_runs(base, first)
+    before = json.dumps(merged, sort_keys=True)
+    withdrawn = sweeps.withdraw_addition(merged, ["ens"])
+    assert json.dumps(merged, sort_keys=True) == before             # nothing mutated
+    for key in ("rows", "runs", "completed", "sweeps", "fit_seconds", "recorded", "ran_on"):
+        assert withdrawn[key] == base[key], key
+    assert withdrawn["additions"] == []
+    replaced = sweeps.add_runs(withdrawn, second)
+    assert [(r["series"], r["scores"]["psnr"]["mean"]) for r in replaced["rows"]] == [
+        ("interp", 19.0), ("nv", 18.9), ("ens", 20.4)]
+    (addition,) = replaced["additions"]
+    assert addition["paired_rows"][0]["scores"]["psnr"]["mean"] == 19.2
+    assert replaced["runs"] == 9 and replaced["fit_seconds"]["ens"]["mean"] == 90.0
+    assert replaced["recorded"]["date"] == "d1; added (ens): d3"
+    with pytest.raises(SystemExit, match="nv: no one earlier addition"):
+        sweeps.withdraw_addition(merged, ["nv"])
+
+
 def test_the_default_is_judged_against_the_best_model_and_its_own_runs_interp():
     """The page's default-model table: its excess behind the best of rsd_prior, the residual
     and the neural volume, and its gains against interp scored in its own runs (the paired
