@@ -26,7 +26,7 @@ over the N kept wall points not held out, with the operator A written once per b
 smoothness is the prior, and with ``albedo_tv`` the albedo's total variation within each
 depth plane relative to its sum (:func:`~nlosfw.model.hybrid.albedo_total_variation`; the
 sum held constant within a step, so the term sharpens edges without dimming the volume),
-its weight rising from 0 over the first ``albedo_tv_warmup`` steps.
+its weight rising by at most ``albedo_tv_rise`` a step.
 The fitted albedo predicts the field anywhere ``rsd_prior`` can (through
 :meth:`RSDPriorFieldModel.from_albedo`).
 
@@ -101,8 +101,8 @@ class VolumeProblem:
     points (ny, nx) the loss uses (``train``, 1 or 0) and which choose the kept step
     (``validation``; None: no validation, or its points are all zero: the last step is
     kept), and the weight of the albedo's total variation in the loss (``tv_weight``:
-    ``albedo_tv`` over the number of points the loss uses, reached after ``tv_warmup``
-    steps: :meth:`tv_weight_at`)."""
+    ``albedo_tv`` over the number of points the loss uses, rising by at most ``tv_rise``
+    a step: :meth:`tv_weight_at`)."""
 
     stack: PlaneStack
     data: np.ndarray
@@ -115,14 +115,14 @@ class VolumeProblem:
     train: np.ndarray
     validation: np.ndarray | None
     tv_weight: float = 0.0
-    tv_warmup: int = 0
+    tv_rise: float = 0.0
 
     def tv_weight_at(self, step: int) -> float:
-        """The total variation's weight at ``step`` (0-based): rising linearly to
-        ``tv_weight`` at step ``tv_warmup`` - 1."""
-        if self.tv_warmup <= 1:
+        """The total variation's weight at ``step`` (0-based): ``tv_rise`` times the steps
+        taken, up to ``tv_weight`` (``tv_rise`` 0: ``tv_weight`` from the start)."""
+        if self.tv_rise <= 0:
             return self.tv_weight
-        return self.tv_weight * min(1.0, (step + 1) / self.tv_warmup)
+        return min(self.tv_weight, self.tv_rise * (step + 1))
 
 
 @dataclass(frozen=True, eq=False)
@@ -293,7 +293,7 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
             network=network, network_config=net_config, network_shape=shape,
             train=train, validation=validation,
             tv_weight=cfg.albedo_tv / max(1.0, float(np.sum(train))),
-            tv_warmup=cfg.albedo_tv_warmup), lattice, scale, prior
+            tv_rise=cfg.albedo_tv_rise), lattice, scale, prior
 
     @classmethod
     def check_config(cls, config: NeuralVolumeConfig) -> None:

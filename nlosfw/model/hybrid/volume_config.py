@@ -104,10 +104,11 @@ class NeuralVolumeConfig(FieldModelConfig):
     fewer kept points, a term 4 times stronger against their relative error. The fit's
     loss and history include the term; the validation error that chooses the kept step is
     the data's alone."""
-    albedo_tv_warmup: int = 100
-    """Steps over which ``albedo_tv``'s weight rises linearly from 0 (0 or 1: at full weight
-    from the first step). The network finds the scene first: from the faint, nearly uniform
-    start, a compact bright scene is the albedo of the highest relative total variation, and
+    albedo_tv_rise: float = 0.05
+    """The most the term's weight (``albedo_tv`` over the points) rises a step, from 0 (0:
+    at full weight from the first step). A weak term acts almost at once; a strong one (a
+    sparse scan's) grows while the network finds the scene: from the faint, nearly uniform
+    start a compact bright scene is the albedo of the highest relative total variation, and
     a strong term at once can hold the volume flat."""
     threads: int = 1
     """CPU threads of torch while training (0: torch's default; JAX ignores it)."""
@@ -136,8 +137,8 @@ class NeuralVolumeConfig(FieldModelConfig):
                 f"must be in (0, 1), got {self.albedo_start}")
         require(self.albedo_tv >= 0 and math.isfinite(self.albedo_tv), "albedo_tv",
                 f"must be >= 0 and finite, got {self.albedo_tv}")
-        require(self.albedo_tv_warmup >= 0, "albedo_tv_warmup",
-                f"must be >= 0, got {self.albedo_tv_warmup}")
+        require(self.albedo_tv_rise >= 0 and math.isfinite(self.albedo_tv_rise),
+                "albedo_tv_rise", f"must be >= 0 and finite, got {self.albedo_tv_rise}")
         require_threads(self.threads, "threads", 0, "torch's default")
 
     def prior_config(self) -> RSDPriorConfig:
