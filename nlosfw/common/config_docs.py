@@ -60,9 +60,15 @@ def option_docs(cls: type, groups: bool = False) -> tuple[OptionDoc, ...]:
     """The options of config dataclass ``cls`` in field order, with type, default, unit, doc.
 
     With ``groups`` an option that is a group of options (a nested config dataclass) is
-    given as its options, named ``group.option`` (as the command line writes them)."""
+    given as its options, named ``group.option`` (as the command line writes them), their
+    defaults the group's default's (a config may give a group defaults of its own)."""
     if not (dataclasses.is_dataclass(cls) and isinstance(cls, type)):
         raise TypeError(f"expected a dataclass type, got {cls!r}")
+    return _option_docs(cls, groups, None)
+
+
+def _option_docs(cls: type, groups: bool, defaults: Any) -> tuple[OptionDoc, ...]:
+    """:func:`option_docs`, the defaults read from ``defaults`` (an instance) if given."""
     hints = get_type_hints(cls)
     docs = attribute_docstrings(cls)
     out: list[OptionDoc] = []
@@ -70,13 +76,15 @@ def option_docs(cls: type, groups: bool = False) -> tuple[OptionDoc, ...]:
         if not f.init:
             continue
         tp = hints.get(f.name, Any)
+        default = _default(f) if defaults is None else getattr(defaults, f.name)
         if groups and isinstance(tp, type) and dataclasses.is_dataclass(tp):
+            given = default if isinstance(default, tp) else None    # not "???" or None
             out += [dataclasses.replace(o, name=f"{f.name}.{o.name}")
-                    for o in option_docs(tp, groups)]
+                    for o in _option_docs(tp, groups, given)]
             continue
         unit, doc = split_unit(docs.get(f.name, ""))
         out.append(OptionDoc(name=f.name, type=type_text(tp),
-                             default=_plain(_default(f)), unit=unit, doc=doc))
+                             default=_plain(default), unit=unit, doc=doc))
     return tuple(out)
 
 

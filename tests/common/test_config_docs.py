@@ -103,6 +103,24 @@ def test_a_group_of_options_is_given_as_its_options_on_request():
     assert flat["depth.step"] == OptionDoc("depth.step", "float", 0.1, "m", "Plane spacing.")
 
 
+@dataclass(frozen=True)
+class OwnDefaults:
+    depth: Inner = field(default_factory=lambda: Inner(step=0.25))
+    """The planes, coarser here."""
+
+
+def test_a_groups_options_show_the_defaults_its_config_gives_it():
+    """A config that gives a group defaults of its own (the ensemble's volume) lists them,
+    not the group class's."""
+    assert {o.name: o.default for o in option_docs(OwnDefaults, groups=True)} == \
+        {"depth.step": 0.25}
+    from nlosfw.model.hybrid import EnsembleConfig
+    found = {o.name: o.default for o in option_docs(EnsembleConfig, groups=True)}
+    ours = EnsembleConfig().volume
+    assert found["volume.albedo_tv"] == ours.albedo_tv > 0
+    assert found["volume.prior.fit_frequencies"] == ours.prior.fit_frequencies == 64
+
+
 def test_split_unit_and_type_text_edge_cases():
     assert split_unit("  [1/m]  Explicit\n   frequencies. ") == ("1/m", "Explicit frequencies.")
     assert split_unit("Inputs are scaled into [-margin, margin].") == (
