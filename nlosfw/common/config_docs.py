@@ -67,7 +67,8 @@ def option_docs(cls: type, groups: bool = False) -> tuple[OptionDoc, ...]:
     return _option_docs(cls, groups, None)
 
 
-def _option_docs(cls: type, groups: bool, defaults: Any) -> tuple[OptionDoc, ...]:
+def _option_docs(cls: type, groups: bool, defaults: object | None
+                 ) -> tuple[OptionDoc, ...]:
     """:func:`option_docs`, the defaults read from ``defaults`` (an instance) if given."""
     hints = get_type_hints(cls)
     docs = attribute_docstrings(cls)

@@ -262,10 +262,14 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         if self.config.concurrent and VOLUME_LABEL in labels and len(labels) > 1:
             # the volume in a second thread, the priors here on the cores it leaves
             workers = self.config.workers_beside_volume
+            # once the priors end, the volume takes their cores (0: every core already)
+            own = self.config.volume.threads
+            widen = None if own == 0 else partial(self.volume_class().use_threads,
+                                                  min(available_cores(), own + workers))
             priors = {label: partial(self._fit_member, label, trained, workers=workers)
                       for label in labels if label != VOLUME_LABEL}
             outcomes = fit_beside((VOLUME_LABEL, fits[VOLUME_LABEL]), priors, on_step,
-                                  name="nlosfw-neural-volume", on_alone=self._widen_volume())
+                                  name="nlosfw-neural-volume", on_alone=widen)
         else:
             outcomes = {label: attempt(fit, on_step) for label, fit in fits.items()}
         fitted: dict[str, FieldModel] = {}
@@ -281,15 +285,6 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
         if not fitted:
             raise failures[0]
         return fitted, reports
-
-    def _widen_volume(self) -> Callable[[], None] | None:
-        """What gives the volume, once the priors end, the cores they used (None: its
-        threads are torch's default, every core, already)."""
-        threads = self.config.volume.threads
-        if threads == 0:
-            return None
-        return partial(self.volume_class().use_threads,
-                       min(available_cores(), threads + self.config.workers_beside_volume))
 
     def _refitted(self, field: PhasorField, fitted: Mapping[str, FieldModel],
                   weights: Mapping[str, float], reports: dict[str, FitReport],
