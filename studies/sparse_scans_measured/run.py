@@ -126,14 +126,14 @@ def run(args: argparse.Namespace) -> None:
 
 def collect(args: argparse.Namespace) -> dict[str, Any]:
     """The study's results from the sweeps' runs; prints the page's generated section."""
+    if getattr(args, "replace", False) and not getattr(args, "add_to", False):
+        raise SystemExit("collect: --replace replaces an addition to the committed results; "
+                         "give --add-to too")
     results: dict[str, Any] = {
         "question": QUESTION, "source": "the runs' metrics.json, read by `run.py collect`",
         "recorded": pages.recorded(args.ran_on or ""), **collect_study(args.dirs)}
     results["reduced"] = bool(args.reduced)
     results["ran_on"] = args.ran_on or f"{results['machine']['cpus']} CPU cores"
-    if getattr(args, "replace", False) and not getattr(args, "add_to", False):
-        raise SystemExit("collect: --replace replaces an addition to the committed results; "
-                         "give --add-to too")
     if getattr(args, "add_to", False):
         base = pages.read_results(HERE)
         if getattr(args, "replace", False):
