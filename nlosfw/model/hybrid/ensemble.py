@@ -26,8 +26,9 @@ alone). The error at V is the members' error against the noise-free field plus t
 noise for each (V's noise is independent of what they were fitted on), so the weights
 follow the error at unseen points; the volume's is a little optimistic, since its early
 stopping chose its step there. The fit reports each member's weight (``weight_<member>``),
-its error at V (``validation_db_<member>``, dB of the power there), the blend's, and the
-residual's scale (``residual_scale``).
+its error at V (``validation_db_<member>``, dB of the power there) and the steps of its
+first fit (``steps_<member>``: the volume's tell where its fit time went), the blend's
+error, and the residual's scale (``residual_scale``).
 
 Cost: the neural volume's fit, one ``rsd_prior`` fit per TV weight and a small network.
 """
@@ -209,6 +210,7 @@ class EnsembleFieldModel(FieldModel[EnsembleConfig]):
                                   "validation_db_blend": _db(blend_error)}
         for label, row in zip(labels, at_v, strict=True):
             info[f"weight_{label}"] = weights.get(label, 0.0)
+            info[f"steps_{label}"] = float(reports[label].steps)
             info[f"validation_db_{label}"] = _db(
                 float(np.sum(np.abs(row - measured) ** 2)) / power)
         scale, error = 0.0, blend_error

@@ -84,7 +84,8 @@ def test_a_clear_winner_is_reproduced_exactly(plain_scene):
     alone = load_plugins().registry.create("model", "neural_volume_torch",
                                            model.config.volume_config())
     assert alone.config.prior.fit_frequencies == 64
-    alone.fit(train)
+    alone_report = alone.fit(train)
+    assert report.fitted["steps_neural_volume"] == alone_report.steps, report.fitted
     assert np.array_equal(model.predict(_points(full), FREQUENCIES),
                           alone.predict(_points(full), FREQUENCIES))
 
