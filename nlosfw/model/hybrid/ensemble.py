@@ -26,9 +26,8 @@ alone). The error at V is the members' error against the noise-free field plus t
 noise for each (V's noise is independent of what they were fitted on), so the weights
 follow the error at unseen points; the volume's is a little optimistic, since its early
 stopping chose its step there. The fit reports each member's weight (``weight_<member>``),
-its error at V (``validation_db_<member>``, dB of the power there) and the steps of its
-first fit (``steps_<member>``: the volume's tell where its fit time went), the blend's
-error, and the residual's scale (``residual_scale``).
+error at V (``validation_db_<member>``, dB of the power there) and steps (``steps_<member>``,
+its first fit's), the blend's error, and the residual's scale (``residual_scale``).
 
 Cost: the neural volume's fit, one ``rsd_prior`` fit per TV weight and a small network.
 """
