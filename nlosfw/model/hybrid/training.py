@@ -5,7 +5,9 @@ step with the lowest validation error and the albedo's total variation
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -35,18 +37,27 @@ def history_entry(step: int, loss: float, validation: float | None) -> dict[str,
 @dataclass
 class BestStep:
     """The step with the lowest validation error so far (no validation: the latest) and its
-    albedo (a backend array), for :meth:`NeuralVolumeFieldModel.train`'s loops."""
+    albedo (a backend array), for :meth:`NeuralVolumeFieldModel.train`'s loops; with
+    ``window`` > 1, the mean of the albedos of the last ``window`` steps up to it."""
 
     patience: int
+    window: int = 1
     step: int = 0
     error: float = float("inf")
     albedo: object = None
+    recent: deque[Any] = field(default_factory=deque)
 
     def offer(self, step: int, error: float | None, albedo: object) -> None:
-        """Keep ``albedo`` (the state before step ``step``'s update) if it is the best."""
+        """Keep ``albedo`` (the state before step ``step``'s update), or the mean of it and the
+        ``window`` - 1 offered before it, if it is the best."""
+        self.recent.append(albedo)
+        if len(self.recent) > self.window:
+            self.recent.popleft()
         if error is None or error < self.error:
+            first, *rest = self.recent
+            kept = sum(rest, first) / len(self.recent) if rest else albedo
             self.step, self.error, self.albedo = step, math.inf if error is None else error, \
-                albedo
+                kept
 
     @property
     def validation(self) -> float | None:

@@ -207,7 +207,8 @@ class NeuralVolumeFieldModel(FieldModel[NeuralVolumeConfig]):
         the network's training (:mod:`nlosfw.model.hybrid.volume_memory`)."""
         network = cls.network_config(cls.network_class(config.network), config)
         return volume_memory(config.prior_config(), network, cls.backend,
-                             cls.held_stacks(config, shape.confocal), shape)
+                             cls.held_stacks(config, shape.confocal), shape,
+                             averaged=config.average_steps)
 
     def learning_rate(self, step: int) -> float:
         """Adam's learning rate at ``step`` (0-based): cosine from ``lr`` to ``lr * lr_final``."""

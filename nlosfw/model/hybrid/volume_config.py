@@ -88,6 +88,10 @@ class NeuralVolumeConfig(FieldModelConfig):
     patience: int = 50
     """Steps without a lower validation error before training stops (0: run every step;
     the best step's albedo is kept in every case)."""
+    average_steps: int = 1
+    """The kept albedo is the mean of the last ``average_steps`` steps' albedos up to the one
+    with the lowest validation error (1: that step's alone), held while training as that
+    many more albedos."""
     lr: float = 3e-3
     """Peak learning rate (cosine decay to ``lr * lr_final``)."""
     lr_final: float = 0.05
@@ -133,6 +137,8 @@ class NeuralVolumeConfig(FieldModelConfig):
         require(0 <= self.validation_fraction < 0.5, "validation_fraction",
                 f"must be in [0, 0.5), got {self.validation_fraction}")
         require(self.patience >= 0, "patience", f"must be >= 0, got {self.patience}")
+        require(self.average_steps >= 1, "average_steps",
+                f"must be >= 1 (1: the best step's albedo alone), got {self.average_steps}")
         require(0 < self.albedo_start < 1, "albedo_start",
                 f"must be in (0, 1), got {self.albedo_start}")
         require(self.albedo_tv >= 0 and math.isfinite(self.albedo_tv), "albedo_tv",

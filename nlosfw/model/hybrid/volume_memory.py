@@ -32,6 +32,7 @@ from nlosfw.model.neural.memory import network_memory
 from nlosfw.model.physics.config import RSDPriorConfig
 from nlosfw.model.physics.frequencies import enough_frequencies, fit_frequency_indices
 from nlosfw.model.physics.lattice import voxel_lattice
+from nlosfw.model.physics.operator import VoxelLattice
 
 #: Voxels the network evaluates at once on the CPU (the backends' ``CPU_CHUNK``).
 CPU_CHUNK = 4096
@@ -59,19 +60,27 @@ def volume_planes(prior: RSDPriorConfig, shape: PlanShape) -> int | None:
     return max(1, math.ceil((far + reach - first) / step) + 1)
 
 
-def operator_bytes(prior: RSDPriorConfig, shape: PlanShape) -> tuple[float, str] | None:
-    """(bytes, why) of the operator's stacked constants on the lattice of ``shape``'s
-    training grid; None when the shape does not know the band, the grid or its spacing."""
-    planes = volume_planes(prior, shape)
-    if planes is None or shape.f_max is None or shape.training is None \
-            or shape.spacing is None:
+def _lattice(prior: RSDPriorConfig, shape: PlanShape) -> tuple[GridLayout, VoxelLattice] | None:
+    """The training wall's grid and one plane of the voxel lattice on it; None when the
+    shape does not know the band, the grid or its spacing."""
+    if shape.f_max is None or shape.training is None or shape.spacing is None:
         return None
     multiplier = 2 if shape.confocal else 1
     spacing = shape.spacing * shape.step
     wall = GridLayout(GridOrder(False, False, False), (0.0, 0.0), (spacing, spacing),
                       shape.training)
     lateral = prior.lateral_step or 1.0 / (shape.f_max * 2 * multiplier)
-    lattice = voxel_lattice(wall, lateral, np.zeros(1))
+    return wall, voxel_lattice(wall, lateral, np.zeros(1))
+
+
+def operator_bytes(prior: RSDPriorConfig, shape: PlanShape) -> tuple[float, str] | None:
+    """(bytes, why) of the operator's stacked constants on the lattice of ``shape``'s
+    training grid; None when the shape does not know the band, the grid or its spacing."""
+    planes = volume_planes(prior, shape)
+    found = _lattice(prior, shape)
+    if planes is None or found is None or shape.f_max is None:
+        return None
+    wall, lattice = found
     axes = [lattice_axis(lattice.shape[i], lattice.step[i], wall.shape[i], wall.spacing[i],
                          wall.origin[i] - lattice.origin[i]) for i in (0, 1)]
     if axes[0] is None or axes[1] is None:
@@ -90,9 +99,10 @@ def operator_bytes(prior: RSDPriorConfig, shape: PlanShape) -> tuple[float, str]
 
 
 def volume_memory(prior: RSDPriorConfig, network: NeuralFieldConfig, backend: str,
-                  stacks: float, shape: PlanShape) -> MemoryEstimate:
-    """The operator's constants (``stacks`` copies of them, as the backend holds them) and
-    the network's training on the voxels (a piece of :data:`CPU_CHUNK` at a time)."""
+                  stacks: float, shape: PlanShape, averaged: int = 1) -> MemoryEstimate:
+    """The operator's constants (``stacks`` copies of them, as the backend holds them), the
+    network's training on the voxels (a piece of :data:`CPU_CHUNK` at a time) and, with
+    ``averaged`` > 1 (``average_steps``), the last steps' albedos the kept one averages."""
     parts: list[MemoryPart] = []
     operator = operator_bytes(prior, shape)
     planes = volume_planes(prior, shape) or 1
@@ -103,6 +113,11 @@ def volume_memory(prior: RSDPriorConfig, network: NeuralFieldConfig, backend: st
                                 why + (f", {stacks:g} copies" if stacks != 1 else ""),
                                 nbytes * stacks))
     voxels = float(planes) * math.prod(grid)
+    if averaged > 1:
+        found = _lattice(prior, shape)
+        albedo = planes * math.prod(found[1].shape if found else grid)
+        parts.append(MemoryPart("the averaged albedos", f"the last {averaged} steps' albedos "
+                                f"of {albedo} voxels (average_steps)", averaged * albedo * 4.0))
     trained = network_memory(network, backend, FieldShape(FieldMode.multi, grid, planes),
                              min(voxels, CPU_CHUNK))
     return MemoryEstimate(tuple(parts)) + trained

@@ -191,7 +191,7 @@ class NeuralVolumeJax(NeuralVolumeFieldModel):
         params, rest = net.params, net.rest
         opt_state = _ADAM.init(params)
         history: list[dict[str, float]] = []
-        best = BestStep(cfg.patience)
+        best = BestStep(cfg.patience, cfg.average_steps)
         loss_value = math.nan
         k = 0
         for k in range(cfg.steps):

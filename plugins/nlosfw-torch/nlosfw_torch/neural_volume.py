@@ -223,7 +223,7 @@ class NeuralVolumeTorch(NeuralVolumeFieldModel):
             return float(torch.sum(squared.detach() * val).item()) / val_power
 
         history: list[dict[str, float]] = []
-        best = BestStep(cfg.patience)
+        best = BestStep(cfg.patience, cfg.average_steps)
         before = torch.get_num_threads()
         if cfg.threads > 0:
             torch.set_num_threads(cfg.threads)

@@ -537,3 +537,39 @@ def test_the_tv_weight_is_per_training_point_and_rises_by_at_most_its_rise(backe
     assert [problem.tv_weight_at(k) for k in range(6)] == pytest.approx(
         [0.125, 0.25, 0.375, 0.5, 0.5, 0.5])
     assert fitted(albedo_tv_rise=0.0).tv_weight_at(0) == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_average_steps_keeps_the_mean_of_the_steps_up_to_the_best(backend, noisy_scene,
+                                                                  monkeypatch):
+    """With ``average_steps`` 5 the fitted albedo is the mean of the 5 albedos the training
+    offered up to the step of lowest validation error (every offer recorded here); with 1,
+    that step's alone, the same network and steps."""
+    from nlosfw.model.hybrid import BestStep
+
+    _, noisy, _ = noisy_scene
+    offers: list[tuple[int, float | None, np.ndarray]] = []
+    original = BestStep.offer
+
+    def record(self, step, error, albedo):
+        values = albedo.cpu().numpy() if isinstance(albedo, torch.Tensor) else albedo
+        offers.append((step, error, np.asarray(values, dtype=np.float64)))
+        original(self, step, error, albedo)
+
+    monkeypatch.setattr(BestStep, "offer", record)
+    fitted = {}
+    for window in (1, 5):
+        offers.clear()
+        model = load_plugins().registry.create(
+            "model", f"neural_volume_{backend}",
+            {**OPTIONS, "steps": 60, "validation_fraction": 0.2, "patience": 0,
+             "average_steps": window})
+        model.fit(noisy)
+        errors = [e for _, e, _ in offers]
+        best = int(np.argmin(errors))
+        assert 5 <= best < len(offers) - 1, best                # a best inside the run
+        expected = np.mean([a for _, _, a in offers[best - window + 1:best + 1]], axis=0)
+        np.testing.assert_allclose(model.albedo, expected.reshape(model.albedo.shape),
+                                   rtol=1e-5, atol=1e-7 * float(np.max(expected)))
+        fitted[window] = model.albedo
+    assert not np.allclose(fitted[1], fitted[5])

@@ -50,8 +50,31 @@ def test_best_step_without_validation_keeps_the_latest_and_never_stops():
     assert best.albedo == 4 and best.validation is None
 
 
+def test_best_step_with_a_window_keeps_the_mean_of_the_last_steps_up_to_the_best():
+    """Albedos 0, 10, 20, ... offered with errors falling to step 4, then rising: a window of
+    3 keeps the mean of steps 2, 3 and 4 (30); the first steps average what there is."""
+    best = BestStep(patience=0, window=3)
+    for step, error in enumerate([5.0, 4.0, 3.0, 2.0, 1.0, 1.5, 0.9 + 1.0]):
+        best.offer(step, error, np.full(2, 10.0 * step))
+        if step == 1:
+            np.testing.assert_allclose(best.albedo, [5.0, 5.0])    # mean of 0 and 10
+    assert best.step == 4 and best.error == 1.0
+    np.testing.assert_allclose(best.albedo, [30.0, 30.0])
+    assert len(best.recent) == 3                               # steps 4, 5, 6 are held
+
+
+def test_best_step_with_a_window_keeps_the_offered_arrays_unchanged():
+    offered = [np.full(2, float(k)) for k in range(3)]
+    best = BestStep(patience=0, window=2)
+    for step, albedo in enumerate(offered):
+        best.offer(step, None, albedo)
+    np.testing.assert_allclose(best.albedo, [1.5, 1.5])
+    assert [float(a[0]) for a in offered] == [0.0, 1.0, 2.0]
+
+
 @pytest.mark.parametrize("option, value", [("validation_fraction", 0.5),
-                                           ("validation_fraction", -0.1), ("patience", -1)])
+                                           ("validation_fraction", -0.1), ("patience", -1),
+                                           ("average_steps", 0)])
 def test_bad_validation_options_name_the_option(option, value):
     with pytest.raises(ConfigError, match=option):
         NeuralVolumeConfig(network="siren", **{option: value})

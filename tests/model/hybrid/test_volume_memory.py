@@ -53,3 +53,24 @@ def test_a_regular_pattern_is_sized_on_every_step_th_point():
     grid = _planned(4, SpatialPattern.grid)
     assert (grid.training, grid.step) == ((16, 16), 4)
     assert _voxels(grid) == (208, 208)
+
+
+def test_average_steps_adds_the_albedos_it_holds():
+    """``average_steps`` holds that many albedos of the lattice's voxels (float32) more; 1
+    (the default) adds nothing."""
+    import math
+
+    from nlosfw.model.hybrid.volume_memory import volume_memory, volume_planes
+    from nlosfw.model.neural.config import NeuralFieldConfig
+
+    shape = _planned(4, SpatialPattern.grid)
+    network = NeuralFieldConfig(hidden=[64, 64])
+    plain = volume_memory(RSDPriorConfig(), network, "torch", 1.0, shape)
+    averaged = volume_memory(RSDPriorConfig(), network, "torch", 1.0, shape, averaged=10)
+    added = [p for p in averaged.parts if p not in plain.parts]
+    planes = volume_planes(RSDPriorConfig(), shape)
+    assert planes is not None
+    assert [p.what for p in added] == ["the averaged albedos"]
+    assert added[0].nbytes == 10 * planes * math.prod(_voxels(shape)) * 4   # the lattice's
+    assert math.prod(_voxels(shape)) > 4 * math.prod(shape.training or (0, 0))
+    assert averaged.total - plain.total == added[0].nbytes
