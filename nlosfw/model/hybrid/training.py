@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Protocol, cast
 
 import numpy as np
 
@@ -34,6 +34,14 @@ def history_entry(step: int, loss: float, validation: float | None) -> dict[str,
     return entry
 
 
+class _Summable(Protocol):
+    """What :class:`BestStep` averages: a backend's array (numpy, torch, JAX)."""
+
+    def __add__(self, other: _Summable, /) -> _Summable: ...
+
+    def __truediv__(self, count: int, /) -> _Summable: ...
+
+
 @dataclass
 class BestStep:
     """The step with the lowest validation error so far (no validation: the latest) and its
@@ -45,17 +53,19 @@ class BestStep:
     step: int = 0
     error: float = float("inf")
     albedo: object = None
-    recent: deque[Any] = field(default_factory=deque)
+    recent: deque[_Summable] = field(default_factory=deque)
 
     def offer(self, step: int, error: float | None, albedo: object) -> None:
         """Keep ``albedo`` (the state before step ``step``'s update), or the mean of it and the
         ``window`` - 1 offered before it, if it is the best."""
-        self.recent.append(albedo)
+        self.recent.append(cast(_Summable, albedo))
         if len(self.recent) > self.window:
             self.recent.popleft()
         if error is None or error < self.error:
             first, *rest = self.recent
-            kept = sum(rest, first) / len(self.recent) if rest else albedo
+            for other in rest:
+                first = first + other
+            kept = first / len(self.recent) if rest else albedo
             self.step, self.error, self.albedo = step, math.inf if error is None else error, \
                 kept
 
